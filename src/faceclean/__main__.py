@@ -1,0 +1,5 @@
+import sys
+
+from faceclean.cli import main
+
+sys.exit(main())

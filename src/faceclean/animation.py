@@ -1,0 +1,108 @@
+"""Animation: the one in-memory type every reader returns and every writer takes."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, canonical
+
+
+@dataclass(eq=False)
+class Animation:
+    """Blendshape weights over time.
+
+    times:  (N,) float64, seconds, non-decreasing in well-formed input.
+    values: (N, M) float64. A row that is all NaN is a missing frame (tracking loss):
+            kept in place, never cleaned, written back as the source had it.
+    names:  (M,) channel names as the source spelled them (``canonical`` maps them).
+    meta:   whatever the source format carried that must go back out unchanged
+            (keys are owned by the format module that wrote them).
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    names: tuple[str, ...]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        self.values = np.asarray(self.values, dtype=np.float64)
+        if self.values.ndim == 1:
+            self.values = self.values.reshape(len(self.times), -1)
+        self.names = tuple(str(n) for n in self.names)
+        if self.values.shape != (len(self.times), len(self.names)):
+            raise ValueError(
+                f"values {self.values.shape} do not match {len(self.times)} times "
+                f"x {len(self.names)} names"
+            )
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.times)
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.names)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(N,) bool: frames that carry values (not tracking loss)."""
+        return ~np.all(np.isnan(self.values), axis=1) if self.n_channels else np.ones(0, bool)
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1] - self.times[0]) if self.n_frames > 1 else 0.0
+
+    @property
+    def rate(self) -> float:
+        """Median frame rate in Hz over valid consecutive frames (0 if unknown)."""
+        dt = np.diff(self.times[self.valid])
+        dt = dt[dt > 0]
+        return float(1.0 / np.median(dt)) if len(dt) else 0.0
+
+    def channel(self, name: str) -> np.ndarray:
+        """(N,) values of one channel, by any accepted spelling."""
+        want = canonical(name) or name
+        for j, n in enumerate(self.names):
+            if n == name or canonical(n) == want:
+                return self.values[:, j]
+        raise KeyError(name)
+
+    def with_values(self, values: np.ndarray) -> Animation:
+        """A copy with new values (N, M); times, names and meta carried over."""
+        return Animation(self.times.copy(), values, self.names, dict(self.meta))
+
+    def arkit(self, names: Sequence[str] = ARKIT52) -> tuple[np.ndarray, np.ndarray]:
+        """Values in the order ``names`` (canonical): ((N, len(names)), present (len(names),)).
+
+        Channels the source lacks are zeros and marked absent.
+        """
+        cols = {canonical(n): j for j, n in reversed(list(enumerate(self.names)))}
+        out = np.zeros((self.n_frames, len(names)))
+        present = np.zeros(len(names), bool)
+        for i, n in enumerate(names):
+            j = cols.get(canonical(n) or n)
+            if j is not None:
+                out[:, i] = self.values[:, j]
+                present[i] = True
+        out[~self.valid] = np.nan
+        return out, present
+
+    def with_arkit(self, values: np.ndarray, names: Sequence[str] = ARKIT52) -> Animation:
+        """A copy whose channels matching ``names`` take ``values`` (N, len(names))."""
+        out = self.values.copy()
+        index = {canonical(n) or n: i for i, n in enumerate(names)}
+        for j, n in enumerate(self.names):
+            i = index.get(canonical(n) or n)
+            if i is not None:
+                out[:, j] = values[:, i]
+        return self.with_values(out)
+
+    @classmethod
+    def from_arkit(cls, times: np.ndarray, values: np.ndarray) -> Animation:
+        """An ARKit-52 animation from (N,) times and (N, 52) values."""
+        return cls(times, values, ARKIT52)

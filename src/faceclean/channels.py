@@ -1,0 +1,87 @@
+"""Channel registry: the canonical ARKit-52 order and name matching.
+
+Names match case-insensitively. Accepted spellings of one channel:
+ARKit camelCase (``eyeBlinkLeft``), Live Link Face PascalCase (``EyeBlinkLeft``),
+``_L``/``_R`` suffixes (``eyeBlink_L``, iFacialMocap / VRM perfect sync) and
+MediaPipe names (its ``_neutral`` channel is not a blendshape and is dropped).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+# ARKit ARFaceAnchor.BlendShapeLocation, canonical order (../shared/data/README.md).
+ARKIT52: tuple[str, ...] = (
+    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft",
+    "eyeSquintLeft", "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight",
+    "eyeLookOutRight", "eyeLookUpRight", "eyeSquintRight", "eyeWideRight", "jawForward",
+    "jawLeft", "jawRight", "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker", "mouthLeft",
+    "mouthRight", "mouthSmileLeft", "mouthSmileRight", "mouthFrownLeft", "mouthFrownRight",
+    "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft", "mouthStretchRight",
+    "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper", "mouthPressLeft",
+    "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft",
+    "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft",
+    "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft",
+    "noseSneerRight", "tongueOut",
+)  # fmt: skip
+
+INDEX: dict[str, int] = {n: i for i, n in enumerate(ARKIT52)}
+
+# MediaPipe's face blendshapes: ARKit names without tongueOut, plus "_neutral".
+MEDIAPIPE: tuple[str, ...] = ("_neutral",) + ARKIT52[:-1]
+
+# Groups used for per-group tuning and for the report's figures.
+GROUPS: dict[str, tuple[str, ...]] = {
+    "eyes": tuple(n for n in ARKIT52 if n.startswith("eye")),
+    "brows": tuple(n for n in ARKIT52 if n.startswith("brow")),
+    "jaw": tuple(n for n in ARKIT52 if n.startswith("jaw")),
+    "mouth": tuple(n for n in ARKIT52 if n.startswith(("mouth", "tongue"))),
+    "cheeks_nose": tuple(n for n in ARKIT52 if n.startswith(("cheek", "nose"))),
+}
+
+_LOWER = {n.lower(): n for n in ARKIT52}
+
+
+def canonical(name: str) -> str | None:
+    """The ARKit name for ``name`` in any accepted spelling, or None if unknown."""
+    key = name.strip().lower()
+    if key in _LOWER:
+        return _LOWER[key]
+    for suffix, side in (("_l", "left"), ("_r", "right")):
+        if key.endswith(suffix):
+            return _LOWER.get(key[: -len(suffix)] + side)
+    return None
+
+
+def group_of(name: str) -> str | None:
+    """The channel group ("eyes", "mouth", ...) of a channel name, or None."""
+    c = canonical(name)
+    return next((g for g, members in GROUPS.items() if c in members), None)
+
+
+def is_mediapipe_only(name: str) -> bool:
+    """MediaPipe's ``_neutral`` score: not a blendshape, dropped on read."""
+    return name.strip().lower() == "_neutral"
+
+
+def to_side_suffix(name: str) -> str:
+    """``eyeBlinkLeft`` -> ``eyeBlink_L`` (iFacialMocap / perfect-sync style)."""
+    for side, suffix in (("Left", "_L"), ("Right", "_R")):
+        if name.endswith(side):
+            return name[: -len(side)] + suffix
+    return name
+
+
+def pascal(name: str) -> str:
+    """``eyeBlinkLeft`` -> ``EyeBlinkLeft`` (Live Link Face CSV header style)."""
+    return name[:1].upper() + name[1:]
+
+
+def match(names: Sequence[str], wanted: Iterable[str] = ARKIT52) -> dict[str, int]:
+    """Map each canonical name in ``wanted`` to its column in ``names`` (when present)."""
+    found: dict[str, int] = {}
+    for j, n in enumerate(names):
+        c = canonical(n)
+        if c is not None and c not in found:
+            found[c] = j
+    return {w: found[w] for w in wanted if w in found}

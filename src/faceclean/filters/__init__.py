@@ -1,0 +1,47 @@
+"""Every cleaner by name. ``make("one-euro", {"min_cutoff": 1.0})`` builds one.
+
+Method name -> "module:Class". Classes take their parameters as keyword arguments
+(physical units: seconds, Hz) plus ``names`` (the channel names, for per-group values).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+from typing import Any
+
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import Cleaner, OfflineCleaner, StreamCleaner
+
+METHODS: dict[str, str] = {
+    "ema": "faceclean.filters.ema:Ema",
+    "one-euro": "faceclean.filters.one_euro:OneEuro",
+    "kalman": "faceclean.filters.kalman:Kalman",
+    "gaussian": "faceclean.filters.gaussian:Gaussian",
+    "savgol": "faceclean.filters.savgol:SavGol",
+    "lstm": "faceclean.filters.learned:Learned",
+    "fc": "faceclean.filters.derivative_net:FullyConnected",
+    "gbt": "faceclean.filters.derivative_net:BoostedTrees",
+}
+
+__all__ = ["METHODS", "Cleaner", "OfflineCleaner", "StreamCleaner", "cleaner_class", "make"]
+
+
+def cleaner_class(method: str) -> type[Cleaner]:
+    """The class implementing ``method``."""
+    if method not in METHODS:
+        raise FacecleanError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    module, cls = METHODS[method].split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def make(
+    method: str, params: dict[str, Any] | None = None, *, names: Sequence[str] = ARKIT52
+) -> Cleaner:
+    """Build a cleaner; a bad parameter name or value is a one-line FacecleanError."""
+    cls = cleaner_class(method)
+    try:
+        return cls(**(params or {}), names=tuple(names))
+    except TypeError as e:
+        raise FacecleanError(f"{method}: bad parameters ({e})") from None

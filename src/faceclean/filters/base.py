@@ -1,0 +1,141 @@
+"""The one streaming contract every cleaner follows, and the rules for time.
+
+``reset()`` forgets everything; ``step(frame, t) -> frame`` cleans one frame as it
+arrives; ``clean(animation)`` is reset-then-step over the valid frames.
+
+Frames are (M,) with a scalar t, or (S, M) with t (S,) for S streams stepped together.
+Time rules, applied per stream, in this order:
+
+1. t not finite, or every value of the frame non-finite: a missing frame. The output is
+   the last output (NaN before the first frame); the state does not change.
+2. Non-finite values in an otherwise good frame are replaced by the last output of
+   their channel (0 before the first frame).
+3. First frame, or a pause longer than ``max_gap`` seconds: the state restarts from this
+   frame and the output equals it (the face came back; nothing jumps or drifts).
+4. t not after the previous frame's time (duplicate or backwards timestamp): the last
+   output again, state unchanged. ``t == 0.0`` is a valid time.
+5. Otherwise the cleaner advances by dt = t - t_prev > 0 seconds.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import numpy as np
+
+from faceclean.animation import Animation
+
+State = tuple[np.ndarray, ...]  # each (S, M)
+
+
+class Cleaner(ABC):
+    """Anything that cleans animation: ``reset``, ``step``, ``clean``."""
+
+    name: ClassVar[str] = "cleaner"
+    offline: ClassVar[bool] = False
+
+    @abstractmethod
+    def reset(self) -> None: ...
+
+    @abstractmethod
+    def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray: ...
+
+    def clean(self, anim: Animation) -> Animation:
+        """Clean a whole clip: reset, then step every valid frame; missing frames stay NaN."""
+        self.reset()
+        out = np.full_like(anim.values, np.nan)
+        valid = anim.valid
+        for i in np.flatnonzero(valid):
+            out[i] = self.step(anim.values[i], anim.times[i])
+        return anim.with_values(out)
+
+
+class StreamCleaner(Cleaner):
+    """A causal cleaner with (S, M) state arrays. Subclasses give ``_start`` and ``_advance``.
+
+    Parameters are fixed at construction (a new object changes them); ``__init__`` of a
+    subclass sets its parameters and ends in ``reset()``.
+    """
+
+    max_gap: float = 0.5  # s; longer pauses restart the state (rule 3)
+
+    def reset(self) -> None:
+        self._t: np.ndarray | None = None  # (S,) s, time of the last accepted frame
+        self._y: np.ndarray | None = None  # (S, M) last output
+        self._state: State | None = None
+
+    @abstractmethod
+    def _start(self, x: np.ndarray) -> State:
+        """State that reproduces ``x`` (S, M) as the current output."""
+
+    @abstractmethod
+    def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
+        """Advance by dt (S, 1) s > 0 with input x (S, M): (new state, output (S, M))."""
+
+    def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+        x = np.array(frame, dtype=np.float64, ndmin=1)
+        single = x.ndim == 1
+        x = x.reshape(1, -1) if single else x
+        s = x.shape[0]
+        t = np.broadcast_to(np.asarray(t, dtype=np.float64), (s,))
+        if self._y is None:
+            self._y = np.full_like(x, np.nan)
+            self._t = np.full(s, np.nan)
+        elif self._y.shape != x.shape:
+            raise ValueError(f"frame shape {x.shape} != {self._y.shape} of earlier frames")
+
+        bad = ~np.isfinite(x)
+        missing = bad.all(axis=1) | ~np.isfinite(t)  # rule 1
+        if bad.any():  # rule 2
+            x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
+        dt = t - self._t  # NaN for streams not started
+        start = ~missing & ~(dt <= self.max_gap)  # rule 3 (NaN dt starts)
+        advance = ~missing & (dt > 0) & ~start  # rule 4 holds the rest
+
+        if advance.all():
+            self._state, y = self._advance(self._state, x, dt[:, None])
+        else:
+            y = self._y.copy()
+            if advance.any():
+                safe = np.where(advance, dt, 1.0)[:, None]
+                new, y_adv = self._advance(self._state, x, safe)
+                self._state = _merge(advance, new, self._state)
+                y = np.where(advance[:, None], y_adv, y)
+            if start.any():
+                fresh = self._start(x)
+                old = self._state if self._state is not None else fresh
+                self._state = _merge(start, fresh, old)
+                y = np.where(start[:, None], x, y)
+        moved = start | advance
+        self._t = np.where(moved, t, self._t)
+        self._y = y
+        return y[0].copy() if single else y.copy()
+
+
+def _merge(rows: np.ndarray, new: State, old: State) -> State:
+    """Per stream: ``new`` where rows (S,) is True, else ``old``."""
+    return tuple(np.where(rows[:, None], a, b) for a, b in zip(new, old, strict=True))
+
+
+class OfflineCleaner(Cleaner):
+    """A non-causal cleaner: only ``clean`` works; ``step`` refuses."""
+
+    offline = True
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+        raise TypeError(f"{self.name} is offline (non-causal): use clean(animation)")
+
+    @abstractmethod
+    def _smooth(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Smooth (N, M) values at (N,) increasing times; both without missing frames."""
+
+    def clean(self, anim: Animation) -> Animation:
+        out = np.full_like(anim.values, np.nan)
+        valid = anim.valid
+        if valid.any():
+            out[valid] = self._smooth(anim.times[valid], anim.values[valid])
+        return anim.with_values(out)

@@ -1,0 +1,90 @@
+"""Readers and writers, all to and from :class:`~faceclean.animation.Animation`.
+
+Each format module has ``read(path) -> Animation`` and ``write(animation, file)``
+(``file`` a binary file object) and ``sniff(head: bytes) -> bool``. The format is chosen
+by extension, or by content when the extension is ambiguous (``.csv``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from pathlib import Path
+from types import ModuleType
+
+from faceclean.animation import Animation
+from faceclean.errors import FacecleanError
+from faceclean.io.atomic import atomic_open
+
+# format name -> module; extensions that select it.
+FORMATS: dict[str, str] = {
+    "livelink": "faceclean.io.livelink_csv",
+    "csv": "faceclean.io.plain_csv",
+    "json": "faceclean.io.json_format",
+    "npz": "faceclean.io.npz_format",
+    "gltf": "faceclean.io.gltf",
+}
+EXTENSIONS: dict[str, tuple[str, ...]] = {
+    ".csv": ("livelink", "csv"),
+    ".json": ("json",),
+    ".npz": ("npz",),
+    ".gltf": ("gltf",),
+    ".glb": ("gltf",),
+}
+
+
+def _module(fmt: str) -> ModuleType:
+    if fmt not in FORMATS:
+        raise FacecleanError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})")
+    return importlib.import_module(FORMATS[fmt])
+
+
+def detect(path: str | os.PathLike) -> str:
+    """The format name of an existing file, by extension, then content."""
+    p = Path(path)
+    candidates = EXTENSIONS.get(p.suffix.lower())
+    if candidates is None:
+        raise FacecleanError(
+            f"{p.name}: unknown file type {p.suffix or '(none)'!r} "
+            f"(known: {', '.join(sorted(EXTENSIONS))})"
+        )
+    if len(candidates) == 1:
+        return candidates[0]
+    with open(p, "rb") as f:
+        head = f.read(4096)
+    for fmt in candidates:
+        if _module(fmt).sniff(head):
+            return fmt
+    raise FacecleanError(f"{p.name}: not a Live Link Face CSV nor a plain CSV with a 'time' column")
+
+
+def load(path: str | os.PathLike, fmt: str | None = None) -> Animation:
+    """Read an animation file; raises FacecleanError with a one-line reason on bad input."""
+    p = Path(path)
+    if not p.exists():
+        raise FacecleanError(f"no such file: {p}")
+    if p.is_dir():
+        raise FacecleanError(f"is a folder, not a file: {p}")
+    fmt = fmt or detect(p)
+    try:
+        anim = _module(fmt).read(p)
+    except FacecleanError:
+        raise
+    except (ValueError, KeyError, IndexError, UnicodeDecodeError, OSError, EOFError) as e:
+        raise FacecleanError(f"{p.name}: not a readable {fmt} file ({e})") from None
+    anim.meta.setdefault("format", fmt)
+    return anim
+
+
+def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> None:
+    """Write atomically; the format comes from ``fmt``, the extension, or the source format."""
+    p = Path(path)
+    if fmt is None:
+        candidates = EXTENSIONS.get(p.suffix.lower())
+        if candidates is None:
+            raise FacecleanError(f"{p.name}: unknown output type {p.suffix or '(none)'!r}")
+        source = anim.meta.get("format")
+        fmt = source if source in candidates else candidates[-1]
+    module = _module(fmt)
+    with atomic_open(p, "wb") as f:
+        module.write(anim, f)

@@ -1,0 +1,50 @@
+"""Atomic output: write to a temporary file beside the target, then rename.
+
+A failed or refused write leaves no file behind and never touches an existing one,
+so OUT == IN is safe (the input was read whole before the rename replaces it).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO
+
+from faceclean.errors import FacecleanError
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
+    """Open a temporary file for writing; on success it replaces ``path`` atomically."""
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise FacecleanError(f"output folder does not exist: {folder}")
+    if target.is_dir():
+        raise FacecleanError(f"output path is a folder: {target}")
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    try:
+        kwargs = {"newline": ""} if "b" not in mode else {}
+        with os.fdopen(fd, mode, **kwargs) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        if target.exists():
+            os.chmod(tmp, target.stat().st_mode & 0o777)
+        else:
+            os.chmod(tmp, 0o644)
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write(path: str | os.PathLike, data: bytes | str) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    mode = "wb" if isinstance(data, bytes) else "w"
+    with atomic_open(path, mode) as f:
+        f.write(data)
