@@ -25,7 +25,15 @@ METHODS: dict[str, str] = {
     "gbt": "faceclean.filters.derivative_net:BoostedTrees",
 }
 
-__all__ = ["METHODS", "Cleaner", "OfflineCleaner", "StreamCleaner", "cleaner_class", "make"]
+__all__ = [
+    "METHODS",
+    "Cleaner",
+    "OfflineCleaner",
+    "StreamCleaner",
+    "cleaner_class",
+    "default_method",
+    "make",
+]
 
 
 def cleaner_class(method: str) -> type[Cleaner]:
@@ -45,3 +53,10 @@ def make(
         return cls(**(params or {}), names=tuple(names))
     except TypeError as e:
         raise FacecleanError(f"{method}: bad parameters ({e})") from None
+
+
+def default_method() -> str:
+    """The shipped default: the learned cleaner when its model ships, else tuned One Euro."""
+    from faceclean.settings import MODELS
+
+    return "lstm" if (MODELS / "default.npz").is_file() else "one-euro"
