@@ -1,0 +1,260 @@
+"""Live Link Face CSV (Epic's iPhone app export), read and written back byte for byte.
+
+Header: ``Timecode,BlendshapeCount,`` (or ``BlendShapeCount``), then blendshape names in
+PascalCase in the app's own order, then 9 head/eye angles. Columns are mapped by name;
+only columns whose name is an ARKit blendshape are channels, every other column is
+passthrough (``meta["pose"]`` (N, P) radians as written, ``meta["pose_names"]``).
+
+Timecode ``HH:MM:SS:FF.fff``: FF frames at 60 fps plus a fractional sub-frame ``.fff``::
+
+    seconds = 3600 HH + 60 MM + SS + (FF + 0.fff) / 60
+
+``times`` start at 0 on the first row (its absolute time of day is
+``meta["timecode_start"]``); a timecode more than 12 h below the previous one wrapped past
+midnight and counts on from 24:00:00.
+
+A row with ``BlendshapeCount`` 0 and no values (``16:48:52:29.134,0``) is a missing frame:
+an all-NaN row, written back as it was.
+
+Writing an animation read from such a file changes only the text of blendshape values
+that changed: the header, timecodes, counts, angles, column order, line endings, blank
+lines and the final newline (or its absence) stay byte for byte. A changed value is
+written with the source's number of decimals (10 in the app's files); a NaN keeps the
+original text. Any other animation is written as a fresh file: 52 blendshapes in the app's
+order, angles from ``meta["pose"]`` or 0, timecodes synthesised from ``times``
+(+ ``meta["timecode_start"]``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52, canonical, pascal
+from faceclean.errors import FacecleanError
+
+FPS = 60.0  # the timecode's frame rate, Hz
+DAY = 86400.0  # s
+DECIMALS = 10  # the app's number format for fresh files
+
+# The app's column order (differs from ARKit's: JawRight before JawLeft, MouthRight first).
+ORDER: tuple[str, ...] = tuple(
+    pascal(n)
+    for n in ARKIT52[:15] + ("jawRight", "jawLeft") + ARKIT52[17:21]
+    + ("mouthRight", "mouthLeft") + ARKIT52[23:]
+)  # fmt: skip
+ANGLES: tuple[str, ...] = (
+    "HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
+    "RightEyeYaw", "RightEyePitch", "RightEyeRoll",
+)  # fmt: skip
+
+_TIMECODE = re.compile(rb"^\s*(\d+):(\d+):(\d+)[:;.](\d+(?:\.\d*)?)\s*$")
+_BOM = b"\xef\xbb\xbf"
+
+
+@dataclass(frozen=True, eq=False)
+class Source:
+    """What the writer needs to give the file back: kept in ``meta["livelink"]``."""
+
+    lines: tuple[bytes, ...]  # every line with its own ending
+    rows: np.ndarray  # (N,) index into lines of each frame
+    missing: np.ndarray  # (N,) bool, rows without values
+    columns: np.ndarray  # (M,) field index of each channel
+    names: tuple[str, ...]  # (M,) channel names as spelled
+    values: np.ndarray  # (N, M) the values as read
+    times: np.ndarray  # (N,) s
+    decimals: int
+
+
+def sniff(head: bytes) -> bool:
+    """A Live Link Face CSV starts ``Timecode,BlendshapeCount``."""
+    return head.removeprefix(_BOM).lower().startswith(b"timecode,blendshapecount")
+
+
+def timecode_seconds(text: bytes | str) -> float:
+    """``HH:MM:SS:FF.fff`` -> seconds of the day (FF at 60 fps, .fff a sub-frame)."""
+    raw = text.encode() if isinstance(text, str) else text
+    m = _TIMECODE.match(raw)
+    if m is None:
+        raise FacecleanError(f"bad timecode {raw.decode(errors='replace')!r}")
+    h, mi, s = (int(g) for g in m.groups()[:3])
+    return 3600.0 * h + 60.0 * mi + s + float(m.group(4)) / FPS
+
+
+def timecode_text(seconds: float) -> str:
+    """Seconds of the day -> ``HH:MM:SS:FF.fff`` (wraps at 24 h)."""
+    sub = int(round(seconds * FPS * 1000.0))  # thousandths of a frame
+    frame, frac = divmod(sub, 1000)
+    sec, ff = divmod(frame, int(FPS))
+    h, rest = divmod(sec, 3600)
+    mi, s = divmod(rest, 60)
+    return f"{h % 24:02d}:{mi:02d}:{s:02d}:{ff:02d}.{frac:03d}"
+
+
+def read(path: str | os.PathLike) -> Animation:
+    """Read a Live Link Face CSV; missing frames become all-NaN rows."""
+    p = Path(path)
+    data = p.read_bytes()
+    lines = tuple(data.splitlines(keepends=True))
+    if not lines or not sniff(lines[0]):
+        raise FacecleanError(f"{p.name}: not a Live Link Face CSV (no Timecode,BlendshapeCount)")
+    header = [h.strip().decode("utf-8") for h in _content(lines[0]).removeprefix(_BOM).split(b",")]
+    n_fields = len(header)
+    columns, names, pose_cols = [], [], []
+    seen: set[str] = set()
+    for j, h in enumerate(header[2:], start=2):
+        c = canonical(h)
+        if c is not None and c not in seen:
+            seen.add(c)
+            columns.append(j)
+            names.append(h)
+        else:
+            pose_cols.append(j)
+    if not columns:
+        raise FacecleanError(f"{p.name}: no blendshape columns in the header")
+
+    rows, missing, stamps, cells = [], [], [], []
+    for k, line in enumerate(lines[1:], start=1):
+        fields = _content(line).split(b",")
+        if fields == [b""]:
+            continue  # blank line: passthrough
+        try:
+            stamps.append(timecode_seconds(fields[0]))
+        except FacecleanError as e:
+            raise FacecleanError(f"{p.name} line {k + 1}: {e}") from None
+        empty = len(fields) <= 2 or all(not f.strip() for f in fields[2:])
+        if not empty and len(fields) != n_fields:
+            raise FacecleanError(
+                f"{p.name} line {k + 1}: {len(fields)} fields, the header has {n_fields}"
+            )
+        rows.append(k)
+        missing.append(empty)
+        cells.append([b""] * (n_fields - 2) if empty else fields[2:])
+    if not rows:
+        raise FacecleanError(f"{p.name}: no frames")
+
+    table = np.array(cells, dtype=bytes).reshape(len(rows), n_fields - 2)
+    try:
+        numbers = np.where(np.char.strip(table) == b"", b"nan", table).astype(np.float64)
+    except ValueError as e:
+        raise FacecleanError(f"{p.name}: a value is not a number ({e})") from None
+    values = numbers[:, np.array(columns) - 2]
+    pose = numbers[:, np.array(pose_cols, dtype=int) - 2]
+
+    absolute = np.array(stamps)
+    times = absolute - absolute[0]
+    # A drop of more than 12 h is a wrap past midnight: count on from 24:00.
+    wraps = np.cumsum(np.diff(absolute, prepend=absolute[0]) < -DAY / 2)
+    times = times + DAY * wraps
+    source = Source(
+        lines=lines,
+        rows=np.array(rows),
+        missing=np.array(missing, bool),
+        columns=np.array(columns),
+        names=tuple(names),
+        values=values.copy(),
+        times=times.copy(),
+        decimals=_decimals(table[~np.array(missing, bool)][:50, np.array(columns) - 2]),
+    )
+    meta = {
+        "format": "livelink",
+        "livelink": source,
+        "timecode_start": float(absolute[0]),
+        "pose": pose,
+        "pose_names": tuple(header[j] for j in pose_cols),
+    }
+    return Animation(times, values, tuple(names), meta)
+
+
+def write(anim: Animation, f: BinaryIO) -> None:
+    """Write back into the source's text when there is one, else a fresh Live Link CSV."""
+    src = anim.meta.get("livelink")
+    if isinstance(src, Source) and _fits(src, anim):
+        f.write(_patched(src, anim))
+    else:
+        f.write(_fresh(anim))
+
+
+def _content(line: bytes) -> bytes:
+    return line.rstrip(b"\r\n")
+
+
+def _decimals(sample: np.ndarray) -> int:
+    """Most decimals among sample cells (bytes), else the app's 10."""
+    best = 0
+    for cell in sample.ravel():
+        text = cell.strip()
+        if b"e" in text.lower():
+            continue
+        _, dot, frac = text.partition(b".")
+        if dot:
+            best = max(best, len(frac))
+    return best or DECIMALS
+
+
+def _fits(src: Source, anim: Animation) -> bool:
+    """Same frames at the same times: the source's text can carry the new values."""
+    return anim.n_frames == len(src.rows) and np.array_equal(anim.times, src.times, equal_nan=True)
+
+
+def _number(v: float, decimals: int) -> bytes:
+    text = f"{v:.{decimals}f}"
+    if text.startswith("-") and float(text) == 0.0:
+        text = text[1:]  # no "-0.0000000000"
+    return text.encode()
+
+
+def _patched(src: Source, anim: Animation) -> bytes:
+    new = src.values.copy()  # (N, M) in the source's columns
+    by_name = {n: i for i, n in enumerate(src.names)}
+    by_canon = {canonical(n): i for i, n in enumerate(src.names)}
+    for j, n in enumerate(anim.names):
+        i = by_name.get(n, by_canon.get(canonical(n)))
+        if i is not None:
+            new[:, i] = anim.values[:, j]
+    changed = ~np.isnan(new) & ~(new == src.values)  # NaN keeps the original text
+    changed[src.missing] = False
+    lines = list(src.lines)
+    for r in np.flatnonzero(changed.any(axis=1)):
+        k = src.rows[r]
+        line = lines[k]
+        body = _content(line)
+        fields = body.split(b",")
+        for i in np.flatnonzero(changed[r]):
+            fields[src.columns[i]] = _number(new[r, i], src.decimals)
+        lines[k] = b",".join(fields) + line[len(body) :]
+    return b"".join(lines)
+
+
+def _fresh(anim: Animation) -> bytes:
+    """A new file in the app's layout (non-ARKit channels cannot be carried)."""
+    arkit, _ = anim.arkit()
+    order = [ARKIT52.index(canonical(n)) for n in ORDER]
+    values = np.nan_to_num(arkit[:, order], nan=0.0)  # (N, 52) app order
+    pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
+    pose_names = tuple(anim.meta.get("pose_names", ()))
+    angles = np.zeros((anim.n_frames, len(ANGLES)))
+    if pose.shape[0] == anim.n_frames:
+        for a, name in enumerate(ANGLES):
+            if name in pose_names:
+                angles[:, a] = np.nan_to_num(pose[:, pose_names.index(name)], nan=0.0)
+    start = float(anim.meta.get("timecode_start", 0.0))
+    out = [",".join(("Timecode", "BlendshapeCount") + ORDER + ANGLES).encode() + b"\n"]
+    valid = anim.valid
+    count = str(len(ORDER) + len(ANGLES)).encode()
+    for i in range(anim.n_frames):
+        tc = timecode_text(start + anim.times[i]).encode()
+        if not valid[i]:
+            out.append(tc + b",0\n")
+            continue
+        cells = [_number(v, DECIMALS) for v in values[i]] + [
+            _number(v, DECIMALS) for v in angles[i]
+        ]
+        out.append(b",".join([tc, count, *cells]) + b"\n")
+    return b"".join(out)
