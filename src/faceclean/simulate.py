@@ -1,0 +1,286 @@
+"""Tracker-artefact simulator: (noisy, truth) pairs from clean animation.
+
+It models what consumer face trackers do to a performance: the clean take is sampled at
+the tracker's own (possibly irregular) instants, then degraded by soft saturation,
+crosstalk, slow drift, velocity-dependent jitter, occlusion spikes, clipping to [0, 1],
+frozen frames, tracking-loss gaps and dropped frames, in that order. Every parameter is
+drawn per sequence from a preset's documented ranges (``PRESETS``) and everything is
+seeded: the same seed gives the same arrays.
+
+    noisy, truth = corrupt(clean, seed=3, preset="iphone")
+
+or, with explicit parameters::
+
+    rng = np.random.default_rng(3)
+    params = dataclasses.replace(sample_params(rng, "webcam"), fps=30.0)
+    noisy, truth = apply(clean, params, rng)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy.signal import lfilter
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52, INDEX
+from faceclean.errors import FacecleanError
+from faceclean.timing import hold_last, resample, runs, stream_times
+
+
+@dataclass(frozen=True)
+class Params:
+    """One sequence's artefacts. Ranges are the widest any preset uses; 0 disables."""
+
+    fps: float = 60.0  # Hz, 24-120: the tracker's nominal rate
+    timing_irregularity: float = 0.0  # 0-0.4: std of a frame interval over the period
+    jitter: float = 0.0  # 0-0.02: base noise std, weight units
+    jitter_velocity: float = 0.0  # s, 0-0.01: extra noise std per unit/s of channel speed
+    jitter_correlation: float = 0.0  # 0-0.6: AR(1) coefficient of the noise, per frame
+    channel_spread: float = 0.0  # 0-0.6: log-std of the per-channel noise scale
+    blink_peak: float = 1.0  # 0.55-1: what a full blink (1.0) reads as (1 = no saturation)
+    peak: float = 1.0  # 0.75-1: other channels' full activation reads as U(peak, 1)
+    crosstalk_lr: float = 0.0  # 0-0.15: share of a channel replaced by its other side
+    crosstalk_jaw: float = 0.0  # 0-0.25: jawOpen added into mouthClose
+    crosstalk_brow: float = 0.0  # 0-0.2: browInnerUp <-> browOuterUp leakage
+    drift: float = 0.0  # 0-0.04: std of the slow per-channel bias
+    drift_period: float = 20.0  # s, 5-40: shortest period of the bias wander
+    spike_rate: float = 0.0  # 1/s, 0-0.5: occlusion glitches per second
+    spike_amplitude: float = 0.3  # 0.1-0.6: peak size of a glitch
+    spike_duration: float = 0.06  # s, 0.02-0.15: length of a glitch
+    freeze_rate: float = 0.0  # 0-0.05: fraction of frames that repeat the last solve
+    drop_rate: float = 0.0  # 0-0.1: fraction of frames never delivered
+    drop_burst: float = 1.0  # frames, 1-6: mean length of a run of dropped frames
+    loss_rate: float = 0.0  # 1/min, 0-3: tracking-loss gaps per minute
+    loss_duration: float = 0.5  # s, 0.2-1.5: mean length of a tracking-loss gap
+
+
+# preset -> field -> (low, high), drawn uniformly (fps log-uniformly); fields left out keep
+# the Params default. "mixed" spans both real presets and every rate: the training preset.
+PRESETS: dict[str, dict[str, tuple[float, float]]] = {
+    "clean": {"jitter": (0.0005, 0.001)},
+    "iphone": {
+        "fps": (60.0, 60.0),
+        "timing_irregularity": (0.0, 0.02),
+        "jitter": (0.002, 0.005),
+        "jitter_velocity": (0.001, 0.004),
+        "jitter_correlation": (0.0, 0.3),
+        "channel_spread": (0.3, 0.5),
+        "blink_peak": (0.65, 0.92),
+        "peak": (0.85, 1.0),
+        "crosstalk_lr": (0.0, 0.08),
+        "crosstalk_jaw": (0.0, 0.15),
+        "crosstalk_brow": (0.0, 0.1),
+        "drift": (0.0, 0.02),
+        "drift_period": (10.0, 40.0),
+        "spike_rate": (0.0, 0.15),
+        "spike_amplitude": (0.1, 0.4),
+        "spike_duration": (0.02, 0.08),
+        "freeze_rate": (0.0, 0.01),
+        "drop_rate": (0.0, 0.04),
+        "drop_burst": (1.0, 6.0),
+        "loss_rate": (0.0, 0.5),
+        "loss_duration": (0.2, 0.8),
+    },
+    "webcam": {
+        "fps": (24.0, 30.0),
+        "timing_irregularity": (0.1, 0.35),
+        "jitter": (0.006, 0.015),
+        "jitter_velocity": (0.003, 0.01),
+        "jitter_correlation": (0.0, 0.5),
+        "channel_spread": (0.3, 0.6),
+        "blink_peak": (0.55, 0.85),
+        "peak": (0.75, 0.95),
+        "crosstalk_lr": (0.03, 0.15),
+        "crosstalk_jaw": (0.05, 0.25),
+        "crosstalk_brow": (0.03, 0.2),
+        "drift": (0.01, 0.04),
+        "drift_period": (5.0, 20.0),
+        "spike_rate": (0.1, 0.5),
+        "spike_amplitude": (0.2, 0.6),
+        "spike_duration": (0.05, 0.15),
+        "freeze_rate": (0.01, 0.05),
+        "drop_rate": (0.03, 0.1),
+        "drop_burst": (1.0, 3.0),
+        "loss_rate": (0.5, 3.0),
+        "loss_duration": (0.3, 1.5),
+    },
+}
+PRESETS["mixed"] = {
+    k: (min(PRESETS["iphone"][k][0], lo), max(PRESETS["iphone"][k][1], hi))
+    for k, (lo, hi) in PRESETS["webcam"].items()
+}
+PRESETS["mixed"]["fps"] = (24.0, 120.0)
+
+# Fields that ``strength`` scales (a rate or a size); the saturation peaks move toward 1.
+_SCALED = (
+    "timing_irregularity", "jitter", "jitter_velocity", "crosstalk_lr", "crosstalk_jaw",
+    "crosstalk_brow", "drift", "spike_rate", "spike_amplitude", "freeze_rate", "drop_rate",
+    "loss_rate",
+)  # fmt: skip
+_CAPS = {"timing_irregularity": 0.8, "crosstalk_lr": 0.45, "freeze_rate": 0.5, "drop_rate": 0.5}
+
+
+def sample_params(
+    rng: np.random.Generator, preset: str = "iphone", strength: float = 1.0
+) -> Params:
+    """Draw one sequence's :class:`Params` from a preset's ranges, scaled by ``strength``
+    (0 = nothing but the tracker's timing, 1 = the preset, 2 = twice the artefacts)."""
+    if preset not in PRESETS:
+        raise FacecleanError(f"unknown simulator preset {preset!r} (known: {', '.join(PRESETS)})")
+    if not np.isfinite(strength) or strength < 0:
+        raise FacecleanError(f"strength must be a number >= 0, got {strength}")
+    values = {}
+    for f in fields(Params):  # fixed field order: the draws do not depend on dict order
+        lo, hi = PRESETS[preset].get(f.name, (f.default, f.default))
+        if f.name == "fps":
+            values[f.name] = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+        else:
+            values[f.name] = float(rng.uniform(lo, hi))
+    for name in _SCALED:
+        values[name] = min(values[name] * strength, _CAPS.get(name, np.inf))
+    for name in ("blink_peak", "peak"):
+        values[name] = float(np.clip(1.0 - strength * (1.0 - values[name]), 0.3, 1.0))
+    return Params(**values)
+
+
+def corrupt(
+    clean: Animation, seed: int, preset: str = "iphone", strength: float = 1.0
+) -> tuple[Animation, Animation]:
+    """(noisy, truth) for a clean take, both at the noisy stream's timestamps.
+
+    The truth is the clean take linearly resampled there. Dropped frames are absent from
+    both; tracking-loss gaps are all-NaN rows in ``noisy`` while ``truth`` keeps values;
+    frames the source itself lacks are NaN in both. Same seed, same output.
+    """
+    rng = np.random.default_rng(seed)
+    return apply(clean, sample_params(rng, preset, strength), rng)
+
+
+def apply(
+    clean: Animation, params: Params, rng: np.random.Generator
+) -> tuple[Animation, Animation]:
+    """Degrade ``clean`` with explicit ``params``; per-channel draws come from ``rng``."""
+    x, present = clean.arkit()
+    times = clean.times
+    ok = clean.valid & np.isfinite(times)
+    if ok.sum() < 2 or np.any(np.diff(times[np.isfinite(times)]) < 0):
+        raise FacecleanError("simulator needs at least 2 valid frames with increasing times")
+    if not 1.0 <= params.fps <= 1000.0:
+        raise FacecleanError(f"simulator rate must be 1-1000 Hz, got {params.fps}")
+    t = stream_times(times[ok][0], times[ok][-1], params.fps, params.timing_irregularity, rng)
+    truth = resample(times[np.isfinite(times)], x[np.isfinite(times)], t)  # (N, 52)
+    seen = ~np.isnan(truth).all(1)  # (N,) the source has this instant
+    y = np.where(seen[:, None], truth, 0.0)
+    n = len(t)
+
+    y = _saturate(y, params, rng)
+    y = y @ _crosstalk(params, rng).T
+    y += _drift(t, params, rng)
+    y += _jitter(t, y, params, rng)
+    y += _spikes(t, params, rng)
+    y = np.clip(y, 0.0, 1.0)  # the tracker's channel range
+
+    y = hold_last(y, runs(n, params.freeze_rate / 1.5, 1.5, rng))
+    lost = runs(n, params.loss_rate / 60.0 / params.fps, params.loss_duration * params.fps, rng)
+    y[lost | ~seen] = np.nan
+    keep = ~runs(n, params.drop_rate / params.drop_burst, params.drop_burst, rng)
+    if keep.sum() < 2:
+        keep[:] = True
+    names = tuple(ARKIT52[i] for i in np.flatnonzero(present))
+    cols = present
+    noisy = Animation(t[keep], y[keep][:, cols], names, {"simulator": _describe(params)})
+    return noisy, Animation(t[keep], truth[keep][:, cols], names)
+
+
+def _describe(params: Params) -> dict[str, float]:
+    return {f.name: getattr(params, f.name) for f in fields(Params)}
+
+
+def _knee(peak: np.ndarray) -> np.ndarray:
+    """Ceiling c of x / (1 + (x/c)^4)^(1/4) such that x = 1 reads as ``peak`` (inf at 1)."""
+    peak = np.clip(peak, 1e-3, 1.0)
+    with np.errstate(divide="ignore"):
+        return np.where(peak < 1.0, (peak**-4.0 - 1.0) ** -0.25, np.inf)
+
+
+def _saturate(y: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
+    """Soft saturation: large activations top out (blinks that never fully close)."""
+    peak = rng.uniform(p.peak, 1.0, 52)
+    blink = p.blink_peak + rng.uniform(-0.03, 0.03, 2) * (p.blink_peak < 1.0)
+    peak[[INDEX["eyeBlinkLeft"], INDEX["eyeBlinkRight"]]] = blink
+    c = _knee(peak)
+    pos = np.maximum(y, 0.0)
+    return np.where(y > 0.0, pos / (1.0 + (pos / c) ** 4) ** 0.25, y)
+
+
+_LR_PAIRS = [
+    (INDEX[n], INDEX[n[:-4] + "Right"])
+    for n in ARKIT52
+    if n.endswith("Left") and not n.startswith("eyeLook") and n not in ("jawLeft", "mouthLeft")
+]
+
+
+def _crosstalk(p: Params, rng: np.random.Generator) -> np.ndarray:
+    """(52, 52) mixing matrix C, noisy = C @ clean per frame."""
+    c = np.eye(52)
+    share = p.crosstalk_lr * rng.uniform(0.5, 1.0, (len(_LR_PAIRS), 2))
+    for (left, right), (a, b) in zip(_LR_PAIRS, share, strict=True):
+        c[left, left], c[left, right] = 1.0 - a, a
+        c[right, right], c[right, left] = 1.0 - b, b
+    c[INDEX["mouthClose"], INDEX["jawOpen"]] += p.crosstalk_jaw
+    inner, outer = INDEX["browInnerUp"], [INDEX["browOuterUpLeft"], INDEX["browOuterUpRight"]]
+    c[inner, outer] += p.crosstalk_brow / 2.0
+    c[outer, inner] += p.crosstalk_brow
+    return c
+
+
+def _drift(t: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
+    """(N, 52) slow bias: per-channel sum of 3 sinusoids of period drift_period..4x, unit RMS."""
+    if p.drift <= 0.0:
+        return np.zeros((len(t), 52))
+    coarse = np.arange(t[0], t[-1] + 0.5, 0.25)  # s; the bias is smooth, interpolate it
+    period = rng.uniform(p.drift_period, 4.0 * p.drift_period, (1, 3, 52))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (1, 3, 52))
+    wave = np.sin(2.0 * np.pi * coarse[:, None, None] / period + phase).sum(1) / np.sqrt(1.5)
+    gain = p.drift * rng.standard_normal(52)
+    return resample(coarse, wave * gain, t, max_gap=np.inf)
+
+
+def _jitter(t: np.ndarray, y: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
+    """(N, 52) noise, std per channel scale * (jitter + jitter_velocity * |dy/dt|)."""
+    speed = np.abs(np.gradient(y, t, axis=0)) if len(t) > 1 else np.zeros_like(y)  # 1/s
+    scale = np.exp(p.channel_spread * rng.standard_normal(52))
+    e = rng.standard_normal(y.shape)
+    r = p.jitter_correlation
+    if r > 0.0:
+        e = lfilter([np.sqrt(1.0 - r * r)], [1.0, -r], e, axis=0)  # unit-variance AR(1)
+    return e * scale * (p.jitter + p.jitter_velocity * speed)
+
+
+# Channels a hand, hair or a bad frame can hit together.
+_REGIONS = [
+    [i for i, n in enumerate(ARKIT52) if n.startswith(prefix)]
+    for prefix in (("eye",), ("brow",), ("mouth", "jaw", "tongue"), ("cheek", "nose", "mouth"))
+]
+
+
+def _spikes(t: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
+    """(N, 52) occlusion glitches: triangular bumps on 2-5 channels of one face region."""
+    out = np.zeros((len(t), 52))
+    count = rng.poisson(p.spike_rate * (t[-1] - t[0])) if p.spike_rate > 0 else 0
+    for _ in range(count):
+        center = rng.uniform(t[0], t[-1])
+        half = 0.5 * p.spike_duration * rng.uniform(0.5, 1.5)
+        region = _REGIONS[rng.integers(len(_REGIONS))]
+        chans = rng.choice(region, size=rng.integers(2, 6), replace=False)
+        sign = np.where(rng.random(len(chans)) < 0.7, 1.0, -1.0)
+        amp = p.spike_amplitude * rng.uniform(0.5, 1.0, len(chans)) * sign
+        lo, hi = np.searchsorted(t, [center - half, center + half])
+        if hi <= lo:  # shorter than a frame: the nearest frame takes it whole
+            lo = int(np.clip(np.searchsorted(t, center), 0, len(t) - 1))
+            hi = lo + 1
+        shape = np.maximum(1.0 - np.abs(t[lo:hi] - center) / half, 0.2)
+        out[lo:hi, chans] += shape[:, None] * amp
+    return out
