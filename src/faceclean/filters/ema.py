@@ -1,0 +1,56 @@
+"""Exponential smoothing, causal: a time constant in seconds, or the paper's per-frame γ.
+
+dt-aware form (default): alpha = 1 - exp(-dt / tau), y <- y + alpha (x - y); the same
+curve sampled at any rate gives the same output (a first-order low-pass, cut-off
+1 / (2 pi tau) Hz).
+
+Per-frame form (the paper's baseline, SPEC section 3): y[n] = γ x[n] + (1 - γ) y[n-1]
+whatever dt is, so its smoothing depends on the frame rate (γ 0.3 at 60 fps is
+tau = -dt / ln(1 - γ) = 47 ms; at 30 fps the same γ is 94 ms).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.params import per_channel
+
+TAU = 0.025  # s; default time constant (a 6.4 Hz low-pass) for 60 fps ARKit data
+
+
+class Ema(StreamCleaner):
+    """Exponential smoothing: ``tau`` seconds (dt-aware) or per-frame ``gamma`` in (0, 1]."""
+
+    name = "ema"
+
+    def __init__(
+        self,
+        *,
+        tau: float | Sequence[float] | None = None,
+        gamma: float | Sequence[float] | None = None,
+        names: Sequence[str] = ARKIT52,
+    ) -> None:
+        if tau is not None and gamma is not None:
+            raise FacecleanError("ema: give tau (seconds) or gamma (per frame), not both")
+        self.names = tuple(names)
+        self.gamma = None if gamma is None else per_channel(gamma, names, "ema gamma", high=1.0)
+        self.tau = (
+            None
+            if gamma is not None
+            else per_channel(TAU if tau is None else tau, names, "ema tau")
+        )
+        self.reset()
+
+    def _start(self, x: np.ndarray) -> State:
+        return (x.copy(),)
+
+    def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
+        (y,) = state  # (S, M)
+        alpha = self.gamma if self.gamma is not None else -np.expm1(-dt / self.tau)
+        y = y + alpha * (x - y)
+        return (y,), y
