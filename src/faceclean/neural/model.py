@@ -1,0 +1,190 @@
+"""The paper's causal recurrent cleaner (Berson et al. 2020, SPEC section 2).
+
+One step runs when input frame n+1 arrives, with dt = t[n+1] - t[n] seconds:
+
+    x_c^(k)[n]  = (x_i^(k-1)[n+1] - x̂^(k-1)[n]) / dt            Eq. 2, k = 1..K
+    features    = [x̂[n], x̂^(1..K)[n-1], x_c^(1..K)[n]]           (B, F), F = M (1 + 2K)
+    h           = LSTM layers((features - feat_mean) / feat_std)  residual for l > 0
+    x̂^(k)[n]    = x_c^(k)[n] + out_scale · dense(h)              output residual
+    x̂^(k-1)[n+1] = x̂^(k-1)[n] + dt x̂^(k)[n]                     k = K..1, x̂ clamped
+
+For K >= 2 the input's derivatives are causal backward differences,
+x_i^(j)[n+1] = (x_i^(j-1)[n+1] - x_i^(j-1)[n]) / dt, and the estimate's intermediate
+derivatives x̂^(j)[n] (1 <= j < K) in Eq. 2 are integrated from the previous step's
+predictions: x̂^(j)[n] = x̂^(j)[n-1] + dt[n-1] x̂^(j+1)[n-1].
+A zero network follows the input exactly (x̂[n+1] = x_i[n+1]); it learns corrections.
+
+``forward`` applies the runtime's time rules (filters/base.py) inside a batch: a missing
+frame (all NaN or t NaN) holds the output and the state, a NaN channel takes the last
+output, and a pause longer than ``max_gap`` seconds restarts from the input.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import torch
+from torch import Tensor, nn
+
+MAX_GAP = 0.5  # s; as StreamCleaner.max_gap: longer pauses restart the state
+
+
+class State(NamedTuple):
+    """Recurrent state of B streams."""
+
+    y: Tensor  # (B, M) last output x̂[n]
+    d: Tensor  # (B, K*M) last predicted derivatives x̂^(1..K)[n-1], 1/s^k
+    z: Tensor  # (B, (K-1)*M) integrated estimate derivatives x̂^(1..K-1)[n], 1/s^k
+    xi: Tensor  # (B, (K-1)*M) input and its backward derivatives x_i^(0..K-2)[n]
+    h: tuple[Tensor, ...]  # L x (B, H)
+    c: tuple[Tensor, ...]  # L x (B, H)
+
+
+class LSTMCleaner(nn.Module):
+    """Stacked-LSTM corrector of K time-derivatives, closed loop, any frame rate.
+
+    Parameters map 1:1 to the checkpoint keys of docs/ARCHITECTURE.md:
+    ``lstm.{l}`` (nn.LSTMCell, gates i, f, g, o) and ``head`` (nn.Linear).
+    """
+
+    def __init__(
+        self,
+        channels: Sequence[str],
+        K: int = 1,
+        hidden: int = 128,
+        layers: int = 2,
+        dropout: float = 0.3,
+        value_range: tuple[float, float] = (0.0, 1.0),
+    ) -> None:
+        super().__init__()
+        if K < 1 or layers < 1 or hidden < 1 or not channels:
+            raise ValueError("need K >= 1, layers >= 1, hidden >= 1 and some channels")
+        self.channels = tuple(channels)
+        self.M = len(self.channels)
+        self.K = int(K)
+        self.hidden = int(hidden)
+        self.layers = int(layers)
+        self.dropout = float(dropout)
+        self.value_range = (float(value_range[0]), float(value_range[1]))
+        self.F = self.M * (1 + 2 * self.K)
+        self.lstm = nn.ModuleList(
+            nn.LSTMCell(self.F if i == 0 else hidden, hidden) for i in range(layers)
+        )
+        self.head = nn.Linear(hidden, self.K * self.M)
+        self.drop = nn.Dropout(self.dropout)
+        self.register_buffer("feat_mean", torch.zeros(self.F))
+        self.register_buffer("feat_std", torch.ones(self.F))
+        self.register_buffer("out_scale", torch.ones(self.K * self.M))
+
+    def config(self) -> dict:
+        """The constructor arguments (the checkpoint's ``config`` minus training facts)."""
+        return {
+            "channels": list(self.channels),
+            "K": self.K,
+            "hidden": self.hidden,
+            "layers": self.layers,
+            "dropout": self.dropout,
+            "value_range": list(self.value_range),
+        }
+
+    def init_state(self, B: int, x0: Tensor | None = None) -> State:
+        """State of B streams started at x̂[0] = x0 (B, M) (zeros when None)."""
+        ref = self.feat_mean
+        y = torch.zeros(B, self.M, dtype=ref.dtype, device=ref.device) if x0 is None else x0
+        km = self.K * self.M
+        zeros = y.new_zeros
+        xi = torch.cat([y, zeros(B, (self.K - 2) * self.M)], 1) if self.K > 1 else zeros(B, 0)
+        h = tuple(zeros(B, self.hidden) for _ in range(self.layers))
+        c = tuple(zeros(B, self.hidden) for _ in range(self.layers))
+        return State(y, zeros(B, km), zeros(B, km - self.M), xi, h, c)
+
+    def features(self, state: State, x_new: Tensor, dt: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Raw features (B, F), corrective derivatives x_c (B, K*M), input derivs (B, K*M).
+
+        x_new (B, M), dt (B,) seconds > 0.
+        """
+        dt = dt.reshape(-1, 1)
+        M = self.M
+        xin = [x_new]  # x_i^(j)[n+1], j = 0..K-1 (backward differences)
+        for j in range(1, self.K):
+            xin.append((xin[j - 1] - state.xi[:, (j - 1) * M : j * M]) / dt)
+        est = [state.y] + [state.z[:, j * M : (j + 1) * M] for j in range(self.K - 1)]
+        xc = torch.cat([(xin[k] - est[k]) / dt for k in range(self.K)], 1)  # Eq. 2
+        return torch.cat([state.y, state.d, xc], 1), xc, torch.cat(xin, 1)
+
+    def step(self, state: State, x_new: Tensor, dt: Tensor) -> tuple[State, Tensor]:
+        """One causal step: input frame x_new (B, M) arrived dt (B,) s after the last one."""
+        feats, xc, xin = self.features(state, x_new, dt)
+        u = (feats - self.feat_mean) / self.feat_std
+        hs, cs = [], []
+        for i, cell in enumerate(self.lstm):
+            h, c = cell(u, (state.h[i], state.c[i]))
+            hs.append(h)
+            cs.append(c)
+            h = h + u if i > 0 else h  # residual where sizes match
+            u = self.drop(h)
+        d = xc + self.out_scale * self.head(u)  # (B, K*M) x̂^(1..K)[n]
+        dtc = dt.reshape(-1, 1)
+        M = self.M
+        y = (state.y + dtc * d[:, :M]).clamp(*self.value_range)
+        # x̂^(j)[n+1] = x̂^(j)[n] + dt x̂^(j+1)[n], 1 <= j < K (Eq. 1 integrated)
+        z = d[:, : (self.K - 1) * M] + dtc * d[:, M:]
+        xi = xin[:, : (self.K - 1) * M]
+        return State(y, d, z, xi, tuple(hs), tuple(cs)), y
+
+    def forward(
+        self, x: Tensor, t: Tensor, return_derivatives: bool = False
+    ) -> Tensor | tuple[Tensor, Tensor, Tensor]:
+        """Closed-loop unroll over (B, T, M) inputs at (B, T) times from x̂[0] = x[0].
+
+        Returns y (B, T, M); with ``return_derivatives`` also d (B, T-1, K*M), the
+        predicted x̂^(1..K)[n] made when frame n+1 arrived, and ``stepped`` (B, T-1)
+        bool, where that step really advanced (held or restarted steps are False).
+        Missing frames (NaN rows or NaN times) hold the last output.
+        """
+        B, T, M = x.shape
+        bad = torch.isnan(x)
+        missing = bad.all(-1) | torch.isnan(t)  # (B, T)
+        x = torch.where(bad, torch.zeros_like(x), x)
+        state = self.init_state(B, x[:, 0])
+        t_last = torch.where(missing[:, 0], torch.full_like(t[:, 0], float("nan")), t[:, 0])
+        ys, ds, stepped = [state.y], [], []
+        for n in range(1, T):
+            xn = torch.where(bad[:, n], state.y, x[:, n])  # NaN channel: last output
+            dt = t[:, n] - t_last
+            start = ~missing[:, n] & ~(dt <= MAX_GAP)  # first frame or long pause
+            advance = ~missing[:, n] & (dt > 0) & ~start
+            new, y = self.step(state, xn, torch.where(advance, dt, torch.ones_like(dt)))
+            if not bool(advance.all()):
+                fresh = self.init_state(B, xn)
+                state = State(
+                    *(
+                        _pick(advance, start, a, b, o)
+                        for a, b, o in zip(new, fresh, state, strict=True)
+                    )
+                )
+                y = state.y
+            else:
+                state = new
+            t_last = torch.where(advance | start, t[:, n], t_last)
+            ys.append(y)
+            ds.append(new.d)
+            stepped.append(advance)
+        y = torch.stack(ys, 1)
+        if not return_derivatives:
+            return y
+        if T < 2:
+            return y, x.new_zeros(B, 0, self.K * M), torch.zeros(B, 0, dtype=torch.bool)
+        return y, torch.stack(ds, 1), torch.stack(stepped, 1)
+
+
+def _pick(advance: Tensor, start: Tensor, new, fresh, old):
+    """Per stream: ``new`` where advanced, ``fresh`` where restarted, else ``old``."""
+    if isinstance(new, tuple):
+        return tuple(
+            _pick(advance, start, a, b, o) for a, b, o in zip(new, fresh, old, strict=True)
+        )
+    a = advance.reshape(-1, 1)
+    s = start.reshape(-1, 1)
+    return torch.where(a, new, torch.where(s, fresh, old))
