@@ -1,0 +1,127 @@
+"""``faceclean info FILE``: what a capture holds: channels, rate, gaps, value ranges."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+import numpy as np
+
+HELP = "describe an animation file: channels, rate, duration, gaps, value ranges"
+GAP_FACTOR = 1.5  # a step longer than this many median steps has dropped frames
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE", help="animation file")
+    p.add_argument("--json", action="store_true", help="print the facts as JSON")
+
+
+def describe(anim) -> dict[str, Any]:
+    """Facts about an Animation (JSON-ready): counts, rate in Hz, seconds, gaps, ranges."""
+    from faceclean.channels import ARKIT52, canonical
+
+    valid = anim.valid
+    dt = np.diff(anim.times)  # s, over every row (tracking loss rows keep their times)
+    positive = dt[dt > 0]
+    median = float(np.median(positive)) if len(positive) else 0.0
+    gap_at = np.flatnonzero(dt > GAP_FACTOR * median) if median else np.zeros(0, int)
+    dropped = int(sum(round(dt[i] / median) - 1 for i in gap_at))
+    arkit = {canonical(n) for n in anim.names} - {None}
+    with np.errstate(all="ignore"):
+        lo = (
+            np.nanmin(anim.values[valid], axis=0)
+            if valid.any()
+            else np.full(anim.n_channels, np.nan)
+        )
+        hi = (
+            np.nanmax(anim.values[valid], axis=0)
+            if valid.any()
+            else np.full(anim.n_channels, np.nan)
+        )
+    outside = [
+        {"channel": n, "min": float(a), "max": float(b)}
+        for n, a, b in zip(anim.names, lo, hi, strict=True)
+        if a < 0.0 or b > 1.0
+    ]
+    return {
+        "format": anim.meta.get("format"),
+        "channels": anim.n_channels,
+        "arkit_channels": len(arkit),
+        "not_arkit": [n for n in anim.names if canonical(n) is None],
+        "arkit_absent": [n for n in ARKIT52 if n not in arkit],
+        "frames": anim.n_frames,
+        "missing_frames": int((~valid).sum()),
+        "rate_hz": 1.0 / median if median else 0.0,
+        "duration_s": anim.duration,
+        "gaps": [{"at_s": float(anim.times[i]), "length_s": float(dt[i])} for i in gap_at],
+        "dropped_frames": dropped,
+        "non_increasing_steps": int((dt <= 0).sum()),
+        "min": float(np.nanmin(lo)) if np.isfinite(lo).any() else None,
+        "max": float(np.nanmax(hi)) if np.isfinite(hi).any() else None,
+        "outside_0_1": outside,
+        "pose_channels": list(anim.meta.get("pose_names", ())),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from faceclean import io
+
+    facts = describe(io.load(args.file))
+    if args.json:
+        print(json.dumps(facts, indent=2))
+        return 0
+    lines = [
+        ("file", args.file),
+        ("format", facts["format"]),
+        ("channels", _channels(facts)),
+        ("frames", f"{facts['frames']} ({facts['missing_frames']} missing: tracking loss)"),
+        ("rate", f"{facts['rate_hz']:.3f} Hz (median step)"),
+        ("duration", f"{facts['duration_s']:.3f} s"),
+        ("gaps", _gaps(facts)),
+        ("range", _range(facts)),
+    ]
+    if facts["pose_channels"]:
+        lines.append(("passthrough", ", ".join(facts["pose_channels"])))
+    for key, text in lines:
+        print(f"{key:<12}{text}")
+    return 0
+
+
+def _channels(f: dict[str, Any]) -> str:
+    text = f"{f['channels']} ({f['arkit_channels']} ARKit)"
+    if f["not_arkit"]:
+        text += "; not ARKit: " + ", ".join(f["not_arkit"])
+    if f["arkit_absent"] and f["arkit_channels"]:
+        text += "; ARKit absent: " + ", ".join(f["arkit_absent"])
+    return text
+
+
+def _gaps(f: dict[str, Any]) -> str:
+    if not f["gaps"]:
+        text = "none (no step longer than 1.5 x the median)"
+    else:
+        longest = max(g["length_s"] for g in f["gaps"])
+        shown = ", ".join(f"{g['at_s']:.2f} s" for g in f["gaps"][:5])
+        more = f" and {len(f['gaps']) - 5} more" if len(f["gaps"]) > 5 else ""
+        text = (
+            f"{len(f['gaps'])} ({f['dropped_frames']} dropped frames, longest "
+            f"{longest * 1000:.0f} ms) at {shown}{more}"
+        )
+    if f["non_increasing_steps"]:
+        text += f"; {f['non_increasing_steps']} repeated or backwards timestamps"
+    return text
+
+
+def _range(f: dict[str, Any]) -> str:
+    if f["min"] is None:
+        return "no values"
+    text = f"min {f['min']:.4f}, max {f['max']:.4f}"
+    out = f["outside_0_1"]
+    if out:
+        worst = ", ".join(f"{o['channel']} [{o['min']:.3f}, {o['max']:.3f}]" for o in out[:6])
+        more = f" and {len(out) - 6} more" if len(out) > 6 else ""
+        text += f"; {len(out)} channels outside [0, 1]: {worst}{more}"
+    else:
+        text += "; all within [0, 1]"
+    return text

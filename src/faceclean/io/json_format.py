@@ -1,0 +1,88 @@
+"""JSON animation files (layout ``faceclean-animation/1``).
+
+::
+
+    {"format": "faceclean-animation/1",
+     "channels": ["eyeBlinkLeft", ...],          # M names
+     "times": [0.0, 0.0167, ...],                 # N, seconds
+     "values": [[0.01, ...], ...],                # N rows of M numbers, null = missing
+     "pose_names": [...], "pose": [[...], ...],   # optional passthrough (N rows)
+     "timecode_start": 53882.7}                   # optional, s of the day
+
+Numbers are written by Python's ``json`` (shortest repr, exact on read). A missing frame
+is a row of nulls (a bare ``null`` row is read the same way). Infinite values are refused.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.errors import FacecleanError
+
+FORMAT = "faceclean-animation/1"
+
+
+def sniff(head: bytes) -> bool:
+    return head.lstrip().startswith(b"{")
+
+
+def read(path: str | os.PathLike) -> Animation:
+    """Read a ``faceclean-animation/1`` JSON file."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_bytes())
+    except json.JSONDecodeError as e:
+        raise FacecleanError(f"{p.name}: not valid JSON ({e})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise FacecleanError(f"{p.name}: not a {FORMAT} JSON file (see docs/FORMATS.md)")
+    names = doc.get("channels")
+    times = np.array(doc.get("times"), dtype=np.float64)
+    m = len(names) if isinstance(names, list) else 0
+    rows = doc.get("values")
+    if not isinstance(names, list) or not isinstance(rows, list) or times.ndim != 1:
+        raise FacecleanError(f"{p.name}: needs 'channels', 'times' and 'values' lists")
+    values = np.array([[None] * m if r is None else r for r in rows], dtype=np.float64)
+    values = values.reshape(len(rows), m) if values.size == 0 else values
+    if values.shape != (len(times), m):
+        raise FacecleanError(
+            f"{p.name}: 'values' is {values.shape}, expected {len(times)} x {m} channels"
+        )
+    meta: dict[str, Any] = {"format": "json"}
+    if "pose" in doc:
+        meta["pose"] = np.array(doc["pose"], dtype=np.float64)
+        meta["pose_names"] = tuple(doc.get("pose_names", ()))
+    if "timecode_start" in doc:
+        meta["timecode_start"] = float(doc["timecode_start"])
+    return Animation(times, values, tuple(str(n) for n in names), meta)
+
+
+def write(anim: Animation, f: BinaryIO) -> None:
+    """Write the layout above, one frame per line."""
+    if np.isinf(anim.values).any() or not np.isfinite(anim.times).all():
+        raise FacecleanError("JSON cannot hold infinite values or non-finite times")
+    head = {"format": FORMAT, "channels": list(anim.names), "times": anim.times.tolist()}
+    extra: dict[str, Any] = {}
+    pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
+    if pose.ndim == 2 and pose.shape[0] == anim.n_frames and pose.shape[1]:
+        extra["pose_names"] = list(anim.meta.get("pose_names", ()))
+        extra["pose"] = _rows(pose)
+    if "timecode_start" in anim.meta:
+        extra["timecode_start"] = float(anim.meta["timecode_start"])
+    parts = [json.dumps(head)[:-1], ',\n "values": [']
+    parts.append(",".join("\n  " + json.dumps(r) for r in _rows(anim.values)))
+    parts.append("\n ]")
+    for k, v in extra.items():
+        parts.append(f",\n {json.dumps(k)}: {json.dumps(v)}")
+    parts.append("\n}\n")
+    f.write("".join(parts).encode("utf-8"))
+
+
+def _rows(a: np.ndarray) -> list[list[float | None]]:
+    """(N, M) -> nested lists with None for NaN."""
+    return [[None if v != v else v for v in row] for row in a.tolist()]  # v != v: NaN

@@ -1,0 +1,72 @@
+"""NumPy ``.npz`` animation files (loaded with ``allow_pickle=False``).
+
+Keys: ``format`` (0-d str ``faceclean-animation/1``), ``times`` (N,) float64 s,
+``values`` (N, M) float64 with NaN for missing, ``names`` (M,) str; optional
+passthrough ``pose`` (N, P), ``pose_names`` (P,), ``timecode_start`` (0-d, s of the day).
+On read, ``time`` and ``weights`` are accepted for ``times`` and ``values`` (the layout of
+``raw_streams/llv_dao.npz``) and ``format`` may be absent.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.errors import FacecleanError
+
+FORMAT = "faceclean-animation/1"
+
+
+def sniff(head: bytes) -> bool:
+    return head.startswith(b"PK\x03\x04")
+
+
+def read(path: str | os.PathLike) -> Animation:
+    """Read an ``.npz`` animation."""
+    p = Path(path)
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, ValueError) as e:
+        raise FacecleanError(f"{p.name}: not a readable npz file ({e})") from None
+    if "format" in arrays and str(arrays["format"]) != FORMAT:
+        raise FacecleanError(f"{p.name}: format {str(arrays['format'])!r}, expected {FORMAT!r}")
+    times = arrays.get("times", arrays.get("time"))
+    values = arrays.get("values", arrays.get("weights"))
+    names = arrays.get("names")
+    if times is None or values is None or names is None:
+        raise FacecleanError(f"{p.name}: needs 'times', 'values' and 'names' arrays")
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 2 or values.shape != (len(times), len(names)):
+        raise FacecleanError(
+            f"{p.name}: 'values' is {values.shape}, expected {len(times)} x {len(names)}"
+        )
+    meta: dict[str, Any] = {"format": "npz"}
+    if "pose" in arrays:
+        meta["pose"] = arrays["pose"].astype(np.float64)
+        meta["pose_names"] = tuple(str(n) for n in arrays.get("pose_names", ()))
+    if "timecode_start" in arrays:
+        meta["timecode_start"] = float(arrays["timecode_start"])
+    return Animation(times, values, tuple(str(n) for n in names), meta)
+
+
+def write(anim: Animation, f: BinaryIO) -> None:
+    """Write the keys above (uncompressed, float64)."""
+    arrays: dict[str, np.ndarray] = {
+        "format": np.array(FORMAT),
+        "times": anim.times,
+        "values": anim.values,
+        "names": np.array(anim.names, dtype=str),
+    }
+    pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
+    if pose.ndim == 2 and pose.shape[0] == anim.n_frames and pose.shape[1]:
+        arrays["pose"] = pose
+        arrays["pose_names"] = np.array(anim.meta.get("pose_names", ()), dtype=str)
+    if "timecode_start" in anim.meta:
+        arrays["timecode_start"] = np.array(float(anim.meta["timecode_start"]))
+    np.savez(f, **arrays)

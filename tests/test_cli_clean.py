@@ -1,0 +1,198 @@
+"""The clean / info / convert commands: Live Link files keep every non-value byte."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from faceclean.cli import main
+from faceclean.cli.clean import parse_params
+from faceclean.errors import FacecleanError
+from faceclean.filters import METHODS
+from faceclean.io import load
+from faceclean.settings import takes_dir
+
+TAKE = takes_dir() / "alexdjulin" / "apfel.csv" if takes_dir() else None
+needs_takes = pytest.mark.skipif(TAKE is None, reason="../shared/data/arkit_takes is absent")
+CLASSICAL = ["ema", "one-euro", "kalman", "gaussian", "savgol"]
+
+
+def _have(method: str) -> bool:
+    return importlib.util.find_spec(METHODS[method].split(":")[0]) is not None
+
+
+def _rows(path):
+    return [line.split(b",") for line in path.read_bytes().split(b"\n")]
+
+
+def _assert_only_values_changed(src, out) -> int:
+    """Every line equal except blendshape cells, which stay numbers. Returns changed cells."""
+    a, b = _rows(src), _rows(out)
+    assert len(a) == len(b)
+    assert a[0] == b[0]  # header
+    blend = {
+        j
+        for j, name in enumerate(a[0])
+        if j >= 2 and not name.endswith((b"Yaw", b"Pitch", b"Roll"))
+    }
+    assert len(blend) == 52
+    changed = 0
+    for ra, rb in zip(a[1:], b[1:], strict=True):
+        assert len(ra) == len(rb)
+        for j, (x, y) in enumerate(zip(ra, rb, strict=True)):
+            if j in blend:
+                assert len(y.split(b".")[1]) == 10  # the source's number format
+                changed += x != y
+            else:
+                assert x == y  # timecode, count and angles as text
+    return changed
+
+
+@needs_takes
+@pytest.mark.parametrize("method", CLASSICAL)
+def test_clean_livelink_changes_only_values(tmp_path, capsys, method):
+    if not _have(method):
+        pytest.skip(f"{method} cleaner not written yet")
+    out = tmp_path / "out.csv"
+    assert main(["clean", str(TAKE), "-o", str(out), "--method", method]) == 0
+    said = capsys.readouterr().out
+    assert said.count("\n") == 1 and "1926 frames" in said and method in said
+    assert _assert_only_values_changed(TAKE, out) > 1000
+    cleaned = load(out)
+    assert cleaned.meta["format"] == "livelink"
+    assert np.array_equal(cleaned.valid, load(TAKE).valid)
+
+
+@needs_takes
+def test_clean_in_place_and_set_params(tmp_path, capsys):
+    if not _have("ema"):
+        pytest.skip("ema cleaner not written yet")
+    take = tmp_path / "take.csv"
+    shutil.copyfile(TAKE, take)
+    assert main(["clean", str(take), "-o", str(take), "--method", "ema", "--set", "tau=0.05"]) == 0
+    assert '"tau": 0.05' in capsys.readouterr().out
+    assert _assert_only_values_changed(TAKE, take) > 1000
+    assert [p.name for p in tmp_path.iterdir()] == ["take.csv"]  # no temporary left
+
+
+@needs_takes
+def test_clean_with_preset(tmp_path, capsys):
+    if importlib.util.find_spec("faceclean.filters.presets") is None or not _have("ema"):
+        pytest.skip("presets not written yet")
+    preset = tmp_path / "p.json"
+    preset.write_text(
+        json.dumps({"format": "faceclean-preset/1", "method": "ema", "params": {"tau": 0.03}})
+    )
+    out = tmp_path / "out.json"
+    assert main(["clean", str(TAKE), "-o", str(out), "--preset", str(preset)]) == 0
+    assert "preset" in capsys.readouterr().out
+    assert load(out).meta["format"] == "json"
+
+
+@needs_takes
+def test_convert_and_info(tmp_path, capsys):
+    npz = tmp_path / "take.npz"
+    assert main(["convert", str(TAKE), "-o", str(npz)]) == 0
+    assert "livelink -> npz" in capsys.readouterr().out
+    assert (
+        main(["convert", str(npz), "-o", str(tmp_path / "back.csv"), "--format", "livelink"]) == 0
+    )
+    back, src = load(tmp_path / "back.csv"), load(TAKE)
+    np.testing.assert_allclose(back.arkit()[0], src.arkit()[0], atol=1e-12)
+    # the timecodes are rebuilt from times + timecode_start, to the ms of a sub-frame
+    assert [r[0] for r in _rows(tmp_path / "back.csv")] == [r[0] for r in _rows(TAKE)]
+    capsys.readouterr()
+    assert main(["info", str(TAKE), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["frames"] == 1926 and facts["missing_frames"] == 35
+    assert facts["channels"] == 52 and facts["arkit_absent"] == [] and facts["not_arkit"] == []
+    assert facts["rate_hz"] == pytest.approx(30.0, abs=0.01)
+    assert facts["dropped_frames"] == 2 and len(facts["gaps"]) == 2
+    assert [o["channel"] for o in facts["outside_0_1"]] == ["EyeLookInLeft", "EyeLookOutRight"]
+    assert main(["info", str(TAKE)]) == 0
+    text = capsys.readouterr().out
+    assert "35 missing" in text and "2 channels outside [0, 1]" in text
+
+
+def _bad_cases(tmp_path):
+    garbage = tmp_path / "garbage.csv"
+    garbage.write_bytes(b"\x00\xffnot,a,capture\n1,2\n")
+    unknown = tmp_path / "take.txt"
+    unknown.write_text("hello")
+    broken = tmp_path / "broken.csv"
+    broken.write_bytes(b"Timecode,BlendshapeCount,JawOpen\n00:00:00:00.000,1,zz\n")
+    good = tmp_path / "good.csv"
+    good.write_bytes(b"time,jawOpen\n0.0,0.5\n0.1,0.6\n")
+    return [
+        ([str(tmp_path / "nope.csv")], tmp_path / "o.csv", "no such file"),
+        ([str(unknown)], tmp_path / "o.csv", "unknown file type"),
+        ([str(garbage)], tmp_path / "o.csv", "not a Live Link Face CSV"),
+        ([str(broken)], tmp_path / "o.csv", "not a number"),
+        ([str(good)], tmp_path / "missing" / "o.csv", "output folder does not exist"),
+        ([str(good)], tmp_path / "o.xyz", "unknown output type"),
+    ]
+
+
+@pytest.mark.parametrize("command", ["clean", "convert", "info"])
+def test_bad_input_exit_2_one_line_no_output(tmp_path, capsys, command):
+    for args, out, message in _bad_cases(tmp_path):
+        if command == "info" and "output" in message:
+            continue
+        argv = [command, *args] + ([] if command == "info" else ["-o", str(out)])
+        if command == "clean":
+            argv += ["--method", "ema"]
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith("faceclean: ") and err.count("\n") == 1 and message in err, err
+        assert not out.exists()
+    leftovers = [p.name for p in tmp_path.rglob("*") if p.name.startswith(".")]
+    assert leftovers == []
+
+
+def test_bad_method_and_params(tmp_path, capsys):
+    good = tmp_path / "good.csv"
+    good.write_bytes(b"time,jawOpen\n0.0,0.5\n0.1,0.6\n")
+    out = tmp_path / "o.csv"
+    assert main(["clean", str(good), "-o", str(out), "--method", "nope"]) == 2
+    assert "unknown method" in capsys.readouterr().err
+    assert main(["clean", str(good), "-o", str(out), "--set", "novalue"]) == 2
+    assert "KEY=VALUE" in capsys.readouterr().err
+    assert main(["clean", str(good), "-o", str(out), "--preset", "x", "--method", "ema"]) == 2
+    assert not out.exists()
+
+
+def test_parse_params():
+    got = parse_params(["a=1", "b=2.5", "c=true", "d=off", "e=[1, 2]", "f=name", "g-h=-3e-2"])
+    assert got == {"a": 1, "b": 2.5, "c": True, "d": False, "e": [1, 2], "f": "name", "g_h": -0.03}
+    with pytest.raises(FacecleanError):
+        parse_params(["=3"])
+
+
+@needs_takes
+def test_subprocess_entry_point(tmp_path):
+    out = tmp_path / "o.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "faceclean", "convert", str(TAKE), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr
+    assert "1926 frames" in run.stdout
+    assert json.loads(out.read_text())["format"] == "faceclean-animation/1"
+    bad = subprocess.run(
+        [sys.executable, "-m", "faceclean", "info", str(tmp_path / "none.csv")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert (
+        bad.returncode == 2
+        and bad.stderr.strip() == f"faceclean: no such file: {tmp_path / 'none.csv'}"
+    )
