@@ -256,23 +256,25 @@ def make_chunks(
     return concat(parts)
 
 
+def epoch_chunks(
+    takes: Sequence[Take], seed: int, epoch: int, *, synthetic_minutes: float = 0.0, **kwargs
+) -> Chunks:
+    """Training chunks of one epoch: a fresh corruption and augmentation for every epoch,
+    plus ``synthetic_minutes`` of new synthetic performer takes. Keywords go to
+    :func:`make_chunks`. Same (seed, epoch), same arrays."""
+    pool = list(takes)
+    if synthetic_minutes > 0:
+        pool += synthetic_takes(synthetic_minutes, seed=seed * 100003 + epoch)
+    return make_chunks(pool, seed=seed * 1000003 + epoch + 1, **kwargs)
+
+
 def epochs(
-    takes: Sequence[Take],
-    seed: int,
-    count: int | None = None,
-    *,
-    synthetic_minutes: float = 0.0,
-    **kwargs,
+    takes: Sequence[Take], seed: int, count: int | None = None, **kwargs
 ) -> Iterator[Chunks]:
-    """Training chunks for epoch 0, 1, ... (``count`` of them, or forever): a fresh
-    corruption and augmentation every epoch, plus ``synthetic_minutes`` of new synthetic
-    performer takes per epoch. Keywords go to :func:`make_chunks`."""
+    """:func:`epoch_chunks` for epoch 0, 1, ... (``count`` of them, or forever)."""
     epoch = 0
     while count is None or epoch < count:
-        pool = list(takes)
-        if synthetic_minutes > 0:
-            pool += synthetic_takes(synthetic_minutes, seed=seed * 100003 + epoch)
-        yield make_chunks(pool, seed=seed * 1000003 + epoch + 1, **kwargs)
+        yield epoch_chunks(takes, seed, epoch, **kwargs)
         epoch += 1
 
 
