@@ -87,4 +87,7 @@ def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> No
         fmt = source if source in candidates else candidates[-1]
     module = _module(fmt)
     with atomic_open(p, "wb") as f:
-        module.write(anim, f)
+        if getattr(module, "WRITE_NEEDS_PATH", False):  # glTF: .glb or .gltf by the name
+            module.write(anim, f, path=p)
+        else:
+            module.write(anim, f)

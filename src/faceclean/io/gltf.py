@@ -1,0 +1,285 @@
+"""glTF 2.0 / GLB morph-target weight animations, written back into a copy of the file.
+
+Read: the first animation channel whose target path is ``"weights"`` (animations and their
+channels in file order; other weight channels and meshes are left alone). Its sampler's
+input accessor gives ``times`` (N,) s, the output accessor the weights (N, M), M the
+morph-target count of the target node's mesh. Channel names come from
+``mesh.extras.targetNames``, else the first primitive's ``extras.targetNames``, else
+``target0..``. ``LINEAR`` and ``STEP`` outputs hold N x M values; ``CUBICSPLINE`` holds
+N x 3 x M (in-tangent, value, out-tangent): the values are read, the tangents kept.
+
+Write: the source file again, with only the output accessor's value bytes replaced, in its
+own component type (float, or normalised integers). Same buffer layout; tangents, other
+animations, meshes, images and the JSON stay as they were; only ``min``/``max`` of the
+output accessor are updated when it declares them (then the JSON is re-serialised). A NaN
+keeps the original weight. GLB in, GLB out: byte for byte equal outside that accessor.
+Out to ``.gltf``, the changed buffer is embedded as a base64 data URI (other URIs kept as
+written, relative to the output); ``.gltf`` in, ``.glb`` out moves buffer 0 into the BIN
+chunk. Only an animation read from a glTF file can be written: its keyframe times must
+be unchanged.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+import urllib.parse
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+import pygltflib
+
+from faceclean.animation import Animation
+from faceclean.errors import FacecleanError
+
+_JSON, _BIN = 0x4E4F534A, 0x004E4942  # GLB chunk types
+# componentType -> (dtype, normalising divisor for integer outputs)
+_COMPONENTS: dict[int, tuple[str, float | None]] = {
+    pygltflib.FLOAT: ("<f4", None),
+    pygltflib.BYTE: ("<i1", 127.0),
+    pygltflib.UNSIGNED_BYTE: ("<u1", 255.0),
+    pygltflib.SHORT: ("<i2", 32767.0),
+    pygltflib.UNSIGNED_SHORT: ("<u2", 65535.0),
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Source:
+    """What the writer needs: kept in ``meta["gltf"]``."""
+
+    raw: bytes  # the whole source file
+    glb: bool
+    doc: dict[str, Any]  # the JSON, as parsed
+    bin_offset: int | None  # file offset of the GLB BIN chunk's data
+    buffers: tuple[bytes, ...]  # every buffer's bytes
+    accessor: int  # the weights output accessor
+    keys: np.ndarray  # (N, K, M) the output as read; K = 3 for CUBICSPLINE, else 1
+    times: np.ndarray  # (N,) s
+    names: tuple[str, ...]
+
+
+def sniff(head: bytes) -> bool:
+    return head.startswith(b"glTF") or head.lstrip().startswith(b"{")
+
+
+def read(path: str | os.PathLike) -> Animation:
+    """Read the first morph-weight animation channel of a .gltf or .glb file."""
+    p = Path(path)
+    try:
+        return _read(p, p.read_bytes())
+    except (IndexError, KeyError, TypeError, AttributeError, ValueError) as e:
+        raise FacecleanError(f"{p.name}: broken glTF ({type(e).__name__}: {e})") from None
+
+
+def _read(p: Path, raw: bytes) -> Animation:
+    glb = raw.startswith(b"glTF")
+    text, bin_offset, bin_chunk = _split_glb(raw, p.name) if glb else (raw, None, None)
+    try:
+        doc = json.loads(text)
+        with warnings.catch_warnings():  # dataclasses_json warns on absent optional fields
+            warnings.simplefilter("ignore")
+            model = pygltflib.GLTF2.from_dict(doc)
+    except (UnicodeDecodeError, ValueError) as e:
+        raise FacecleanError(f"{p.name}: not a glTF file ({e})") from None
+    buffers = tuple(_buffer(b, bin_chunk, p) for b in model.buffers)
+
+    found = [
+        (anim, ch)
+        for anim in model.animations
+        for ch in anim.channels
+        if ch.target is not None and ch.target.path == "weights" and ch.target.node is not None
+    ]
+    if not found:
+        raise FacecleanError(f"{p.name}: no morph-target weight animation in the file")
+    anim, channel = found[0]
+    sampler = anim.samplers[channel.sampler]
+    mesh = model.meshes[model.nodes[channel.target.node].mesh]
+    m = len(mesh.primitives[0].targets or [])
+    if m == 0:
+        raise FacecleanError(f"{p.name}: the animated mesh has no morph targets")
+    times = _read_accessor(model, buffers, sampler.input)
+    out = _read_accessor(model, buffers, sampler.output)
+    k = 3 if sampler.interpolation == pygltflib.ANIM_CUBICSPLINE else 1
+    if out.size != len(times) * k * m:
+        raise FacecleanError(
+            f"{p.name}: weights output has {out.size} values, expected {len(times)} x {k} x {m}"
+        )
+    keys = out.reshape(len(times), k, m)
+    names = _target_names(mesh, m)
+    source = Source(
+        raw, glb, doc, bin_offset, buffers, sampler.output, keys.copy(), times.copy(), names
+    )
+    values = keys[:, 1 if k == 3 else 0, :]
+    meta = {"format": "gltf", "gltf": source, "interpolation": sampler.interpolation or "LINEAR"}
+    return Animation(times, values, names, meta)
+
+
+WRITE_NEEDS_PATH = True  # io.save passes the target path: its suffix picks GLB or .gltf
+
+
+def write(anim: Animation, f: BinaryIO, path: str | os.PathLike | None = None) -> None:
+    """Write the weights back into a copy of the source file.
+
+    The container is GLB when ``path`` ends in ``.glb``, JSON glTF for ``.gltf``, else the
+    source's.
+    """
+    src = anim.meta.get("gltf")
+    if not isinstance(src, Source):
+        raise FacecleanError(
+            "glTF output needs an animation read from a glTF/GLB file "
+            "(weights are written back into that file's copy)"
+        )
+    if anim.n_frames != len(src.times) or not np.array_equal(anim.times, src.times):
+        raise FacecleanError("glTF output: the keyframe times changed; cannot write them back")
+    keys = src.keys.copy()
+    slot = 1 if keys.shape[1] == 3 else 0
+    index = {n: i for i, n in enumerate(src.names)}
+    for j, n in enumerate(anim.names):
+        i = index.get(n)
+        if i is not None:
+            new = anim.values[:, j]
+            keys[:, slot, i] = np.where(np.isnan(new), keys[:, slot, i], new)
+
+    doc = json.loads(json.dumps(src.doc))  # a deep copy we may edit
+    acc = doc["accessors"][src.accessor]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype, scale = _COMPONENTS[acc["componentType"]]
+    encoded = _encode(keys.ravel(), dtype, scale)
+    buffer_i = view["buffer"]
+    data = bytearray(src.buffers[buffer_i])
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    stride = view.get("byteStride") or encoded.itemsize
+    if stride == encoded.itemsize:
+        data[start : start + encoded.nbytes] = encoded.tobytes()
+    else:  # interleaved view
+        for n, item in enumerate(_items(encoded)):
+            data[start + n * stride : start + n * stride + len(item)] = item
+    json_changed = False
+    if "min" in acc or "max" in acc:
+        decoded = _decode(encoded, scale)
+        acc["min"], acc["max"] = [float(decoded.min())], [float(decoded.max())]
+        json_changed = (acc["min"], acc["max"]) != (
+            src.doc["accessors"][src.accessor].get("min"),
+            src.doc["accessors"][src.accessor].get("max"),
+        )
+
+    suffix = Path(path).suffix.lower() if path is not None else ""
+    if {".glb": True, ".gltf": False}.get(suffix, src.glb):
+        in_bin_chunk = "uri" not in src.doc["buffers"][buffer_i]
+        if src.glb and in_bin_chunk and not json_changed:
+            out = bytearray(src.raw)
+            out[src.bin_offset : src.bin_offset + len(data)] = data
+            f.write(bytes(out))
+            return
+        buffers = list(src.buffers)
+        buffers[buffer_i] = bytes(data)
+        f.write(_glb(doc, buffers, buffer_i))
+    else:
+        for i, b in enumerate(doc.get("buffers", [])):
+            if i == buffer_i or "uri" not in b:  # changed, or the GLB's BIN chunk
+                payload = bytes(data) if i == buffer_i else src.buffers[i]
+                b["uri"] = "data:application/octet-stream;base64," + base64.b64encode(
+                    payload
+                ).decode("ascii")
+        f.write((json.dumps(doc, indent=2) + "\n").encode("utf-8"))
+
+
+def _split_glb(raw: bytes, name: str) -> tuple[bytes, int | None, bytes | None]:
+    """GLB -> (JSON chunk, file offset of the BIN data, BIN data)."""
+    if len(raw) < 20:
+        raise FacecleanError(f"{name}: truncated GLB")
+    _, version, length = struct.unpack_from("<4sII", raw, 0)
+    if version != 2:
+        raise FacecleanError(f"{name}: GLB version {version}, only 2 is supported")
+    pos, text, bin_offset, bin_data = 12, None, None, None
+    while pos + 8 <= min(length, len(raw)):
+        size, kind = struct.unpack_from("<II", raw, pos)
+        if kind == _JSON and text is None:
+            text = raw[pos + 8 : pos + 8 + size]
+        elif kind == _BIN and bin_offset is None:
+            bin_offset, bin_data = pos + 8, raw[pos + 8 : pos + 8 + size]
+        pos += 8 + size
+    if text is None:
+        raise FacecleanError(f"{name}: GLB without a JSON chunk")
+    return text, bin_offset, bin_data
+
+
+def _buffer(buffer: pygltflib.Buffer, bin_chunk: bytes | None, path: Path) -> bytes:
+    uri = buffer.uri
+    if uri is None:
+        if bin_chunk is None:
+            raise FacecleanError(f"{path.name}: a buffer without URI and no GLB BIN chunk")
+        return bin_chunk
+    if uri.startswith("data:"):
+        return base64.b64decode(uri.split(",", 1)[1])
+    target = path.parent / urllib.parse.unquote(uri)
+    if not target.is_file():
+        raise FacecleanError(f"{path.name}: buffer file {uri!r} not found beside it")
+    return target.read_bytes()
+
+
+def _read_accessor(model: pygltflib.GLTF2, buffers: tuple[bytes, ...], i: int) -> np.ndarray:
+    """A SCALAR accessor as float64 (normalised integers mapped to [-1, 1] / [0, 1])."""
+    acc = model.accessors[i]
+    if acc.sparse is not None or acc.bufferView is None or acc.type != "SCALAR":
+        raise FacecleanError(f"accessor {i}: only dense SCALAR accessors are supported")
+    if acc.componentType not in _COMPONENTS:
+        raise FacecleanError(f"accessor {i}: component type {acc.componentType} not supported")
+    dtype, scale = _COMPONENTS[acc.componentType]
+    view = model.bufferViews[acc.bufferView]
+    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+    stride = view.byteStride or np.dtype(dtype).itemsize
+    data = buffers[view.buffer]
+    if start + stride * (acc.count - 1) + np.dtype(dtype).itemsize > len(data):
+        raise FacecleanError(f"accessor {i}: runs past the end of its buffer")
+    raw = np.ndarray((acc.count,), dtype, buffer=data, offset=start, strides=(stride,))
+    return _decode(raw, scale)
+
+
+def _decode(raw: np.ndarray, scale: float | None) -> np.ndarray:
+    a = raw.astype(np.float64)
+    return a if scale is None else np.maximum(a / scale, -1.0)  # glTF normalised ints
+
+
+def _encode(values: np.ndarray, dtype: str, scale: float | None) -> np.ndarray:
+    if scale is None:
+        return values.astype(dtype)
+    info = np.iinfo(np.dtype(dtype))
+    return np.clip(np.round(values * scale), info.min, info.max).astype(dtype)
+
+
+def _items(encoded: np.ndarray) -> list[bytes]:
+    size = encoded.itemsize
+    flat = encoded.tobytes()
+    return [flat[i : i + size] for i in range(0, len(flat), size)]
+
+
+def _target_names(mesh: pygltflib.Mesh, m: int) -> tuple[str, ...]:
+    for extras in (mesh.extras, mesh.primitives[0].extras):
+        names = extras.get("targetNames") if isinstance(extras, dict) else None
+        if isinstance(names, list) and len(names) == m:
+            return tuple(str(n) for n in names)
+    return tuple(f"target{i}" for i in range(m))
+
+
+def _glb(doc: dict[str, Any], buffers: list[bytes], changed: int) -> bytes:
+    """A GLB: buffer 0 becomes the BIN chunk; other changed or URI-less buffers, data URIs."""
+    for i, b in enumerate(doc.get("buffers", [])):
+        if i == 0:
+            b.pop("uri", None)
+        elif i == changed or "uri" not in b:
+            b["uri"] = "data:application/octet-stream;base64," + base64.b64encode(
+                buffers[i]
+            ).decode("ascii")
+    text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
+    text += b" " * (-len(text) % 4)
+    chunks = struct.pack("<II", len(text), _JSON) + text
+    if buffers:
+        data = buffers[0] + b"\0" * (-len(buffers[0]) % 4)
+        chunks += struct.pack("<II", len(data), _BIN) + data
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
