@@ -196,3 +196,22 @@ def test_subprocess_entry_point(tmp_path):
         bad.returncode == 2
         and bad.stderr.strip() == f"faceclean: no such file: {tmp_path / 'none.csv'}"
     )
+
+
+def test_progress_path_equals_batch_clean():
+    from faceclean.animation import Animation
+    from faceclean.cli.clean import PROGRESS_FRAMES, clean_with_progress
+    from faceclean.filters import make
+
+    if not _have("one-euro"):
+        pytest.skip("one-euro cleaner not written yet")
+    n = PROGRESS_FRAMES + 10
+    rng = np.random.default_rng(3)
+    values = rng.random((n, 3))
+    values[100:110] = np.nan  # tracking loss
+    anim = Animation(np.arange(n) / 60.0, values, ("jawOpen", "eyeBlinkLeft", "custom"))
+    cleaner = make("one-euro", names=anim.names)
+    stepped = clean_with_progress(cleaner, anim)
+    batch = cleaner.clean(anim)
+    assert np.array_equal(stepped.values, batch.values, equal_nan=True)
+    assert np.isnan(stepped.values[100:110]).all()
