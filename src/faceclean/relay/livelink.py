@@ -1,0 +1,148 @@
+"""Live Link Face UDP, protocol version 6: packets <-> frames, and ``.gesichter`` recordings.
+
+One packet, big-endian (../shared/data/README.md):
+``u8 version(=6)``, ``i32 len`` + device id, ``i32 len`` + subject name,
+``i32 frame_number``, ``f32 sub_frame``, ``i32 rate_numerator``, ``i32 rate_denominator``,
+``u8 count`` (61; 52 is accepted: no angles), ``count x f32``: 52 blendshapes in ARKit
+order, then the 9 head/eye angles (``POSE_NAMES``).
+
+Time of a packet: t = (frame_number + sub_frame) * denominator / numerator seconds.
+"""
+
+from __future__ import annotations
+
+import gzip
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, canonical
+from faceclean.errors import FacecleanError
+from faceclean.relay.frame import Frame, Malformed
+
+VERSION = 6
+DEFAULT_PORT = 11111
+N_SHAPES = 52
+N_POSE = 9
+_TIMING = struct.Struct(">ifiiB")  # frame_number, sub_frame, rate num, rate den, count
+_I32 = struct.Struct(">i")
+_BE_F32 = np.dtype(">f4")
+OUT_RATE = (60, 1)  # frames per second of the frame numbers we write: 60/1
+
+
+def _string(data: bytes, at: int) -> tuple[str, int]:
+    if at + 4 > len(data):
+        raise Malformed("livelink: truncated packet")
+    (n,) = _I32.unpack_from(data, at)
+    at += 4
+    if n < 0 or at + n > len(data):
+        raise Malformed("livelink: bad string length")
+    try:
+        return data[at : at + n].decode("utf-8"), at + n
+    except UnicodeDecodeError:
+        raise Malformed("livelink: string is not UTF-8") from None
+
+
+def decode(data: bytes) -> Frame:
+    """One Live Link Face v6 packet -> a Frame (ARKit-52 names, pose, subject, time)."""
+    if not data or data[0] != VERSION:
+        raise Malformed(f"livelink: not a protocol {VERSION} packet")
+    device, at = _string(data, 1)
+    subject, at = _string(data, at)
+    if at + _TIMING.size > len(data):
+        raise Malformed("livelink: truncated packet")
+    number, sub, num, den, count = _TIMING.unpack_from(data, at)
+    at += _TIMING.size
+    if count not in (N_SHAPES, N_SHAPES + N_POSE) or at + 4 * count != len(data):
+        raise Malformed(f"livelink: {count} values in a {len(data)}-byte packet")
+    floats = np.frombuffer(data, _BE_F32, count, at).astype(np.float64)  # (count,)
+    t = (number + float(sub)) * den / num if num > 0 and den > 0 else None
+    if t is not None and not np.isfinite(t):
+        t = None
+    pose = floats[N_SHAPES:] if count > N_SHAPES else None
+    return Frame(ARKIT52, floats[:N_SHAPES], t, pose, (), subject, device)
+
+
+class Decoder:
+    """Stateless: every datagram is a whole frame."""
+
+    def feed(self, data: bytes) -> Frame | None:
+        return decode(data)
+
+
+class Encoder:
+    """Frames -> Live Link Face v6 packets (61 floats: 52 blendshapes, then 9 angles).
+
+    Channels the frame lacks are 0; its pose passes through (zeros when it has none).
+    Frame numbers count 60 fps frames of the frame's time (``OUT_RATE``).
+    """
+
+    def __init__(self, subject: str = "faceclean", device: str = "faceclean") -> None:
+        self.subject = subject
+        self.device = device
+        self._index: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self._heads: dict[tuple[str, str], bytes] = {}
+        self._count = 0
+
+    def _columns(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        cols = self._index.get(names)
+        if cols is None:  # (source columns, ARKit positions), cached per name tuple
+            pos = {n: i for i, n in enumerate(ARKIT52)}
+            pairs = [(j, pos[c]) for j, n in enumerate(names) if (c := canonical(n)) in pos]
+            cols = (np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int))
+            self._index[names] = cols
+        return cols
+
+    def _head(self, device: str, subject: str) -> bytes:
+        key = (device, subject)
+        head = self._heads.get(key)
+        if head is None:
+            d, s = device.encode("utf-8"), subject.encode("utf-8")
+            head = bytes([VERSION]) + _I32.pack(len(d)) + d + _I32.pack(len(s)) + s
+            self._heads[key] = head
+        return head
+
+    def encode(self, frame: Frame) -> bytes:
+        floats = np.zeros(N_SHAPES + N_POSE)
+        src, dst = self._columns(frame.names)
+        floats[dst] = frame.values[src]
+        if frame.pose is not None:
+            floats[N_SHAPES : N_SHAPES + min(N_POSE, len(frame.pose))] = frame.pose[:N_POSE]
+        num, den = OUT_RATE
+        if frame.t is not None and np.isfinite(frame.t):
+            x = frame.t * num / den  # frames, 60 fps
+            number = int(np.floor(x))
+            sub = x - number
+        else:
+            number, sub = self._count, 0.0
+        self._count = number + 1
+        number = (number + 2**31) % 2**32 - 2**31  # wrap into i32
+        head = self._head(frame.device or self.device, frame.subject or self.subject)
+        timing = _TIMING.pack(number, sub, num, den, N_SHAPES + N_POSE)
+        return head + timing + floats.astype(_BE_F32).tobytes()
+
+
+def read_recording(path: str | os.PathLike) -> list[bytes]:
+    """The packets of a ``.gesichter`` recording (gzip: u8 version, u32 count, then
+    per packet u32 size + the packet exactly as sent)."""
+    p = Path(path)
+    try:
+        with gzip.open(p, "rb") as f:
+            blob = f.read()
+    except (OSError, EOFError) as e:
+        raise FacecleanError(f"{p.name}: not a gzip .gesichter recording ({e})") from None
+    if len(blob) < 5:
+        raise FacecleanError(f"{p.name}: truncated recording")
+    (count,) = struct.unpack_from(">I", blob, 1)
+    packets, at = [], 5
+    for _ in range(count):
+        if at + 4 > len(blob):
+            raise FacecleanError(f"{p.name}: truncated recording")
+        (size,) = struct.unpack_from(">I", blob, at)
+        if at + 4 + size > len(blob):
+            raise FacecleanError(f"{p.name}: truncated recording")
+        packets.append(blob[at + 4 : at + 4 + size])
+        at += 4 + size
+    return packets

@@ -1,0 +1,242 @@
+"""The relay's socket loop: receive, decode, clean, encode, send; newest frame only.
+
+Per wake-up the socket is drained without blocking; of the face frames it held, only the
+newest is cleaned and sent (never a queue: a relay that falls behind skips, it does not
+lag). Datagrams that carry only passthrough messages are forwarded as they come (VMC
+output). Ordering: a frame whose time is not after the last one sent is dropped
+(out of order or duplicate); a backwards jump over ``RESTART`` seconds is a new stream
+(the sender restarted) and restarts the cleaner. Frames without a timestamp take their
+arrival time (``time.monotonic``). A long silence restarts the cleaner through its own
+``max_gap`` rule (filters/base.py), so the face does not jump or drift when it returns.
+The loop sends only to the ``send`` endpoint, never back to a sender.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, canonical
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import Cleaner
+from faceclean.relay.frame import Frame, Malformed
+from faceclean.relay.url import Endpoint
+
+RESTART = 1.0  # s; a backwards jump in sender time larger than this is a new stream
+MAX_DATAGRAM = 65535  # bytes
+MAX_DRAIN = 256  # datagrams read per wake-up before the newest frame is processed
+WINDOW = 8192  # latency samples kept for the percentiles
+RCVBUF = 1 << 20  # bytes asked for the receive buffer (the kernel may cap it)
+
+
+@dataclass
+class Stats:
+    """Counters of one relay run. Latency: receive to send, ns, over the last WINDOW frames."""
+
+    datagrams: int = 0
+    frames_in: int = 0  # face frames decoded
+    frames_out: int = 0  # face frames sent
+    passthrough: int = 0  # passthrough-only datagrams forwarded
+    out_of_order: int = 0  # not after the last frame sent (late or duplicate)
+    stale: int = 0  # superseded by a newer frame in the same drain
+    malformed: int = 0  # datagrams that are not packets of the protocol
+    missing: int = 0  # frames without a single finite value (tracking loss)
+    restarts: int = 0  # sender time jumped back over RESTART s
+    send_errors: int = 0  # sends the OS refused (no listener, ...)
+    latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(WINDOW, np.int64))
+    n_latency: int = 0
+
+    @property
+    def dropped(self) -> int:
+        return self.out_of_order + self.stale
+
+    def record(self, ns: int) -> None:
+        self.latency_ns[self.n_latency % WINDOW] = ns
+        self.n_latency += 1
+
+    def latencies_ms(self) -> np.ndarray:
+        """The kept latency samples (up to WINDOW), ms."""
+        return self.latency_ns[: min(self.n_latency, WINDOW)] / 1e6
+
+    def percentile_ms(self, q: float) -> float:
+        lat = self.latencies_ms()
+        return float(np.percentile(lat, q)) if len(lat) else float("nan")
+
+    def line(self) -> str:
+        """One human line: frames in/out, dropped, malformed, latency p50/p99."""
+        return (
+            f"in {self.frames_in} out {self.frames_out} "
+            f"dropped {self.dropped} (order {self.out_of_order}, stale {self.stale}) "
+            f"malformed {self.malformed} passthrough {self.passthrough} "
+            f"latency p50 {self.percentile_ms(50):.3f} ms p99 {self.percentile_ms(99):.3f} ms"
+        )
+
+
+class Relay:
+    """A bound relay: ``run()`` serves until ``stop()`` (thread- and signal-safe)."""
+
+    def __init__(
+        self,
+        listen: Endpoint,
+        send: Endpoint,
+        cleaner: Cleaner,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.listen, self.send, self.cleaner, self.clock = listen, send, cleaner, clock
+        self.decoder = listen.decoder()
+        self.encoder = send.encoder()
+        self.stats = Stats()
+        self._vmc_out = send.scheme == "vmc"
+        self._columns: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self._last_t: float | None = None  # s, time of the last frame sent
+        self._packet_clock: bool | None = None  # the stream's frames carry their time
+        self._stopping = False
+        family, addr = listen.sockaddr()
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            with contextlib.suppress(OSError):
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF)
+            self._sock.bind(addr)
+            self._sock.setblocking(False)
+            out_family, out_addr = send.sockaddr()
+            self._out = socket.socket(out_family, socket.SOCK_DGRAM)
+            self._out.connect(out_addr)  # the one address we ever send to
+        except OSError as e:
+            self._sock.close()
+            raise FacecleanError(f"cannot relay {listen} -> {send}: {e.strerror or e}") from None
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+
+    @property
+    def address(self) -> Endpoint:
+        """The listening endpoint with its actual port (after binding port 0)."""
+        host, port = self._sock.getsockname()[:2]
+        return Endpoint(self.listen.scheme, host, port, self.listen.options)
+
+    def stop(self) -> None:
+        """Ask ``run`` to return; safe from another thread or a signal handler."""
+        self._stopping = True
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"\x00")
+
+    def close(self) -> None:
+        for s in (self._sock, self._out, self._wake_r, self._wake_w):
+            s.close()
+
+    def __enter__(self) -> Relay:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def run(
+        self,
+        stats_every: float | None = None,
+        on_stats: Callable[[Stats], None] | None = None,
+    ) -> Stats:
+        """Serve until ``stop()``; every ``stats_every`` s call ``on_stats(stats)``."""
+        watch = [self._sock, self._wake_r]
+        next_stats = time.monotonic() + stats_every if stats_every else None
+        while not self._stopping:
+            timeout = None if next_stats is None else max(0.0, next_stats - time.monotonic())
+            ready, _, _ = select.select(watch, [], [], timeout)
+            if self._stopping:
+                break
+            if self._sock in ready:
+                self._drain()
+            if next_stats is not None and time.monotonic() >= next_stats:
+                if on_stats is not None:
+                    on_stats(self.stats)
+                next_stats = max(next_stats + stats_every, time.monotonic())
+        return self.stats
+
+    def _drain(self) -> None:
+        """Read what is waiting; process the newest good face frame among it."""
+        best: tuple[Frame, float, int] | None = None  # (frame, time s, receive ns)
+        best_t = self._last_t
+        for _ in range(MAX_DRAIN):
+            try:
+                data = self._sock.recv(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:  # e.g. an ICMP error queued on the socket
+                continue
+            received = time.perf_counter_ns()
+            self.stats.datagrams += 1
+            try:
+                frame = self.decoder.feed(data)
+            except Malformed:
+                self.stats.malformed += 1
+                continue
+            if frame is None:
+                continue
+            if not frame.is_face:
+                if self._vmc_out:
+                    self.stats.passthrough += 1
+                    self._send(self.encoder.encode(frame))
+                continue
+            self.stats.frames_in += 1
+            packet = frame.t is not None
+            t = frame.t if packet else self.clock()
+            if packet != self._packet_clock:  # the time base changed: a new stream
+                self._packet_clock = packet
+                best_t = self._last_t = None
+                self.cleaner.reset()
+            elif best_t is not None and t <= best_t:
+                if best_t - t <= RESTART:
+                    self.stats.out_of_order += 1
+                    continue
+                self.stats.restarts += 1
+                self.cleaner.reset()
+            if best is not None:
+                self.stats.stale += 1
+            best, best_t = (frame, t, received), t
+        if best is not None:
+            self._process(*best)
+
+    def _cols(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        cols = self._columns.get(names)
+        if cols is None:  # (frame columns, ARKit positions), cached per name tuple
+            pos = {n: i for i, n in enumerate(ARKIT52)}
+            pairs = [(j, pos[c]) for j, n in enumerate(names) if (c := canonical(n)) in pos]
+            cols = (np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int))
+            if len(self._columns) > 64:  # a sender that keeps changing names
+                self._columns.clear()
+            self._columns[names] = cols
+        return cols
+
+    def _process(self, frame: Frame, t: float, received: int) -> None:
+        src, dst = self._cols(frame.names)
+        x = np.full(len(ARKIT52), np.nan)  # (52,) canonical order
+        x[dst] = frame.values[src]
+        if not np.isfinite(x).any():
+            self.stats.missing += 1
+        y = self.cleaner.step(x, t)  # (52,)
+        self._last_t = t
+        if np.isnan(y).all():  # nothing seen yet: nothing to send
+            return
+        if self._vmc_out:
+            values = frame.values.copy()  # non-ARKit channels pass unchanged
+            values[src] = y[dst]
+            out = Frame(frame.names, values, t, frame.pose, frame.passthrough)
+        else:
+            out = Frame(ARKIT52, np.nan_to_num(y), t, frame.pose, (), frame.subject, frame.device)
+        if self._send(self.encoder.encode(out)):
+            self.stats.frames_out += 1
+            self.stats.record(time.perf_counter_ns() - received)
+
+    def _send(self, data: bytes) -> bool:
+        try:
+            self._out.send(data)
+            return True
+        except OSError:
+            self.stats.send_errors += 1
+            return False

@@ -1,0 +1,146 @@
+"""The VMC protocol (Virtual Motion Capture, OSC over UDP): blendshape frames <-> datagrams.
+
+A frame is ``/VMC/Ext/Blend/Val (s name, f value)`` messages, then
+``/VMC/Ext/Blend/Apply``, in one bundle or spread over loose messages and datagrams.
+``/VMC/Ext/T (f seconds)`` gives the sender's time. Every other address (bones, root,
+``/VMC/Ext/OK`` ...) passes through untouched: in the output bundle of the frame it came
+with, or, in a datagram without blendshape messages, as that datagram unchanged.
+Names are the ARKit "perfect sync" ones in any spelling ``channels.canonical`` accepts.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from faceclean.channels import canonical, pascal, to_side_suffix
+from faceclean.relay import osc
+from faceclean.relay.frame import Frame, Malformed
+
+DEFAULT_PORT = 39539  # the VMC performer (receiver) port
+VAL = b"/VMC/Ext/Blend/Val"
+APPLY = b"/VMC/Ext/Blend/Apply"
+TIME = b"/VMC/Ext/T"
+MAX_PENDING = 512  # values or passthrough messages held while waiting for Apply
+NAME_STYLES = ("keep", "arkit", "pascal", "lr")
+_APPLY_MSG = osc.message(APPLY.decode())
+_VAL_HEAD = osc.pad(VAL) + osc.pad(b",sf")
+_F32 = struct.Struct(">f")
+
+
+class Decoder:
+    """Datagrams -> frames. Holds the values seen since the last Apply (loose messages)."""
+
+    def __init__(self) -> None:
+        self._clear()
+
+    def _clear(self) -> None:
+        self._vals: dict[str, float] = {}
+        self._t: float | None = None
+        self._passthrough: list[bytes] = []
+
+    def feed(self, data: bytes) -> Frame | None:
+        """A frame when this datagram holds an Apply; a passthrough-only frame when it
+        holds no blendshape message at all; else None. Raises Malformed (state kept)."""
+        vals: list[tuple[str, float]] = []
+        other: list[bytes] = []
+        t: float | None = None
+        applied = False
+        for address, start, end in osc.messages(data):  # parse all before changing state
+            if address == VAL and data.startswith(_VAL_HEAD, start):  # fast path: ",sf"
+                name, at = osc.string(data, start + len(_VAL_HEAD), end)
+                if at + 4 != end:
+                    raise Malformed("vmc: Blend/Val needs (string, float)")
+                vals.append((name, _F32.unpack_from(data, at)[0]))
+            elif address == VAL:
+                args = osc.arguments(data, start, end)
+                if len(args) != 2 or not isinstance(args[0], str):
+                    raise Malformed("vmc: Blend/Val needs (string, float)")
+                value = args[1]
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise Malformed("vmc: Blend/Val value is not a number")
+                vals.append((args[0], float(value)))
+            elif address == APPLY:
+                applied = True
+            else:
+                if address == TIME:
+                    args = osc.arguments(data, start, end)
+                    if len(args) == 1 and isinstance(args[0], float) and np.isfinite(args[0]):
+                        t = float(args[0])
+                other.append(data[start:end])
+        if not vals and not applied:
+            if t is not None:
+                self._t = t
+            return Frame((), np.zeros(0), passthrough=(data,))
+        self._vals.update(vals)
+        self._passthrough.extend(other)
+        if t is not None:
+            self._t = t
+        if len(self._vals) > MAX_PENDING or len(self._passthrough) > MAX_PENDING:
+            self._clear()
+            raise Malformed("vmc: too many messages without Apply")
+        if not applied:
+            return None
+        frame = Frame(
+            tuple(self._vals),
+            np.fromiter(self._vals.values(), np.float64, len(self._vals)),
+            self._t,
+            passthrough=tuple(self._passthrough),
+        )
+        self._clear()
+        return frame
+
+
+def rename(name: str, style: str) -> str:
+    """A channel name in an output style: keep, arkit (camelCase), pascal, lr (``_L``/``_R``)."""
+    if style == "keep":
+        return name
+    c = canonical(name)
+    if c is None:
+        return name
+    return {"arkit": c, "pascal": pascal(c), "lr": to_side_suffix(c)}[style]
+
+
+class Encoder:
+    """Frames -> one VMC bundle: passthrough elements, the Val messages, Apply.
+
+    ``names``: the spelling of the names sent (``NAME_STYLES``); ``stamp``: add
+    ``/VMC/Ext/T`` with the frame's time (float32 seconds: keep times small).
+    """
+
+    def __init__(self, names: str = "keep", stamp: bool = False) -> None:
+        if names not in NAME_STYLES:
+            raise ValueError(f"vmc names style {names!r} not in {NAME_STYLES}")
+        self.style = names
+        self.stamp = stamp
+        self._heads: dict[str, bytes] = {}  # name -> i32 size + message up to its float
+
+    def _head(self, name: str) -> bytes:
+        head = self._heads.get(name)
+        if head is None:
+            body = _VAL_HEAD + osc.pad(rename(name, self.style).encode("utf-8"))
+            head = struct.pack(">i", len(body) + 4) + body
+            if len(self._heads) < 4 * MAX_PENDING:  # bounded cache
+                self._heads[name] = head
+        return head
+
+    def encode(self, frame: Frame) -> bytes:
+        if not frame.is_face:
+            if len(frame.passthrough) == 1:  # a datagram forwarded unchanged
+                return frame.passthrough[0]
+            return osc.bundle(list(frame.passthrough))
+        floats = np.asarray(frame.values, ">f4").tobytes()  # (M,) big-endian f32
+        parts = [osc.BUNDLE, osc.IMMEDIATE]
+        elements = list(frame.passthrough)
+        if self.stamp and frame.t is not None:
+            elements.insert(0, osc.message(TIME.decode(), float(frame.t)))
+        for e in elements:
+            parts.append(struct.pack(">i", len(e)))
+            parts.append(e)
+        for i, name in enumerate(frame.names):
+            parts.append(self._head(name))
+            parts.append(floats[4 * i : 4 * i + 4])
+        parts.append(struct.pack(">i", len(_APPLY_MSG)))
+        parts.append(_APPLY_MSG)
+        return b"".join(parts)
