@@ -91,8 +91,16 @@ def test_clean_with_preset(tmp_path, capsys):
     )
     out = tmp_path / "out.json"
     assert main(["clean", str(TAKE), "-o", str(out), "--preset", str(preset)]) == 0
-    assert "preset" in capsys.readouterr().out
+    assert "cleaned with ema (preset" in capsys.readouterr().out
     assert load(out).meta["format"] == "json"
+    # --set overrides the preset: a longer time constant smooths more
+    slow = tmp_path / "slow.json"
+    assert (
+        main(["clean", str(TAKE), "-o", str(slow), "--preset", str(preset), "--set", "tau=0.3"])
+        == 0
+    )
+    rough = lambda a: np.nanmean(np.diff(a.values, 2, axis=0) ** 2)  # noqa: E731
+    assert rough(load(slow)) < rough(load(out))
 
 
 @needs_takes

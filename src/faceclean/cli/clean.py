@@ -10,7 +10,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from faceclean.animation import Animation
+    from faceclean.filters.base import Cleaner
 
 HELP = "clean an animation file (Live Link CSV, CSV, JSON, NPZ, glTF/GLB)"
 PROGRESS_FRAMES = 5000  # show a progress bar from this many frames on
@@ -28,7 +32,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=[],
         help="cleaner parameter, repeatable (numbers, true/false, JSON lists, strings)",
     )
-    p.add_argument("--preset", metavar="FILE", help="preset file made by 'faceclean tune'")
+    p.add_argument(
+        "--preset",
+        metavar="FILE",
+        help="preset file made by 'faceclean tune', or a shipped preset's name (--set overrides)",
+    )
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
 
 
@@ -60,18 +68,19 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.errors import FacecleanError
 
     anim = io.load(args.input)
+    params = parse_params(args.params)
     if args.preset is not None:
-        if args.method or args.params:
-            raise FacecleanError("give --preset alone, or --method with --set, not both")
+        if args.method:
+            raise FacecleanError("--preset names its method: give --preset or --method, not both")
         from faceclean.filters import presets
 
-        cleaner = presets.build(args.preset, anim.names)
-        what = f"preset {args.preset}"
+        cleaner = presets.build(args.preset, anim.names, overrides=params or None)
+        what = f"{cleaner.name} (preset {args.preset})"
     else:
         method = args.method or filters.default_method()
-        params = parse_params(args.params)
         cleaner = filters.make(method, params, names=anim.names)
-        what = method + (f" {json.dumps(params)}" if params else "")
+        what = method
+    what += f" {json.dumps(params)}" if params else ""
     cleaned = clean_with_progress(cleaner, anim)
     io.save(cleaned, args.output, fmt=args.fmt)
     missing = int((~anim.valid).sum())
@@ -83,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def clean_with_progress(cleaner, anim):
+def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
     """``cleaner.clean(anim)``, with a progress bar on stderr for long stream cleans.
 
     A stream cleaner that keeps the base batch path is stepped here frame by frame, which
