@@ -1,0 +1,281 @@
+"""The paper's non-recurrent baselines (SPEC section 3): FC and GBT, numpy runtime.
+
+Both predict the K = 4 time-derivatives of the clean signal from the input alone, then
+integrate them with the complementary blend, for k = 0..K-1 with X̂^(0) = X_i:
+
+    X_r^(k)[n+1] = α (X_r^(k)[n] + dt X̂^(k+1)) + (1 − α) X̂^(k)[n+1],   X_r^(0) = output.
+
+Indices, the causal reading (SPEC section 2, step 2): when input frame n+1 arrives,
+every derivative is a backward difference ending at its frame,
+d^(k)[n+1] = (d^(k-1)[n+1] − d^(k-1)[n]) / dt, d^(0) = x_i. The features are the current
+input and the input's K derivatives ending at n+1 and at n, per channel
+``[x, d^(1..K)[n+1], d^(1..K)[n]]`` (1 + 2K values); the model predicts the truth's
+backward derivatives at n+1 (the slope from n to n+1 for k = 1, the SPEC's forward
+X̂^(k+1)[n]). With the SPEC's form only X̂^(1) reaches the output; X_r^(1..K-1) are
+the smoothed derivative estimates, kept as state.
+
+Checkpoints are npz (``allow_pickle=False``) written by ``faceclean.neural.baselines``:
+``config`` (JSON: format, channels, K, alpha, value_range, val_sources, ...) plus
+- FC (``faceclean-fc/1``), a whole-face MLP: ``feat_mean``, ``feat_std`` (F·M,) over
+  the feature-major vector ``[x (M), d^(1)[n+1] (M) .. d^(K)[n] (M)]``, the scaled
+  features clipped to +-``config["feat_clip"]`` (outliers: spikes, drops); ``fc.{l}.w``
+  (out, in), ``fc.{l}.b``, ReLU between layers; output (K·M,) order-major, times
+  ``out_std`` plus ``out_mean``.
+- GBT (``faceclean-gbt/1``), trees shared by all channels, one ensemble per order, on
+  raw per-channel features plus the channel's group index: flat node arrays
+  ``tree.feature``, ``tree.threshold`` (go left when ``x <= threshold``), ``tree.left``,
+  ``tree.right`` (leaves point to themselves), ``tree.value``; ``tree.root`` and
+  ``tree.order`` per tree; ``baseline`` (K,) and ``out_std`` (K,): order k's
+  prediction is ``out_std[k] * (baseline[k] + Σ value[leaf])``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52, GROUPS, canonical
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import State, StreamCleaner
+
+GROUP_NAMES = tuple(GROUPS)
+BIG = 1e30  # derivatives are clipped to +-BIG (a dt of 1e-9 s must not overflow)
+
+
+def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], dict]:
+    """(config, arrays) of a baseline checkpoint; FacecleanError if it is not one."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        config = json.loads(str(arrays.pop("config")))
+    except (OSError, ValueError, KeyError, json.JSONDecodeError) as e:
+        raise FacecleanError(f"{path}: not a readable model file ({e})") from None
+    if config.get("format") != fmt:
+        raise FacecleanError(f"{path}: format {config.get('format')!r}, expected {fmt!r}")
+    return config, arrays
+
+
+def blend(
+    r: Sequence[np.ndarray], d_hat: Sequence[np.ndarray], x: np.ndarray, dt, alpha: float
+) -> list[np.ndarray]:
+    """One complementary-blend step. r: X_r^(0..K-1)[n]; d_hat: X̂^(1..K); x: X_i[n+1].
+
+    Returns X_r^(0..K-1)[n+1]. α = 0 follows the prediction (the input for k = 0);
+    α = 1 with zero derivatives holds.
+    """
+    target = [x, *d_hat]  # X̂^(0..K)
+    return [alpha * (r[k] + dt * target[k + 1]) + (1.0 - alpha) * target[k] for k in range(len(r))]
+
+
+def group_index(names: Sequence[str]) -> np.ndarray:
+    """(M,) float: each channel's group in GROUPS order (len(GROUPS) when unknown)."""
+    out = []
+    for n in names:
+        c = canonical(n) or n
+        out.append(next((i for i, g in enumerate(GROUPS.values()) if c in g), len(GROUPS)))
+    return np.asarray(out, np.float64)
+
+
+class _DerivativeNet(StreamCleaner):
+    """Shared runtime: derivative features, a model (``_predict``), the blend."""
+
+    fmt: ClassVar[str] = ""
+    default_file: ClassVar[str] = ""
+    batched: ClassVar[bool] = False  # clean() predicts all frames at once (bit-exact models)
+
+    def __init__(
+        self,
+        *,
+        model: str | os.PathLike | None = None,
+        alpha: float | None = None,
+        names: Sequence[str] = ARKIT52,
+    ) -> None:
+        from faceclean.settings import MODELS
+
+        path = model if model is not None else MODELS / self.default_file
+        config, arrays = load_checkpoint(path, self.fmt)
+        self._load(arrays)
+        self._setup(config, names, alpha)
+
+    def _setup(self, config: dict, names: Sequence[str], alpha: float | None) -> None:
+        self.config = config
+        self.channels = tuple(config["channels"])  # model channels (M,)
+        self.K = int(config["K"])
+        self.alpha = float(config["alpha"] if alpha is None else alpha)
+        if not 0.0 <= self.alpha <= 1.0:
+            raise FacecleanError(f"{self.name}: alpha must be in [0, 1], got {self.alpha}")
+        self.lo, self.hi = (float(v) for v in config.get("value_range", [0.0, 1.0]))
+        # frame column of each model channel (-1: the frame lacks it; it sees zeros)
+        cols = {canonical(n) or n: j for j, n in reversed(list(enumerate(names)))}
+        self._cols = np.array([cols.get(canonical(c) or c, -1) for c in self.channels])
+        self._have = self._cols >= 0
+        self._pending: list[np.ndarray] | None = None  # batch path: precomputed predictions
+        self._record: list[np.ndarray] | None = None  # batch path: recorded features
+        self._ages: list[np.ndarray] = []  # advances since the start, per recorded step
+        self.reset()
+
+    def _load(self, arrays: dict) -> None:
+        raise NotImplementedError
+
+    def predict(self, feats: np.ndarray) -> np.ndarray:
+        """Derivative predictions (n, M, K) from features (n, M, 1 + 2K)."""
+        raise NotImplementedError
+
+    def _model_frame(self, x: np.ndarray) -> np.ndarray:
+        """(S, M_in) frame -> (S, M) model channels (zeros where absent)."""
+        return np.where(self._have, x[:, np.maximum(self._cols, 0)], 0.0)
+
+    # State: d^(0..K) of the input, X_r^(0..K-1), age (advances since the start); each (S, M).
+    def _start(self, x: np.ndarray) -> State:
+        xm = self._model_frame(x)
+        zero = np.zeros_like(xm)
+        return (xm, *[zero] * self.K, xm, *[zero] * (self.K - 1), zero)
+
+    def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
+        K = self.K
+        d_old, r_old, age = state[: K + 1], state[K + 1 : 2 * K + 1], state[2 * K + 1]
+        d_new = [self._model_frame(x)]
+        for k in range(1, K + 1):  # backward differences ending at the new frame
+            d = (d_new[k - 1] - d_old[k - 1]) / dt
+            d_new.append(np.clip(np.nan_to_num(d), -BIG, BIG))  # finite for any dt
+        feats = np.stack([d_new[0], *d_new[1:], *d_old[1:]], axis=-1)  # (S, M, 1 + 2K)
+        if self._record is not None:
+            self._record.append(feats)
+            self._ages.append(age.copy())
+            pred = np.zeros((*feats.shape[:2], K))
+        elif self._pending is not None:
+            pred = self._pending.pop()
+        else:
+            pred = self.predict(feats)  # (S, M, K)
+        r_new = blend(r_old, [pred[..., k] for k in range(K)], d_new[0], dt, self.alpha)
+        r_new[0] = np.clip(r_new[0], self.lo, self.hi)
+        y = x.copy()
+        y[:, self._cols[self._have]] = r_new[0][:, self._have]
+        return (*d_new, *r_new, age + 1.0), y
+
+    def features(self, anim: Animation) -> tuple[np.ndarray, np.ndarray]:
+        """Features of every advancing step: ((n, M, 1 + 2K), ages (n, M)).
+
+        ``ages`` counts the advances before the step since the last start; a step's
+        derivatives are complete when its age is at least K.
+        """
+        try:
+            self._record, self._ages = [], []
+            super().clean(anim)
+            m, f = len(self.channels), 1 + 2 * self.K
+            if not self._record:
+                return np.zeros((0, m, f)), np.zeros((0, m))
+            return np.concatenate(self._record), np.concatenate(self._ages)
+        finally:
+            self._record, self._ages = None, []
+
+    def clean(self, anim: Animation) -> Animation:
+        """Reset-then-step, with the model run once on every frame's features (batched).
+
+        The features depend on the input only, so a first pass records them, one batched
+        prediction follows, and a second pass blends: the same numbers as stepping when the
+        model is exact row by row (trees; a matrix product is not, so FC steps).
+        """
+        if not self.batched:
+            return super().clean(anim)
+        try:
+            self._record = []
+            super().clean(anim)
+            recorded, self._record, self._ages = self._record, None, []
+            if recorded:
+                shapes = [f.shape[0] for f in recorded]
+                pred = self.predict(np.concatenate(recorded))
+                self._pending = np.split(pred, np.cumsum(shapes)[:-1])[::-1]
+            return super().clean(anim)
+        finally:
+            self._record = self._pending = None
+            self._ages = []
+
+
+class FullyConnected(_DerivativeNet):
+    """FC baseline (method "fc"): whole-face MLP on the 52 channels' features, α = 0.9."""
+
+    name = "fc"
+    fmt = "faceclean-fc/1"
+    default_file = "fc.npz"
+
+    def _load(self, a: dict) -> None:
+        n = len([k for k in a if k.startswith("fc.") and k.endswith(".w")])
+        self._w = [a[f"fc.{i}.w"].astype(np.float64) for i in range(n)]
+        self._b = [a[f"fc.{i}.b"].astype(np.float64) for i in range(n)]
+        self._fm, self._fs = a["feat_mean"].astype(np.float64), a["feat_std"].astype(np.float64)
+        self._om, self._os = a["out_mean"].astype(np.float64), a["out_std"].astype(np.float64)
+
+    def predict(self, feats: np.ndarray) -> np.ndarray:
+        n, m, f = feats.shape
+        h = (feats.transpose(0, 2, 1).reshape(n, f * m) - self._fm) / self._fs  # feature-major
+        clip = float(self.config.get("feat_clip", np.inf))  # scaled features kept in +-clip
+        h = np.clip(h, -clip, clip)
+        for i, (w, b) in enumerate(zip(self._w, self._b, strict=True)):
+            h = h @ w.T + b
+            if i < len(self._w) - 1:
+                h = np.maximum(h, 0.0)
+        out = h * self._os + self._om  # (n, K·M) order-major
+        return out.reshape(n, self.K, m).transpose(0, 2, 1)
+
+
+class BoostedTrees(_DerivativeNet):
+    """GBT baseline (method "gbt"): per-channel trees shared by all channels, α = 0.97."""
+
+    name = "gbt"
+    fmt = "faceclean-gbt/1"
+    default_file = "gbt.npz"
+    batched = True
+
+    def _load(self, a: dict) -> None:
+        self._feat = a["tree.feature"].astype(np.intp)
+        self._thr = a["tree.threshold"].astype(np.float64)
+        self._left = a["tree.left"].astype(np.intp)
+        self._right = a["tree.right"].astype(np.intp)
+        self._val = a["tree.value"].astype(np.float64)
+        self._root = a["tree.root"].astype(np.intp)  # (T,)
+        self._order = a["tree.order"].astype(np.intp)  # (T,)
+        self._base = a["baseline"].astype(np.float64)  # (K,)
+        self._ostd = a["out_std"].astype(np.float64)  # (K,)
+        self._depth = int(a["tree.depth"])
+        self._groups = None
+
+    def predict(self, feats: np.ndarray) -> np.ndarray:
+        n, m, _ = feats.shape
+        if self._groups is None:
+            self._groups = group_index(self.channels)
+        x = np.concatenate([feats, np.broadcast_to(self._groups[None, :, None], (n, m, 1))], -1)
+        x = x.reshape(n * m, -1)
+        out = np.empty((n * m, self.K))
+        step = max(1, 400_000 // len(self._root))  # samples per chunk: bounded memory
+        for s in range(0, n * m, step):
+            out[s : s + step] = self.predict_features(x[s : s + step])
+        return out.reshape(n, m, self.K)
+
+    def predict_features(self, x: np.ndarray) -> np.ndarray:
+        """(n, K) predictions from (n, F) raw per-channel features (last one: group)."""
+        node = np.broadcast_to(self._root, (len(x), len(self._root))).copy()  # (n, T)
+        rows = np.arange(len(x))[:, None]
+        for _ in range(self._depth):  # every tree descends one level per pass
+            go_left = x[rows, self._feat[node]] <= self._thr[node]
+            node = np.where(go_left, self._left[node], self._right[node])
+        leaf = self._val[node]  # (n, T)
+        out = np.zeros((len(x), self.K))
+        for k in range(self.K):  # each row summed alone: the same bits for any n
+            out[:, k] = leaf[:, self._order == k].sum(axis=1)
+        return (out + self._base) * self._ostd
+
+
+class DerivativeFeatures(_DerivativeNet):
+    """The FC/GBT feature pass without a model (training data): ``features(anim)``."""
+
+    name = "derivative-features"
+
+    def __init__(self, *, K: int = 4, names: Sequence[str] = ARKIT52) -> None:
+        config = {"channels": list(names), "K": K, "alpha": 0.0, "value_range": [-np.inf, np.inf]}
+        self._setup(config, names, None)
