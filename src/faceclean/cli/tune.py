@@ -1,0 +1,66 @@
+"""``faceclean tune NOISY --truth CLEAN --method one-euro -o preset.json``.
+
+Searches a classical cleaner's parameters so that cleaning NOISY comes closest (MSE) to
+CLEAN, globally or per channel group, and saves a preset that ``clean --preset`` loads.
+Several NOISY/CLEAN pairs may be given, in the same order. The files may be in any
+readable format and at different instants: CLEAN is interpolated at NOISY's times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+HELP = "tune a classical cleaner against ground truth and save a preset"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("noisy", metavar="NOISY", nargs="+", help="noisy animation file(s)")
+    p.add_argument(
+        "--truth", metavar="CLEAN", nargs="+", required=True, help="clean file(s), same order"
+    )
+    p.add_argument("--method", default="one-euro", help="ema, one-euro, kalman, gaussian, savgol")
+    p.add_argument("--per-group", action="store_true", help="tune each channel group apart")
+    p.add_argument("-o", "--output", metavar="PRESET", required=True, help="preset JSON to write")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from faceclean import io
+    from faceclean.errors import FacecleanError
+    from faceclean.filters import tune
+
+    if len(args.noisy) != len(args.truth):
+        raise FacecleanError(
+            f"{len(args.noisy)} NOISY file(s) but {len(args.truth)} --truth file(s)"
+        )
+    if Path(args.output).suffix.lower() != ".json":
+        raise FacecleanError(f"{args.output}: a preset is a .json file")
+    pairs = []
+    for n, c in zip(args.noisy, args.truth, strict=True):
+        noisy = io.load(n)
+        pairs.append((noisy, tune.align(noisy, io.load(c))))
+    bar = tqdm(total=1 + tune.REFINE, desc="tuning", unit="pass", file=sys.stderr, leave=False)
+
+    def progress(done: int, total: int) -> None:
+        bar.update(done - bar.n)
+
+    try:
+        result = tune.tune(args.method, pairs, per_group=args.per_group, progress=progress)
+    finally:
+        bar.close()
+    about = {
+        "noisy": [Path(n).name for n in args.noisy],
+        "truth": [Path(c).name for c in args.truth],
+    }
+    result.save(args.output, about=about)
+    print(f"{'unit':<12} {'raw MSE':>10} {'tuned MSE':>10}  parameters")
+    for unit in result.mse:
+        values = result.groups.get(unit, result.params)
+        text = ", ".join(f"{k}={v:g}" for k, v in values.items())
+        print(f"{unit:<12} {result.raw_mse[unit]:>10.3g} {result.mse[unit]:>10.3g}  {text}")
+    print(f"wrote {args.output} ({args.method}{', per group' if args.per_group else ''})")
+    return 0
