@@ -92,8 +92,10 @@ def _channels(f: dict[str, Any]) -> str:
     text = f"{f['channels']} ({f['arkit_channels']} ARKit)"
     if f["not_arkit"]:
         text += "; not ARKit: " + ", ".join(f["not_arkit"])
-    if f["arkit_absent"] and f["arkit_channels"]:
-        text += "; ARKit absent: " + ", ".join(f["arkit_absent"])
+    absent = f["arkit_absent"]
+    if absent and f["arkit_channels"]:
+        shown = ", ".join(absent[:8]) + (f" and {len(absent) - 8} more" if len(absent) > 8 else "")
+        text += f"; {len(absent)} ARKit absent: {shown}"
     return text
 
 
