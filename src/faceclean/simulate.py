@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
-from scipy.signal import lfilter
+from scipy.signal import butter, lfilter
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
@@ -35,9 +35,10 @@ class Params:
 
     fps: float = 60.0  # Hz, 24-120: the tracker's nominal rate
     timing_irregularity: float = 0.0  # 0-0.4: std of a frame interval over the period
-    jitter: float = 0.0  # 0-0.02: base noise std, weight units
+    jitter: float = 0.0  # 0-0.03: base noise std, weight units
     jitter_velocity: float = 0.0  # s, 0-0.01: extra noise std per unit/s of channel speed
-    jitter_correlation: float = 0.0  # 0-0.6: AR(1) coefficient of the noise, per frame
+    jitter_cutoff: float = 1000.0  # Hz, 4-16: low-pass of the noise (trackers smooth it)
+    jitter_white: float = 1.0  # 0-1: share of the noise variance left white (unfiltered)
     channel_spread: float = 0.0  # 0-0.6: log-std of the per-channel noise scale
     blink_peak: float = 1.0  # 0.55-1: what a full blink (1.0) reads as (1 = no saturation)
     peak: float = 1.0  # 0.75-1: other channels' full activation reads as U(peak, 1)
@@ -63,9 +64,10 @@ PRESETS: dict[str, dict[str, tuple[float, float]]] = {
     "iphone": {
         "fps": (60.0, 60.0),
         "timing_irregularity": (0.0, 0.02),
-        "jitter": (0.002, 0.005),
-        "jitter_velocity": (0.001, 0.004),
-        "jitter_correlation": (0.0, 0.3),
+        "jitter": (0.01, 0.02),
+        "jitter_velocity": (0.001, 0.005),
+        "jitter_cutoff": (8.0, 16.0),
+        "jitter_white": (0.03, 0.1),
         "channel_spread": (0.3, 0.5),
         "blink_peak": (0.65, 0.92),
         "peak": (0.85, 1.0),
@@ -86,9 +88,10 @@ PRESETS: dict[str, dict[str, tuple[float, float]]] = {
     "webcam": {
         "fps": (24.0, 30.0),
         "timing_irregularity": (0.1, 0.35),
-        "jitter": (0.006, 0.015),
+        "jitter": (0.012, 0.03),
         "jitter_velocity": (0.003, 0.01),
-        "jitter_correlation": (0.0, 0.5),
+        "jitter_cutoff": (4.0, 10.0),
+        "jitter_white": (0.05, 0.3),
         "channel_spread": (0.3, 0.6),
         "blink_peak": (0.55, 0.85),
         "peak": (0.75, 0.95),
@@ -253,9 +256,11 @@ def _jitter(t: np.ndarray, y: np.ndarray, p: Params, rng: np.random.Generator) -
     speed = np.abs(np.gradient(y, t, axis=0)) if len(t) > 1 else np.zeros_like(y)  # 1/s
     scale = np.exp(p.channel_spread * rng.standard_normal(52))
     e = rng.standard_normal(y.shape)
-    r = p.jitter_correlation
-    if r > 0.0:
-        e = lfilter([np.sqrt(1.0 - r * r)], [1.0, -r], e, axis=0)  # unit-variance AR(1)
+    if p.jitter_white < 1.0 and p.jitter_cutoff < 0.45 * p.fps:
+        b, a = butter(2, p.jitter_cutoff / (0.5 * p.fps))  # per nominal frame
+        gain = np.sqrt(np.sum(lfilter(b, a, np.eye(1, 512)[0]) ** 2))  # unit variance
+        smooth = lfilter(b, a, rng.standard_normal(y.shape), axis=0) / gain
+        e = np.sqrt(p.jitter_white) * e + np.sqrt(1.0 - p.jitter_white) * smooth
     return e * scale * (p.jitter + p.jitter_velocity * speed)
 
 
