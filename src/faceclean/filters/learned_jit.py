@@ -1,0 +1,111 @@
+"""Optional numba kernel for the learned runtime's step (used when numba is installed).
+
+Why: for one stream the numpy step spends more time in ~30 small ufunc calls than in
+its two matrix-vector products (about 30 us against 12 us for 2 layers of 128 on one
+core), so a single compiled function that does the products and the gate arithmetic
+in one pass halves the step (docs/BENCHMARKS.md). Many streams stay with numpy, whose
+BLAS matrix-matrix products are faster than these per-row loops.
+
+The gate nonlinearity uses a rational tanh (Eigen's float approximation: max absolute
+error 2.6e-7 against float64 tanh over [-12, 12], tested), which vectorises; libm's
+scalar tanh would cost more than the products. Without numba, ``available()`` is False
+and the runtime uses its numpy kernel only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:  # the optional ``fast`` extra
+    from numba import njit
+except ImportError:  # pragma: no cover - exercised where numba is absent
+    njit = None
+
+_FAST = {"reassoc", "contract"}  # reorder sums (vectorise the dots); no nnan/ninf
+
+
+def available() -> bool:
+    """Whether the compiled kernel can run here."""
+    return njit is not None
+
+
+def _tanh(x):
+    """tanh in float32 arithmetic, |error| <= 2.6e-7 (Eigen's rational approximation)."""
+    c = np.float32(7.99881172180175781)  # tanh is 1 - 2e-7 beyond this
+    x = min(max(x, -c), c)
+    x2 = x * x
+    p = x2 * np.float32(-2.76076847742355e-16) + np.float32(2.00018790482477e-13)
+    p = p * x2 + np.float32(-8.60467152213735e-11)
+    p = p * x2 + np.float32(5.12229709037114e-08)
+    p = p * x2 + np.float32(1.48572235717979e-05)
+    p = p * x2 + np.float32(6.37261928875436e-04)
+    p = p * x2 + np.float32(4.89352455891786e-03)
+    q = x2 * np.float32(1.19825839466702e-06) + np.float32(1.18534705686654e-04)
+    q = q * x2 + np.float32(2.26843463243900e-03)
+    q = q * x2 + np.float32(4.89352518554385e-03)
+    return x * p / q
+
+
+def _step(x, dt, zs, cs, top, g, hv, wts, head_t, lo, hi, out, flip):
+    """One step for every row s of the workspace, in place; False (nothing changed) if
+    ``x`` holds a non-finite value.
+
+    x (S, M) new input (any float dtype); dt (S, 1) s; zs[l] (S, in_l + H + 1) rows
+    [in | h_l | 1] with zs[0] = [x̂ | x̂' | x_c | h_0 | 1]; cs[l] (S, H); top (S, H + 1);
+    g (4H,), hv (H,) scratch; wts[l] (4H, in_l + H + 1) fused weights transposed, gates
+    (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t (M, H + 1); out (S, M)
+    receives x̂[n+1]. ``flip`` walks the weight rows backwards: alternating it from step
+    to step keeps most of the ~1.1 MB of weights in a 1 MB L2 cache (LRU sees the rows it
+    kept first) instead of missing on all of them; the result does not depend on it.
+    """
+    S, M = x.shape
+    for s in range(S):
+        for m in range(M):
+            if not np.isfinite(x[s, m]):
+                return False
+    H = cs[0].shape[1]
+    L = len(zs)
+    half = np.float32(0.5)
+    for s in range(S):
+        z0 = zs[0]
+        for m in range(M):
+            z0[s, 2 * M + m] = (np.float32(x[s, m]) - z0[s, m]) / dt[s, 0]  # Eq. 2
+        for layer in range(L):
+            z, c, w = zs[layer], cs[layer], wts[layer]
+            width = z.shape[1]
+            for r in range(4 * H):  # gates = W [in | h | 1]
+                n = 4 * H - 1 - r if flip else r
+                acc = np.float32(0.0)
+                for k in range(width):
+                    acc += w[n, k] * z[s, k]
+                g[n] = acc
+            for n in range(4 * H):
+                g[n] = _tanh(g[n])
+            for j in range(H):
+                i = half + half * g[j]  # sigmoid(a) = (1 + tanh(a / 2)) / 2
+                f = half + half * g[H + j]
+                c[s, j] = f * c[s, j] + i * g[3 * H + j]
+                hv[j] = _tanh(c[s, j])
+            off = width - 1 - H  # where h_l sits in z
+            nxt = zs[layer + 1] if layer + 1 < L else top
+            for j in range(H):
+                h = (half + half * g[2 * H + j]) * hv[j]  # h = o tanh(c)
+                z[s, off + j] = h
+                nxt[s, j] = h + z[s, j] if layer > 0 else h  # residual for l >= 1
+        for m in range(M):
+            acc = np.float32(0.0)
+            for k in range(H + 1):
+                acc += head_t[m, k] * top[s, k]
+            dm = z0[s, 2 * M + m] + acc  # x̂'[n] = x_c + correction
+            z0[s, M + m] = dm
+            ym = min(max(z0[s, m] + dt[s, 0] * dm, lo), hi)  # integrate, clamp
+            z0[s, m] = ym
+            out[s, m] = ym
+    return True
+
+
+if njit is not None:
+    _tanh = njit(fastmath=_FAST, inline="always", cache=True)(_tanh)
+    step = njit(fastmath=_FAST, boundscheck=False, nogil=True, cache=True)(_step)
+else:  # pragma: no cover
+    step = None

@@ -1,0 +1,235 @@
+"""The learned model's checkpoint (docs/ARCHITECTURE.md), read without torch.
+
+``LSTMWeights.load(path)`` checks and holds the raw arrays; ``fused()`` folds them into
+the few float32 matrices one step needs (used by the numpy runtime and the ONNX export):
+
+- feature scaling folded into layer 0: W (x - mean) / std = (W / std) x - (W / std) mean;
+- [W_ih | W_hh | b_ih + b_hh] stacked so one matrix product per layer does everything
+  (the input buffer carries a constant 1 column for the bias);
+- gate rows reordered from PyTorch's (i, f, g, o) to (i, f, o, g): the three sigmoid
+  gates are one contiguous block;
+- ``out_scale`` folded into the head.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.errors import FacecleanError
+
+FORMAT = "faceclean-lstm/1"
+
+
+@dataclass(frozen=True)
+class Fused:
+    """Step matrices, float32, for inputs laid out as rows.
+
+    layers[0]: (F + H + 1, 4H) for [features | h_0 | 1];
+    layers[l]: (2H + 1, 4H) for [input_l | h_l | 1], l >= 1;
+    head:      (H + 1, K*M) for [top output | 1]; gates in (i, f, o, g) order.
+    ``half_sigmoid``: the (i, f, o) columns are pre-scaled by 1/2, so that one tanh over
+    all 4H gates gives sigmoid(a) = (1 + tanh(a / 2)) / 2 for them (numpy's tanh is SIMD).
+    """
+
+    layers: tuple[np.ndarray, ...]
+    head: np.ndarray
+    half_sigmoid: bool = False
+
+
+@dataclass(frozen=True)
+class LSTMWeights:
+    """A checkpoint's config and arrays (float32), validated."""
+
+    config: dict[str, Any]
+    feat_mean: np.ndarray  # (F,)
+    feat_std: np.ndarray  # (F,)
+    out_scale: np.ndarray  # (K*M,)
+    w_ih: tuple[np.ndarray, ...]  # (4H, in_l) per layer
+    w_hh: tuple[np.ndarray, ...]  # (4H, H)
+    b_ih: tuple[np.ndarray, ...]  # (4H,)
+    b_hh: tuple[np.ndarray, ...]  # (4H,)
+    head_w: np.ndarray  # (K*M, H)
+    head_b: np.ndarray  # (K*M,)
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return tuple(self.config["channels"])
+
+    @property
+    def K(self) -> int:  # noqa: N802 (the paper's symbol)
+        return int(self.config["K"])
+
+    @property
+    def hidden(self) -> int:
+        return int(self.config["hidden"])
+
+    @property
+    def layers(self) -> int:
+        return len(self.w_ih)
+
+    @property
+    def value_range(self) -> tuple[float, float]:
+        lo, hi = self.config.get("value_range", (0.0, 1.0))
+        return float(lo), float(hi)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> LSTMWeights:
+        """Read and check a ``faceclean-lstm/1`` .npz; FacecleanError if it is not one."""
+        p = Path(path)
+        if not p.is_file():
+            raise FacecleanError(f"no such model file: {p}")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError) as e:
+            raise FacecleanError(f"{p.name}: not a model .npz ({e})") from None
+        return cls.from_arrays(arrays, p.name)
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], label: str = "model") -> LSTMWeights:
+        """Build from the checkpoint's key -> array mapping (see docs/ARCHITECTURE.md)."""
+        try:
+            config = json.loads(str(arrays["config"][()]))
+        except (KeyError, ValueError, TypeError) as e:
+            raise FacecleanError(f"{label}: no readable 'config' ({e})") from None
+        if not isinstance(config, dict) or config.get("format") != FORMAT:
+            raise FacecleanError(f"{label}: not a {FORMAT} checkpoint")
+
+        def get(key: str) -> np.ndarray:
+            if key not in arrays:
+                raise FacecleanError(f"{label}: missing array {key!r}")
+            return np.asarray(arrays[key], dtype=np.float32)
+
+        try:
+            n_layers = int(config["layers"])
+            M, K, H = len(config["channels"]), int(config["K"]), int(config["hidden"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise FacecleanError(f"{label}: bad config ({e})") from None
+        F = M * (1 + 2 * K)
+        w = cls(
+            config=config,
+            feat_mean=get("feat_mean"),
+            feat_std=get("feat_std"),
+            out_scale=get("out_scale"),
+            w_ih=tuple(get(f"lstm.{i}.w_ih") for i in range(n_layers)),
+            w_hh=tuple(get(f"lstm.{i}.w_hh") for i in range(n_layers)),
+            b_ih=tuple(get(f"lstm.{i}.b_ih") for i in range(n_layers)),
+            b_hh=tuple(get(f"lstm.{i}.b_hh") for i in range(n_layers)),
+            head_w=get("head.w"),
+            head_b=get("head.b"),
+        )
+        shapes = {
+            "feat_mean": (w.feat_mean.shape, (F,)),
+            "feat_std": (w.feat_std.shape, (F,)),
+            "out_scale": (w.out_scale.shape, (K * M,)),
+            "head.w": (w.head_w.shape, (K * M, H)),
+            "head.b": (w.head_b.shape, (K * M,)),
+        }
+        for i in range(n_layers):
+            shapes[f"lstm.{i}.w_ih"] = (w.w_ih[i].shape, (4 * H, F if i == 0 else H))
+            shapes[f"lstm.{i}.w_hh"] = (w.w_hh[i].shape, (4 * H, H))
+            shapes[f"lstm.{i}.b_ih"] = (w.b_ih[i].shape, (4 * H,))
+            shapes[f"lstm.{i}.b_hh"] = (w.b_hh[i].shape, (4 * H,))
+        for key, (got, want) in shapes.items():
+            if got != want:
+                raise FacecleanError(f"{label}: {key} has shape {got}, expected {want}")
+        if n_layers < 1 or K < 1:
+            raise FacecleanError(f"{label}: needs at least one layer and K >= 1")
+        if not np.all(w.feat_std > 0):
+            raise FacecleanError(f"{label}: feat_std must be positive")
+        return w
+
+    def fused(self, half_sigmoid: bool = False) -> Fused:
+        """The folded step matrices (see the module docstring and ``Fused``)."""
+        H = self.hidden
+        gate_scale = np.ones((4 * H, 1))
+        if half_sigmoid:
+            gate_scale[: 3 * H] = 0.5  # rows (i, f, o) after reordering
+        order = np.r_[0:H, H : 2 * H, 3 * H : 4 * H, 2 * H : 3 * H]  # (i,f,g,o) -> (i,f,o,g)
+        layers = []
+        for i in range(self.layers):
+            w_ih, bias = self.w_ih[i].astype(np.float64), (self.b_ih[i] + self.b_hh[i])
+            bias = bias.astype(np.float64)
+            if i == 0:  # fold the feature scaling (float64, then rounded once)
+                w_ih = w_ih / self.feat_std.astype(np.float64)
+                bias = bias - w_ih @ self.feat_mean.astype(np.float64)
+            stacked = np.concatenate([w_ih, self.w_hh[i], bias[:, None]], axis=1)  # (4H, in+H+1)
+            stacked = stacked[order] * gate_scale
+            layers.append(np.ascontiguousarray(stacked.T, dtype=np.float32))
+        scale = self.out_scale.astype(np.float64)[:, None]
+        head = np.concatenate([self.head_w * scale, self.head_b[:, None] * scale], axis=1)
+        head = np.ascontiguousarray(head.T, dtype=np.float32)
+        return Fused(tuple(layers), head, half_sigmoid)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The checkpoint's key -> array mapping (inverse of ``from_arrays``)."""
+        arrays = {
+            "config": np.array(json.dumps(self.config)),
+            "feat_mean": self.feat_mean,
+            "feat_std": self.feat_std,
+            "out_scale": self.out_scale,
+            "head.w": self.head_w,
+            "head.b": self.head_b,
+        }
+        for i in range(self.layers):
+            arrays[f"lstm.{i}.w_ih"], arrays[f"lstm.{i}.w_hh"] = self.w_ih[i], self.w_hh[i]
+            arrays[f"lstm.{i}.b_ih"], arrays[f"lstm.{i}.b_hh"] = self.b_ih[i], self.b_hh[i]
+        return arrays
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write a ``faceclean-lstm/1`` .npz atomically."""
+        from faceclean.io.atomic import atomic_open
+
+        with atomic_open(path, "wb") as f:
+            np.savez(f, **self.to_arrays())
+
+    @classmethod
+    def random(
+        cls,
+        channels: tuple[str, ...] | list[str],
+        *,
+        hidden: int = 128,
+        layers: int = 2,
+        seed: int = 0,
+        gain: float = 1.0,
+    ) -> LSTMWeights:
+        """An untrained model with PyTorch's default init U(-1/sqrt(H), 1/sqrt(H)), seeded.
+
+        For tests and benchmarks; ``gain`` scales the head (0 gives a model that follows
+        its input exactly).
+        """
+        rng = np.random.default_rng(seed)
+        M, H = len(channels), hidden
+        F, bound = 3 * M, 1.0 / np.sqrt(H)
+
+        def u(*shape: int) -> np.ndarray:
+            return rng.uniform(-bound, bound, shape).astype(np.float32)
+
+        config = {
+            "format": FORMAT,
+            "channels": list(channels),
+            "K": 1,
+            "hidden": H,
+            "layers": layers,
+            "value_range": [0.0, 1.0],
+            "dropout": 0.3,
+            "note": f"random init, seed {seed}",
+        }
+        return cls(
+            config=config,
+            feat_mean=rng.uniform(0.0, 0.3, F).astype(np.float32),
+            feat_std=rng.uniform(0.5, 2.0, F).astype(np.float32),
+            out_scale=np.full(M, 0.5, np.float32),
+            w_ih=tuple(u(4 * H, F if i == 0 else H) for i in range(layers)),
+            w_hh=tuple(u(4 * H, H) for i in range(layers)),
+            b_ih=tuple(u(4 * H) for i in range(layers)),
+            b_hh=tuple(u(4 * H) for i in range(layers)),
+            head_w=u(M, H) * np.float32(gain),
+            head_b=u(M) * np.float32(gain),
+        )
