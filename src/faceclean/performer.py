@@ -98,9 +98,9 @@ def _resting(rng: np.random.Generator) -> np.ndarray:
 
 
 def _idle(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """(N, 52) slow wander of every channel (breathing, posture): 2 sines, 3-15 s periods."""
-    amp = rng.uniform(0.0, 0.02, 52)
-    period = rng.uniform(3.0, 15.0, (2, 52))
+    """(N, 52) slow wander of every channel (breathing, posture): 2 sines, 1-15 s periods."""
+    amp = rng.uniform(0.005, 0.04, 52)
+    period = rng.uniform(1.0, 15.0, (2, 52))
     phase = rng.uniform(0.0, 2.0 * np.pi, (2, 52))
     wave = np.sin(2.0 * np.pi * t[:, None, None] / period + phase).sum(1)
     idle = amp * (1.0 + 0.5 * wave)
@@ -109,7 +109,7 @@ def _idle(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def _blinks(x: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> None:
-    """Blinks: 10-25 a minute, gaps of 0.6 s or more; close 70-100 ms, closed 20-60 ms,
+    """Blinks: 10-25 a minute, gaps of 0.6 s or more; close 70-100 ms, closed 10-40 ms,
     open 150-250 ms; the right eye a few ms off and a few percent shallower or deeper."""
     rate = rng.uniform(10.0, 25.0)  # per minute
     starts = _events(t[-1], 60.0 / rate, rng, shape=3.0)
@@ -118,7 +118,7 @@ def _blinks(x: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> None:
     for s in starts:
         close, hold, opening = (
             rng.uniform(0.07, 0.1),
-            rng.uniform(0.02, 0.06),
+            rng.uniform(0.01, 0.04),
             rng.uniform(0.15, 0.25),
         )
         peak = rng.uniform(0.8, 1.0)
@@ -153,6 +153,12 @@ def _gaze(x: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> None:
     hh = h[i - (i > 0)] + (h[i] - h[i - (i > 0)]) * u
     vv = v[i - (i > 0)] + (v[i] - v[i - (i > 0)]) * u
     gain_l, gain_r = rng.uniform(0.9, 1.1, 2)
+    # Fixational drift and small pursuit: 3 sines of 0.3-3 Hz, 0.01-0.04 each.
+    wander = rng.uniform(0.01, 0.04, (2, 3)) * np.sin(
+        2.0 * np.pi * rng.uniform(0.3, 3.0, (2, 3)) * t[:, None, None]
+        + rng.uniform(0, 2 * np.pi, (2, 3))
+    )  # (N, 2, 3)
+    hh, vv = hh + wander[:, 0].sum(1), vv + wander[:, 1].sum(1)
     gain = dict(zip(("Left", "Right"), rng.uniform(0.9, 1.1, 2), strict=True))
     for side in ("Left", "Right"):
         toward, away = ("Out", "In") if side == "Left" else ("In", "Out")
@@ -166,7 +172,8 @@ def _gaze(x: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> None:
 
 # Mouth shapes a syllable can take (weights at full opening); the jaw scales them.
 _VISEMES = [
-    {"jawOpen": 1.0, "mouthLowerDown": 0.8, "mouthUpperUp": 0.3, "mouthStretch": 0.2},  # a
+    {"jawOpen": 1.0, "mouthLowerDown": 0.8, "mouthUpperUp": 0.3, "mouthStretch": 0.2,
+     "jawForward": 0.1, "cheekSquint": 0.1},  # a
     {"jawOpen": 0.5, "mouthFunnel": 0.9, "mouthPucker": 0.7, "mouthLowerDown": 0.2},  # o, u
     {"jawOpen": 0.5, "mouthStretch": 0.6, "mouthSmile": 0.2, "mouthDimple": 0.3,
      "mouthUpperUp": 0.4},  # e, i
