@@ -1,0 +1,128 @@
+"""``faceclean train``: train the recurrent cleaner (CPU; data-parallel under torchrun)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+
+HELP = "train the recurrent (LSTM) cleaner on clean takes corrupted by the simulator"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", help="folder of clean takes (default: the shared arkit_takes)")
+    p.add_argument(
+        "--synthetic-minutes",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="fresh synthetic-performer minutes mixed into every epoch",
+    )
+    p.add_argument(
+        "--val-sources",
+        nargs="+",
+        default=[],
+        metavar="SOURCE",
+        help="sources (take subfolders) held out for validation "
+        "(default: 20%% of every source's takes)",
+    )
+    p.add_argument("--epochs", type=int, default=40)
+    p.add_argument("--batch", type=int, default=32, help="chunks per batch (per process)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hidden", type=int, default=128)
+    p.add_argument("--layers", type=int, default=2)
+    p.add_argument("--K", type=int, default=1, help="derivative orders (paper: 1)")
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument(
+        "--patience",
+        type=int,
+        default=8,
+        help="epochs without validation improvement before stopping",
+    )
+    p.add_argument(
+        "--w-acc",
+        type=float,
+        default=None,
+        help="weight of the second-derivative loss, s^4 (0: the paper's loss)",
+    )
+    p.add_argument("--w-dis", type=float, default=None, help="weight of the distance loss")
+    p.add_argument("--mesh", help="face mesh (.npz or .glb with ARKit morph targets)")
+    p.add_argument("--max-batches", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads per process")
+    p.add_argument("--resume", metavar="CKPT", help="continue from MODEL.last.npz")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--out", required=True, metavar="MODEL", help="best model (.npz)")
+    # fmt: skip
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from tqdm import tqdm
+
+    from faceclean.errors import FacecleanError
+    from faceclean.neural.losses import Weights
+    from faceclean.neural.train import Config, train
+
+    if not args.out.endswith(".npz"):
+        raise FacecleanError("--out must end in .npz")
+    if args.epochs < 1 or args.batch < 1:
+        raise FacecleanError("--epochs and --batch must be at least 1")
+    weights = Weights()
+    if args.w_acc is not None:
+        weights = dataclasses.replace(weights, acc=args.w_acc)
+    if args.w_dis is not None:
+        weights = dataclasses.replace(weights, dis=args.w_dis)
+    cfg = Config(
+        out=args.out, data=args.data, val_sources=tuple(args.val_sources),
+        synthetic_minutes=args.synthetic_minutes, epochs=args.epochs, batch=args.batch,
+        seed=args.seed, K=args.K, hidden=args.hidden, layers=args.layers, lr=args.lr,
+        patience=args.patience, weights=weights, mesh=args.mesh, resume=args.resume,
+        max_batches=args.max_batches, threads=args.threads,
+    )  # fmt: skip
+    bar: list[tqdm] = []
+
+    def report(e: dict) -> None:
+        if args.quiet:
+            return
+        if e["event"] == "start":
+            print(f"train on {', '.join(e['train_sources'])}; validate on "
+                  f"{', '.join(e['val_sources']) or '-'}; {e['world']} process(es)",
+                  file=sys.stderr)  # fmt: skip
+        elif e["event"] == "batch":
+            if e["i"] == 0:
+                bar.append(tqdm(total=e["n"], desc=f"epoch {e['epoch']}", leave=False))
+            bar[-1].set_postfix(loss=f"{e['loss']:.4f}", mse=f"{e['mse']:.5f}")
+            bar[-1].update(1)
+        elif e["event"] == "epoch":
+            if bar:
+                bar.pop().close()
+            print(_epoch_line(e), file=sys.stderr)
+
+    best = train(cfg, report)
+    if not args.quiet and best:
+        print(f"best epoch {best['epoch']}: {args.out}", file=sys.stderr)
+    return 0
+
+
+def _epoch_line(e: dict) -> str:
+    parts = [f"epoch {e['epoch']:3d}", f"train {e['train_loss']:.4f}"]
+    for cond, v in (e.get("val") or {}).items():
+        parts.append(
+            f"{cond}: loss {v['loss']:.4f} mse {v['mse']:.5f} ({v['mse_ratio']:.2f}x raw) "
+            f"jitter {v['jitter_ratio']:.2f} blink {_f(v['blink_closure'])}"
+        )
+    parts.append(f"{e['seconds']:.0f}s" + (" *" if e["improved"] else ""))
+    return " | ".join(parts)
+
+
+def _f(x: float) -> str:
+    return "-" if not math.isfinite(x) else f"{x:.2f}"
+
+
+def main(argv: Sequence[str]) -> int:
+    """Entry for ``python -m faceclean.neural.train ARGS`` (no subcommand name)."""
+    from faceclean.cli import main as cli_main
+
+    return cli_main(["train", *argv])
