@@ -32,7 +32,7 @@ class Kalman(StreamCleaner):
     def __init__(
         self,
         *,
-        q: float | Sequence[float] = 300.0,
+        q: float | Sequence[float] = 5.0,
         r: float | Sequence[float] = 0.02,
         names: Sequence[str] = ARKIT52,
     ) -> None:

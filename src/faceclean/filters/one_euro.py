@@ -37,8 +37,8 @@ class OneEuro(StreamCleaner):
     def __init__(
         self,
         *,
-        min_cutoff: float | Sequence[float] = 2.0,
-        beta: float | Sequence[float] = 0.5,
+        min_cutoff: float | Sequence[float] = 1.5,
+        beta: float | Sequence[float] = 3.0,
         d_cutoff: float | Sequence[float] = 1.0,
         names: Sequence[str] = ARKIT52,
     ) -> None:

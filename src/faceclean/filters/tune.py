@@ -38,7 +38,7 @@ from faceclean.metrics import _interp_rows, _paired
 SPACES: dict[str, dict[str, tuple[float, float]]] = {
     "ema": {"tau": (0.002, 0.5)},  # s
     "one-euro": {"min_cutoff": (0.05, 60.0), "beta": (0.001, 100.0)},  # Hz, Hz/(unit/s)
-    "kalman": {"q": (0.1, 1e7)},  # unit^2/s^3
+    "kalman": {"q": (0.01, 1e7)},  # unit^2/s^3
     "gaussian": {"sigma": (0.002, 0.2)},  # s
     "savgol": {"window": (0.02, 0.8)},  # s
 }
