@@ -34,13 +34,23 @@ CONST_TOL = {"lstm": 0.02, "fc": 0.02, "gbt": 0.02}
 CONST_TOL_DEFAULT = 1e-9
 
 
-def _build(method: str) -> Cleaner:
+def _build(method: str, trained: bool = False) -> Cleaner:
+    """The cleaner with default parameters (and the shipped model for learned ones).
+
+    Until the LSTM's shipped model exists, the structural tests run its runtime with a
+    seeded random-weight model; ``trained`` asks for behaviour only a trained one has.
+    """
     module = METHODS[method].split(":")[0]
     if importlib.util.find_spec(module) is None:
         pytest.skip(f"{module} does not exist yet")
     try:
         return make(method, names=ARKIT52)
     except FacecleanError as e:  # a learned cleaner whose shipped model is not there yet
+        if method == "lstm" and not trained:
+            from faceclean.filters.learned import Learned
+            from faceclean.filters.lstm_weights import LSTMWeights
+
+            return Learned(names=ARKIT52, weights=LSTMWeights.random(ARKIT52, hidden=32))
         pytest.skip(f"{method} cannot be built yet: {e}")
 
 
@@ -86,7 +96,8 @@ def _need_stream(c: Cleaner) -> None:
 # --- every cleaner -------------------------------------------------------------------
 
 
-def test_constant_in_constant_out(method, cleaner):
+def test_constant_in_constant_out(method):
+    cleaner = _build(method, trained=True)
     t = np.arange(120) / 60.0
     level = np.linspace(0.1, 0.9, M)
     y = cleaner.clean(Animation(t, np.tile(level, (120, 1)), ARKIT52)).values
@@ -94,7 +105,8 @@ def test_constant_in_constant_out(method, cleaner):
     np.testing.assert_allclose(y, np.tile(level, (120, 1)), atol=tol, rtol=0)
 
 
-def test_same_curve_at_30_60_120_fps_agrees(method, cleaner):
+def test_same_curve_at_30_60_120_fps_agrees(method):
+    cleaner = _build(method, trained=True)
     outs = {}
     for fps in (30, 60, 120):
         t = np.arange(int(4 * fps)) / fps  # 4 s
