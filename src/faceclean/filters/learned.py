@@ -25,10 +25,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, canonical
+from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters import learned_jit
 from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.channel_map import ChannelMap
 from faceclean.filters.lstm_weights import Fused, LSTMWeights
 
 
@@ -156,23 +157,8 @@ class Learned(StreamCleaner):
         self.max_gap = float(max_gap)
         self.names = tuple(names)
         self.lo, self.hi = (np.float32(v) for v in weights.value_range)
-        self._map_channels()
+        self.map = ChannelMap(weights.channels, self.names)
         self.reset()
-
-    def _map_channels(self) -> None:
-        """Model channel j <- input column ``self._src[j]`` (-1 when the input lacks it)."""
-        cols: dict[str, int] = {}
-        for j, n in enumerate(self.names):
-            cols.setdefault(canonical(n) or n, j)
-        model = [canonical(n) or n for n in self.weights.channels]
-        src = np.array([cols.get(n, -1) for n in model], dtype=np.intp)
-        self._src = src
-        self._have = np.flatnonzero(src >= 0)  # model channels fed from the input
-        self._lack = np.flatnonzero(src < 0)  # model channels fed their last output
-        self._cols = src[self._have]  # their input columns
-        self._identity = len(model) == len(self.names) and bool(
-            np.array_equal(src, np.arange(len(model)))
-        )
 
     @property
     def state_bytes(self) -> int:
@@ -203,40 +189,22 @@ class Learned(StreamCleaner):
         np.copyto(out, ws.y)
         return True
 
-    # -- model space <-> input space -------------------------------------------------------
-
-    def _gather(self, x: np.ndarray, y_model: np.ndarray, out: np.ndarray) -> None:
-        """Input frames (S, len(names)) -> model channel order in ``out`` (S, M)."""
-        if self._identity:
-            np.copyto(out, x, casting="unsafe")
-            return
-        out[:, self._have] = x[:, self._cols]
-        out[:, self._lack] = y_model[:, self._lack]
-
-    def _scatter(self, x: np.ndarray, y_model: np.ndarray) -> np.ndarray:
-        """Output frames: the input with the model's channels replaced by its output."""
-        if self._identity:
-            return y_model.astype(np.float64)
-        out = np.array(x, dtype=np.float64)
-        out[:, self._cols] = y_model[:, self._have]
-        return out
-
     # -- the generic path (base class rules) -----------------------------------------------
 
     def _start(self, x: np.ndarray) -> State:
         S, M, H = x.shape[0], len(self.weights.channels), self.weights.hidden
         y = np.zeros((S, M), np.float32)
-        self._gather(x, y, y)  # channels the input lacks start at 0
+        self.map.gather(x, y, y)  # channels the input lacks start at 0
         zeros = [np.zeros((S, H), np.float32) for _ in range(2 * self.weights.layers)]
         return (y, np.zeros((S, M), np.float32), *zeros)
 
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         ws = self._ws
         ws.load(state)
-        self._gather(x, ws.y, ws.x)
+        self.map.gather(x, ws.y, ws.x)
         np.copyto(ws.dt, dt, casting="unsafe")
         self._run(ws, ws.x, ws.out)
-        return ws.state(), self._scatter(x, ws.y)
+        return ws.state(), self.map.scatter(x, ws.y)
 
     def _generic_step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
         x = np.array(frame, dtype=np.float64, ndmin=1)
@@ -281,16 +249,16 @@ class Learned(StreamCleaner):
         if x.dtype.kind != "f":
             return self._generic_step(frame, t)
         x2 = x.reshape(ws.streams, -1)
-        if self._identity:
+        if self.map.identity:
             if not self._run(ws, x2, last):
                 return self._generic_step(frame, t)  # rule 2: the generic path
         else:
             flat = x.reshape(-1)
             if not math.isfinite(float(np.dot(flat, flat))):
                 return self._generic_step(frame, t)
-            self._gather(x2, ws.y, ws.x)
+            self.map.gather(x2, ws.y, ws.x)
             self._run(ws, ws.x, ws.out)
-            last[...] = self._scatter(x2, ws.y)
+            last[...] = self.map.scatter(x2, ws.y)
         if single:
             self._t[0] = tf
         else:

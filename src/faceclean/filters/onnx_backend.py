@@ -1,0 +1,113 @@
+"""The learned cleaner run by ONNX Runtime, from an exported step graph (neural/export.py).
+
+The graph holds one step with its state as explicit inputs and outputs; this class keeps
+that state between calls and applies the time rules of filters/base.py around it, so it
+is interchangeable with the numpy runtime (``filters.learned.Learned``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.channel_map import ChannelMap
+
+STEP_FORMAT = "faceclean-lstm-step/1"  # = neural.export.STEP_FORMAT (kept torch-free)
+
+
+def _session(model: bytes, threads: int) -> Any:
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        raise FacecleanError(
+            "the ONNX backend needs onnxruntime (pip install onnxruntime)"
+        ) from None
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = threads
+    opts.inter_op_num_threads = 1
+    opts.log_severity_level = 3  # errors only
+    try:
+        return ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+    except Exception as e:  # onnxruntime raises its own types for a bad graph
+        raise FacecleanError(f"not a loadable ONNX model ({str(e).splitlines()[0]})") from None
+
+
+def model_bytes(path: str | os.PathLike) -> bytes:
+    """The step graph of ``path``: an exported .onnx as is, or a .npz checkpoint built now."""
+    p = Path(path)
+    if not p.is_file():
+        raise FacecleanError(f"no such model file: {p}")
+    if p.suffix.lower() == ".npz":
+        from faceclean.filters.lstm_weights import LSTMWeights
+        from faceclean.neural.export import build  # needs onnx, not torch
+
+        return build(LSTMWeights.load(p)).SerializeToString()
+    return p.read_bytes()
+
+
+class OnnxLearned(StreamCleaner):
+    """The learned cleaner on ONNX Runtime; ``path``: a .onnx step graph, a .npz model, or
+    the graph's bytes.
+
+    Channels map onto ``names`` as in ``Learned`` (extra inputs pass through).
+    """
+
+    name = "lstm-onnx"
+
+    def __init__(
+        self,
+        path: str | os.PathLike | bytes,
+        *,
+        names: Sequence[str] = ARKIT52,
+        max_gap: float = 0.5,
+        threads: int = 1,
+    ) -> None:
+        graph = path if isinstance(path, bytes) else model_bytes(path)
+        label = "model" if isinstance(path, bytes) else Path(path).name
+        self.session = _session(graph, threads)
+        meta = self.session.get_modelmeta().custom_metadata_map
+        if meta.get("faceclean.format") != STEP_FORMAT:
+            raise FacecleanError(f"{label}: not a faceclean step graph ({STEP_FORMAT})")
+        try:
+            self.channels = tuple(json.loads(meta["channels"]))
+            self.config = json.loads(meta["config"])
+            self.state_names = tuple(json.loads(meta["state"]))
+        except (KeyError, ValueError) as e:
+            raise FacecleanError(f"{label}: bad faceclean metadata ({e})") from None
+        if not max_gap > 0:
+            raise FacecleanError(f"max_gap must be > 0 s (got {max_gap})")
+        self.max_gap = float(max_gap)
+        self.names = tuple(names)
+        self.map = ChannelMap(self.channels, self.names)
+        widths = {i.name: i.shape[1] for i in self.session.get_inputs()}
+        self._widths = [int(widths[n]) for n in self.state_names]
+        self._outputs = [f"{n}_next" for n in self.state_names]
+        self.reset()
+
+    @property
+    def state_bytes(self) -> int:
+        """Bytes of recurrent state per stream (float32)."""
+        return 4 * sum(self._widths)
+
+    def _start(self, x: np.ndarray) -> State:
+        S = x.shape[0]
+        state = [np.zeros((S, w), np.float32) for w in self._widths]
+        self.map.gather(x, state[0], state[0])  # y = the first frame; the rest 0
+        return tuple(state)
+
+    def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
+        x_new = np.empty_like(state[0])
+        self.map.gather(x, state[0], x_new)
+        feeds = dict(zip(self.state_names, state, strict=True))
+        feeds["x_new"] = x_new
+        feeds["dt"] = dt.astype(np.float32)
+        new = tuple(self.session.run(self._outputs, feeds))
+        return new, self.map.scatter(x, new[0])
