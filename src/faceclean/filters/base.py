@@ -9,7 +9,8 @@ Time rules, applied per stream, in this order:
 1. t not finite, or every value of the frame non-finite: a missing frame. The output is
    the last output (NaN before the first frame); the state does not change.
 2. Non-finite values in an otherwise good frame are replaced by the last output of
-   their channel (0 before the first frame).
+   their channel (0 before the first frame). A value beyond +-``MAX_ABS`` is a tracker
+   glitch, not a weight: it counts as non-finite (so nothing overflows).
 3. First frame, or a pause longer than ``max_gap`` seconds: the state restarts from this
    frame and the output equals it (the face came back; nothing jumps or drifts).
 4. t not after the previous frame's time (duplicate or backwards timestamp): the last
@@ -27,6 +28,7 @@ import numpy as np
 from faceclean.animation import Animation
 
 State = tuple[np.ndarray, ...]  # each (S, M)
+MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
 
 
 class Cleaner(ABC):
@@ -85,7 +87,7 @@ class StreamCleaner(Cleaner):
         elif self._y.shape != x.shape:
             raise ValueError(f"frame shape {x.shape} != {self._y.shape} of earlier frames")
 
-        bad = ~np.isfinite(x)
+        bad = ~(np.abs(x) <= MAX_ABS)  # non-finite or absurd (NaN compares False)
         missing = bad.all(axis=1) | ~np.isfinite(t)  # rule 1
         if bad.any():  # rule 2
             x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
@@ -119,7 +121,13 @@ def _merge(rows: np.ndarray, new: State, old: State) -> State:
 
 
 class OfflineCleaner(Cleaner):
-    """A non-causal cleaner: only ``clean`` works; ``step`` refuses."""
+    """A non-causal cleaner: only ``clean`` works; ``step`` refuses.
+
+    The stream rules carry over: missing frames stay NaN; a non-finite or absurd value
+    (rule 2) takes its channel's previous good value (0 before the first); a frame whose
+    time is not after every earlier one (rule 4) repeats the previous output; ``_smooth``
+    sees the rest, at strictly increasing times.
+    """
 
     offline = True
 
@@ -135,7 +143,18 @@ class OfflineCleaner(Cleaner):
 
     def clean(self, anim: Animation) -> Animation:
         out = np.full_like(anim.values, np.nan)
-        valid = anim.valid
-        if valid.any():
-            out[valid] = self._smooth(anim.times[valid], anim.values[valid])
+        rows = np.flatnonzero(anim.valid & np.isfinite(anim.times))  # (V,) rule 1
+        if not len(rows):
+            return anim.with_values(out)
+        x = anim.values[rows]  # (V, M)
+        bad = ~(np.abs(x) <= MAX_ABS)
+        if bad.any():  # rule 2: each channel's previous good value (0 before the first)
+            last = np.maximum.accumulate(np.where(bad, -1, np.arange(len(x))[:, None]), axis=0)
+            good = x[np.maximum(last, 0), np.arange(x.shape[1])]
+            x = np.where(last >= 0, good, 0.0)
+        t = anim.times[rows]
+        ahead = t > np.maximum.accumulate(np.concatenate(([-np.inf], t[:-1])))  # rule 4
+        y = self._smooth(t[ahead], x[ahead])  # (A, M)
+        held = np.cumsum(ahead) - 1  # (V,) index into y of the last frame ahead
+        out[rows] = y[held]
         return anim.with_values(out)

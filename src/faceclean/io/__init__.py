@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import importlib
 import os
+import struct
+import zipfile
 from pathlib import Path
 from types import ModuleType
+
+import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
@@ -24,6 +28,20 @@ FORMATS: dict[str, str] = {
     "npz": "faceclean.io.npz_format",
     "gltf": "faceclean.io.gltf",
 }
+# What a reader raises on a malformed file (anything else is a bug the fuzzer must find).
+_BAD_INPUT = (
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+    UnicodeDecodeError,
+    OSError,
+    EOFError,
+    RecursionError,
+    OverflowError,
+    zipfile.BadZipFile,
+    struct.error,
+)
 EXTENSIONS: dict[str, tuple[str, ...]] = {
     ".csv": ("livelink", "csv"),
     ".json": ("json",),
@@ -70,10 +88,34 @@ def load(path: str | os.PathLike, fmt: str | None = None) -> Animation:
         anim = _module(fmt).read(p)
     except FacecleanError:
         raise
-    except (ValueError, KeyError, IndexError, UnicodeDecodeError, OSError, EOFError) as e:
-        raise FacecleanError(f"{p.name}: not a readable {fmt} file ({e})") from None
+    except _BAD_INPUT as e:
+        raise FacecleanError(f"{p.name}: not a readable {fmt} file ({_short(e)})") from None
     anim.meta.setdefault("format", fmt)
+    return checked(anim, p.name)
+
+
+def checked(anim: Animation, label: str) -> Animation:
+    """``anim`` if it holds the invariants every reader promises, else FacecleanError.
+
+    At least one frame; times (N,) finite seconds (order is not checked: cleaners hold
+    on a repeated or backwards time); values (N, M) float64; M string names.
+    """
+    if anim.n_frames == 0:
+        raise FacecleanError(f"{label}: no frames")
+    bad = np.flatnonzero(~np.isfinite(anim.times))
+    if len(bad):
+        raise FacecleanError(f"{label}: frame {bad[0]} has no finite time")
+    if anim.values.dtype != np.float64 or anim.values.ndim != 2:
+        raise FacecleanError(f"{label}: values are not a (frames, channels) table")
+    if not all(isinstance(n, str) for n in anim.names):
+        raise FacecleanError(f"{label}: channel names must be text")
     return anim
+
+
+def _short(e: BaseException) -> str:
+    """A one-line reason for an exception (first line, at most 200 characters)."""
+    text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    return text[:200]
 
 
 def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> None:

@@ -47,6 +47,8 @@ def read(path: str | os.PathLike) -> Animation:
     rows = doc.get("values")
     if not isinstance(names, list) or not isinstance(rows, list) or times.ndim != 1:
         raise FacecleanError(f"{p.name}: needs 'channels', 'times' and 'values' lists")
+    if not all(isinstance(n, str) for n in names):
+        raise FacecleanError(f"{p.name}: 'channels' must be a list of strings")
     values = np.array([[None] * m if r is None else r for r in rows], dtype=np.float64)
     values = values.reshape(len(rows), m) if values.size == 0 else values
     if values.shape != (len(times), m):

@@ -41,6 +41,8 @@ def read(path: str | os.PathLike) -> Animation:
     names = arrays.get("names")
     if times is None or values is None or names is None:
         raise FacecleanError(f"{p.name}: needs 'times', 'values' and 'names' arrays")
+    if np.ndim(times) != 1 or np.ndim(names) != 1 or names.dtype.kind not in "US":
+        raise FacecleanError(f"{p.name}: 'times' and 'names' must be 1-D (names as text)")
     values = np.asarray(values, dtype=np.float64)
     if values.ndim != 2 or values.shape != (len(times), len(names)):
         raise FacecleanError(
