@@ -229,9 +229,12 @@ class Relay:
             out = Frame(frame.names, values, t, frame.pose, frame.passthrough)
         else:
             out = Frame(ARKIT52, np.nan_to_num(y), t, frame.pose, (), frame.subject, frame.device)
-        if self._send(self.encoder.encode(out)):
-            self.stats.frames_out += 1
+        data = self.encoder.encode(out)
+        self.stats.frames_out += 1  # counted before the peer can see it
+        if self._send(data):
             self.stats.record(time.perf_counter_ns() - received)
+        else:
+            self.stats.frames_out -= 1
 
     def _send(self, data: bytes) -> bool:
         try:

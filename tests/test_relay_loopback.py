@@ -1,0 +1,416 @@
+"""The relay end to end over loopback, python-osc as the peer on both sides: delivery,
+cleaning, garbage, ordering, silences, NaN, passthrough, signals, replay."""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pythonosc.dispatcher import Dispatcher
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.osc_packet import OscPacket
+from pythonosc.osc_server import BlockingOSCUDPServer
+from pythonosc.udp_client import UDPClient
+
+from faceclean import filters
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.cli import main
+from faceclean.relay import Relay, livelink, parse
+from faceclean.relay.frame import Frame
+from faceclean.relay.replay import frames_from_animation, replay
+from faceclean.settings import data_dir, takes_dir
+
+REPO = Path(__file__).resolve().parents[1]
+WAIT = 5.0  # s; the most any single event may take before the test gives up
+
+
+class VmcPeer:
+    """A python-osc server collecting VMC frames (dict name -> value) and other messages."""
+
+    def __init__(self) -> None:
+        self.frames: list[dict[str, float]] = []
+        self.other: list[tuple[str, list]] = []
+        self._current: dict[str, float] = {}
+        self._cond = threading.Condition()
+        d = Dispatcher()
+        d.map("/VMC/Ext/Blend/Val", self._val)
+        d.map("/VMC/Ext/Blend/Apply", self._apply)
+        d.set_default_handler(lambda address, *args: self.other.append((address, list(args))))
+        self.server = BlockingOSCUDPServer(("127.0.0.1", 0), d)
+        self.port = self.server.server_address[1]
+        self._thread = threading.Thread(
+            target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True
+        )
+        self._thread.start()
+
+    def _val(self, address: str, name: str, value: float) -> None:
+        self._current[name] = value
+
+    def _apply(self, address: str, *args: object) -> None:
+        with self._cond:
+            self.frames.append(self._current)
+            self._current = {}
+            self._cond.notify_all()
+
+    def wait_for(self, n: int, timeout: float = WAIT) -> bool:
+        with self._cond:
+            return self._cond.wait_for(lambda: len(self.frames) >= n, timeout)
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+        self._thread.join(WAIT)
+
+
+@contextlib.contextmanager
+def vmc_peer():
+    peer = VmcPeer()
+    try:
+        yield peer
+    finally:
+        peer.close()
+
+
+@contextlib.contextmanager
+def running(listen: str, send: str, method: str = "ema"):
+    """A relay serving in a thread; stopped and closed on exit."""
+    relay = Relay(parse(listen), parse(send, "send"), filters.make(method))
+    thread = threading.Thread(target=relay.run, daemon=True)
+    thread.start()
+    try:
+        yield relay
+    finally:
+        relay.stop()
+        thread.join(WAIT)
+        relay.close()
+    assert not thread.is_alive()
+
+
+@contextlib.contextmanager
+def raw_receiver():
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(WAIT)
+    try:
+        yield sock
+    finally:
+        sock.close()
+
+
+def vmc_bundle(names, values, t=None, extra=()):
+    """A VMC frame built with python-osc: [/VMC/Ext/T], extra messages, Vals, Apply."""
+    b = OscBundleBuilder(IMMEDIATELY)
+    msgs = ([("/VMC/Ext/T", [float(t)])] if t is not None else []) + list(extra)
+    msgs += [("/VMC/Ext/Blend/Val", [n, float(v)]) for n, v in zip(names, values, strict=True)]
+    for address, args in msgs + [("/VMC/Ext/Blend/Apply", [])]:
+        m = OscMessageBuilder(address)
+        for a in args:
+            m.add_arg(a)
+        b.add_content(m.build())
+    return b.build()
+
+
+def jitter(x: np.ndarray) -> float:
+    """Mean squared second difference over frames and channels."""
+    return float(np.mean(np.diff(x, 2, axis=0) ** 2))
+
+
+def real_take(n: int = 600) -> np.ndarray:
+    """(n, 52) values of a real 60 fps ARKit take."""
+    folder = takes_dir()
+    if folder is None or not (folder / "neurosync").is_dir():
+        pytest.skip("shared data (arkit_takes/neurosync) not present")
+    from faceclean import load
+
+    values, _ = load(sorted((folder / "neurosync").glob("*.csv"))[0]).arkit()
+    values = values[~np.isnan(values).all(axis=1)]
+    return values[:n]
+
+
+GARBAGE = [b"", b"garbage", b"\x00\x01\x02\x03", b"#bundle\x00", b"{json: 1}", b"\xff" * 300]
+
+
+def test_vmc_stream_comes_out_cleaned_through_garbage():
+    truth = real_take()
+    rng = np.random.default_rng(1)
+    noisy = np.clip(truth + rng.normal(0.0, 0.02, truth.shape), 0.0, 1.0)
+    with vmc_peer() as peer, running("vmc://127.0.0.1:0", f"vmc://127.0.0.1:{peer.port}") as r:
+        client = UDPClient("127.0.0.1", r.address.port)
+        junk = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        n_garbage = 0
+        for i, row in enumerate(noisy):
+            before = len(peer.frames)
+            client.send(vmc_bundle(ARKIT52, row, t=i / 60.0))  # 60 fps by its timestamps
+            if i % 7 == 3:
+                junk.sendto(GARBAGE[n_garbage % len(GARBAGE)], ("127.0.0.1", r.address.port))
+                n_garbage += 1
+            peer.wait_for(before + 1, 1.0)
+        junk.close()
+        assert peer.wait_for(int(0.95 * len(noisy)))
+        stats = r.stats
+        client._sock.setblocking(False)
+        with pytest.raises(BlockingIOError):  # nothing ever goes back to the sender
+            client._sock.recv(65536)
+    assert len(peer.frames) >= 0.95 * len(noisy)
+    assert stats.malformed == n_garbage
+    assert stats.frames_in == len(noisy) and stats.frames_out == len(peer.frames)
+    out = np.array([[f[n] for n in ARKIT52] for f in peer.frames])
+    assert out.shape[1] == 52 and np.isfinite(out).all()
+    assert jitter(out) < 0.5 * jitter(noisy)  # smoother than what went in
+    assert np.abs(out - noisy[: len(out)]).max() > 0.01  # actually changed
+
+
+def test_recorded_livelink_packets_come_out_as_vmc_frames():
+    d = data_dir()
+    if d is None or not (d / "raw_streams" / "llv_dao.gesichter").is_file():
+        pytest.skip("shared data (raw_streams/llv_dao.gesichter) not present")
+    packets = livelink.read_recording(d / "raw_streams" / "llv_dao.gesichter")
+    ref = np.load(d / "raw_streams" / "llv_dao.npz")
+    with (
+        vmc_peer() as peer,
+        running("livelink://127.0.0.1:0", f"vmc://127.0.0.1:{peer.port}") as r,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx,
+    ):
+        for i, p in enumerate(packets):
+            tx.sendto(p, ("127.0.0.1", r.address.port))
+            peer.wait_for(i + 1, 1.0)
+        stats = r.stats
+    assert len(peer.frames) == len(packets) == 180
+    assert stats.dropped == 0 and stats.malformed == 0
+    assert list(peer.frames[0]) == list(ARKIT52)  # ARKit "perfect sync" names
+    out = np.array([[f[n] for n in ARKIT52] for f in peer.frames])
+    np.testing.assert_array_equal(out[0], ref["weights"][0])  # the first frame starts the state
+    assert jitter(out) < jitter(ref["weights"].astype(np.float64))
+
+
+def ll(t: float, values: np.ndarray) -> bytes:
+    return livelink.Encoder().encode(Frame(ARKIT52, values, t))
+
+
+def test_order_duplicates_silence_nan_and_restart():
+    rng = np.random.default_rng(2)
+    v = rng.uniform(0.2, 0.8, (10, 52)).astype(np.float32).astype(np.float64)
+    with (
+        vmc_peer() as peer,
+        running("livelink://127.0.0.1:0", f"vmc://127.0.0.1:{peer.port}") as r,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx,
+    ):
+        to = ("127.0.0.1", r.address.port)
+
+        def deliver(packet: bytes, n: int) -> np.ndarray:
+            tx.sendto(packet, to)
+            assert peer.wait_for(n)
+            return np.array([peer.frames[-1][k] for k in ARKIT52])
+
+        t0 = 1000.0
+        for i in range(3):
+            deliver(ll(t0 + i / 60, v[i]), i + 1)
+        tx.sendto(ll(t0 + 2 / 60, v[3]), to)  # duplicate
+        tx.sendto(ll(t0 + 1 / 60, v[4]), to)  # late
+        last = deliver(ll(t0 + 3 / 60, v[5]), 4)
+        assert r.stats.out_of_order == 2 and r.stats.frames_out == 4
+
+        back = deliver(ll(t0 + 3600.0, v[6]), 5)  # an hour of silence: restart, no jump
+        np.testing.assert_array_equal(back, v[6])
+
+        x = v[7].copy()
+        x[5] = np.nan
+        y = deliver(ll(t0 + 3600.0 + 1 / 60, x), 6)  # NaN channel: held, others advance
+        assert np.isfinite(y).all() and y[5] == np.float32(back[5])
+        assert not np.array_equal(y, back)
+
+        held = deliver(ll(t0 + 3600.0 + 2 / 60, np.full(52, np.nan)), 7)  # all NaN
+        np.testing.assert_array_equal(held, y)
+        assert r.stats.missing == 1
+
+        fresh = deliver(ll(t0 + 3000.0, v[8]), 8)  # the sender restarted its clock
+        np.testing.assert_array_equal(fresh, v[8])
+        assert r.stats.restarts == 1
+    assert not np.array_equal(last, v[5])  # frames in between were cleaned
+
+
+def test_vmc_to_livelink_and_passthrough():
+    names = ("EyeBlink_L", "jawOpen", "Joy")  # ARKit in two spellings + a VRM clip
+    with (
+        raw_receiver() as rx,
+        running("vmc://127.0.0.1:0", f"livelink://127.0.0.1:{rx.getsockname()[1]}") as r,
+    ):
+        UDPClient("127.0.0.1", r.address.port).send(vmc_bundle(names, [1.0, 0.5, 0.25], t=4.0))
+        f = livelink.decode(rx.recv(65536))
+    assert f.values[ARKIT52.index("eyeBlinkLeft")] == 1.0 and f.values[17] == 0.5
+    assert np.count_nonzero(f.values) == 2 and not f.pose.any()
+    assert f.t == pytest.approx(4.0)
+
+    root = ("/VMC/Ext/Root/Pos", ["root", 1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0])
+    bones = OscBundleBuilder(IMMEDIATELY)
+    m = OscMessageBuilder("/VMC/Ext/Bone/Pos")
+    for a in ["Head", 0.0, 1.5, 0.0, 0.0, 0.0, 0.0, 1.0]:
+        m.add_arg(a)
+    bones.add_content(m.build())
+    bones = bones.build().dgram
+    with (
+        raw_receiver() as rx,
+        running("vmc://127.0.0.1:0", f"vmc://127.0.0.1:{rx.getsockname()[1]}") as r,
+    ):
+        client = UDPClient("127.0.0.1", r.address.port)
+        client.send(vmc_bundle(names, [1.0, 0.5, 0.25], extra=[root]))
+        got = [(m.message.address, m.message.params) for m in OscPacket(rx.recv(65536)).messages]
+        client._sock.sendto(bones, ("127.0.0.1", r.address.port))
+        assert rx.recv(65536) == bones  # a datagram without blendshapes: unchanged
+        assert r.stats.passthrough == 1
+    assert got[0] == root  # other addresses pass through untouched
+    vals = [("/VMC/Ext/Blend/Val", [n, v]) for n, v in zip(names, [1.0, 0.5, 0.25], strict=True)]
+    assert got[1:4] == vals
+    assert got[4] == ("/VMC/Ext/Blend/Apply", [])
+
+
+def test_ifacialmocap_input_uses_arrival_time():
+    with (
+        vmc_peer() as peer,
+        running("ifacialmocap://127.0.0.1:0", f"vmc://127.0.0.1:{peer.port}") as r,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx,
+    ):
+        to = ("127.0.0.1", r.address.port)
+        tx.sendto(b"eyeBlink_L-100|jawOpen-50|=head#1,2,3,0,0,0|", to)
+        assert peer.wait_for(1)
+        tx.sendto(b"eyeBlink_L-0|jawOpen-50|", to)
+        assert peer.wait_for(2)
+    assert peer.frames[0] == {"eyeBlink_L": 1.0, "jawOpen": 0.5}
+    assert 0.0 < peer.frames[1]["eyeBlink_L"] < 1.0  # smoothed on arrival times
+
+
+@pytest.mark.parametrize("scheme", ["vmc", "livelink"])
+def test_relay_survives_a_flood_of_random_and_truncated_datagrams(scheme):
+    rng = np.random.default_rng(3)
+    good = vmc_bundle(ARKIT52, np.full(52, 0.5)).dgram if scheme == "vmc" else None
+    with (
+        vmc_peer() as peer,
+        running(f"{scheme}://127.0.0.1:0", f"vmc://127.0.0.1:{peer.port}") as r,
+    ):
+        to = ("127.0.0.1", r.address.port)
+        sent = 0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for burst in range(12):
+                frame = vmc_bundle(ARKIT52, np.full(52, 0.5), t=burst) if good else None
+                packet = frame.dgram if frame else ll(burst, np.full(52, 0.5))
+                for _ in range(100):
+                    if rng.random() < 0.5:
+                        junk = rng.bytes(int(rng.integers(0, 1200)))
+                        junk = b"\x00" + junk if junk[:1] in (b"/", b"#", b"\x06") else junk
+                    else:
+                        junk = packet[: int(rng.integers(0, len(packet) - 4))]
+                    tx.sendto(junk, to)
+                    sent += 1
+                tx.sendto(packet, to)
+                assert peer.wait_for(burst + 1)
+        stats = r.stats
+    assert len(peer.frames) == 12
+    if scheme == "livelink":
+        assert stats.malformed == sent  # every one of them, and nothing else
+    else:  # a cut at a bundle element boundary is a valid (partial) bundle
+        assert stats.malformed >= 0.8 * sent
+
+
+def _start(sig_args: list[str]) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "faceclean", "relay", *sig_args]
+    return subprocess.Popen(
+        cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_relay_process_stops_cleanly_on_signals(sig):
+    with raw_receiver() as rx:
+        proc = _start(
+            ["--listen", "vmc://127.0.0.1:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
+            + ["--method", "ema", "--stats", "60"]
+        )
+        try:
+            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+            assert ready, "relay did not start"
+            line = proc.stdout.readline()
+            port = int(line.split()[1].rsplit(":", 1)[1])
+            UDPClient("127.0.0.1", port).send(vmc_bundle(["jawOpen"], [0.25]))
+            frame = OscPacket(rx.recv(65536)).messages
+            proc.send_signal(sig)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert frame[0].message.params == ["jawOpen", 0.25]
+    assert proc.returncode == 0, err
+    assert "stopped: in 1 out 1 dropped 0" in out and "Traceback" not in err
+
+
+def test_relay_command_errors_are_one_line(capsys):
+    assert main(["relay", "--listen", "vmc://:0", "--send", "ifacialmocap://:4"]) == 2
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        port = busy.getsockname()[1]
+        assert main(["relay", "--listen", f"vmc://:{port}", "--send", "vmc://:9"]) == 2
+    assert (
+        main(["relay", "--listen", "vmc://:0", "--send", "vmc://:9", "--method", "gaussian"]) == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(e.startswith("faceclean: ") for e in err)
+    assert "cannot relay" in err[1] and "offline" in err[2]
+
+
+def test_relay_listens_on_localhost_by_default():
+    with raw_receiver() as rx, running("vmc://:0", f"vmc://:{rx.getsockname()[1]}") as r:
+        assert r.address.host == "127.0.0.1"
+
+
+def test_replay_paces_by_timestamps_with_an_injected_clock():
+    times = np.array([0.0, 0.02, 0.05, 0.07])
+    values = np.linspace(0.0, 1.0, 4)[:, None] * np.ones((4, 52))
+    values[2] = np.nan  # tracking loss: nothing sent
+    frames = frames_from_animation(Animation.from_arkit(times + 10.0, values))
+    now = [100.0]
+    deadlines: list[float] = []
+    stop = threading.Event()
+
+    def wait(deadline: float) -> None:
+        deadlines.append(deadline)
+        now[0] = max(now[0], deadline)
+        if len(deadlines) == 6:
+            stop.set()
+
+    with raw_receiver() as rx:
+        port = rx.getsockname()[1]
+        n = replay(frames, parse(f"vmc://:{port}", "send"), speed=2.0, loop=True, stop=stop,
+                   clock=lambda: now[0], wait=wait)  # fmt: skip
+        got = [OscPacket(rx.recv(65536)).messages for _ in range(n)]
+    assert n == 5
+    sent_t = [m[0].message.params[0] for m in got]  # /VMC/Ext/T
+    cycle = 0.07 + 0.035  # one pass + the median period (of 0.02 and 0.05)
+    np.testing.assert_allclose(sent_t, [0.0, 0.02, 0.07, cycle, cycle + 0.02], atol=1e-6)
+    np.testing.assert_allclose(deadlines[:5], 100.0 + np.array(sent_t) / 2.0, atol=1e-6)
+    assert got[1][1].message.params == ["eyeBlinkLeft", pytest.approx(1 / 3)]
+
+
+def test_replay_command_streams_a_recording_as_livelink(capsys):
+    d = data_dir()
+    if d is None or not (d / "raw_streams" / "llv_dao.gesichter").is_file():
+        pytest.skip("shared data (raw_streams/llv_dao.gesichter) not present")
+    ref = np.load(d / "raw_streams" / "llv_dao.npz")
+    with raw_receiver() as rx:
+        rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        url = f"livelink://127.0.0.1:{rx.getsockname()[1]}"
+        path = str(d / "raw_streams" / "llv_dao.gesichter")
+        assert main(["replay", path, "--send", url, "--speed", "200"]) == 0
+        frames = [livelink.decode(rx.recv(65536)) for _ in range(180)]
+    assert "sent 180 packets" in capsys.readouterr().out
+    np.testing.assert_array_equal([f.values for f in frames], ref["weights"])
+    np.testing.assert_allclose([f.t for f in frames], ref["time"] - ref["time"][0], atol=1e-4)
