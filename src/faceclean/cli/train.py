@@ -51,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-batches", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads per process")
     p.add_argument("--resume", metavar="CKPT", help="continue from MODEL.last.npz")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (epoch lines only)")
     p.add_argument("--out", required=True, metavar="MODEL", help="best model (.npz)")
     # fmt: skip
 
@@ -84,13 +84,11 @@ def run(args: argparse.Namespace) -> int:
     bar: list[tqdm] = []
 
     def report(e: dict) -> None:
-        if args.quiet:
-            return
         if e["event"] == "start":
             print(f"train on {', '.join(e['train_sources'])}; validate on "
                   f"{', '.join(e['val_sources']) or '-'}; {e['world']} process(es)",
                   file=sys.stderr)  # fmt: skip
-        elif e["event"] == "batch":
+        elif e["event"] == "batch" and not args.quiet:
             if e["i"] == 0:
                 bar.append(tqdm(total=e["n"], desc=f"epoch {e['epoch']}", leave=False))
             bar[-1].set_postfix(loss=f"{e['loss']:.4f}", mse=f"{e['mse']:.5f}")
@@ -101,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
             print(_epoch_line(e), file=sys.stderr)
 
     best = train(cfg, report)
-    if not args.quiet and best:
+    if best:
         print(f"best epoch {best['epoch']}: {args.out}", file=sys.stderr)
     return 0
 

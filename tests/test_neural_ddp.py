@@ -1,0 +1,76 @@
+"""The train command runs data-parallel under torchrun: 2 local CPU processes (gloo)."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from faceclean.settings import takes_dir  # noqa: E402
+
+TORCHRUN = Path(sys.executable).with_name("torchrun")
+
+# The train command (faceclean.neural.train.main, as `torchrun -m` runs it); each rank
+# then writes its final weights so that the test can compare them.
+SCRIPT = textwrap.dedent(
+    """
+    import os, sys
+    import numpy as np
+    import faceclean.neural.train as tr
+    from faceclean.neural import checkpoint
+
+    held = {}
+    real_wrap = tr.distributed.wrap
+
+    def wrap(model, device):  # keep this rank's model to compare it afterwards
+        held["model"] = model
+        return real_wrap(model, device)
+
+    tr.distributed.wrap = wrap
+    out = sys.argv[1]
+    rc = tr.main(["--val-sources", "jmtechart", "--epochs", "1", "--batch", "2",
+                  "--hidden", "8", "--layers", "1", "--max-batches", "2", "--seed", "5",
+                  "--quiet", "--out", out])
+    rank = int(os.environ["RANK"])
+    np.savez(out + f".rank{rank}.npz", **checkpoint.arrays(held["model"]))
+    print("rank", rank, "world", os.environ["WORLD_SIZE"], "rc", rc)
+    """
+)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.skipif(takes_dir() is None, reason="shared data arkit_takes/ absent")
+@pytest.mark.skipif(not TORCHRUN.exists(), reason="torchrun not installed beside python")
+def test_two_process_training_keeps_ranks_identical(tmp_path):
+    script = tmp_path / "ddp_run.py"
+    script.write_text(SCRIPT)
+    out = tmp_path / "m.npz"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(takes_dir().parent)}
+    cmd = [
+        str(TORCHRUN), "--nproc_per_node", "2", "--master_addr", "127.0.0.1",
+        "--master_port", str(_free_port()), str(script), str(out),
+    ]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "rank 0 world 2 rc 0" in proc.stdout and "rank 1 world 2 rc 0" in proc.stdout
+    r0 = np.load(f"{out}.rank0.npz")
+    r1 = np.load(f"{out}.rank1.npz")
+    assert set(r0.files) == set(r1.files)
+    for k in r0.files:
+        assert np.array_equal(r0[k], r1[k]), k
+    assert "2 process(es)" in proc.stderr
+    written = np.load(out)  # rank 0 wrote the model, and it is the trained one
+    assert np.array_equal(written["head.w"], r0["head.w"])
