@@ -59,7 +59,7 @@ def gbt_model(tmp_path_factory):
     targets = np.stack(
         [feats[..., 1] * 0.5 + np.sin(feats[..., 0] * 5), *(rng.normal(0, 9, (3, 300, M)))], -1
     )
-    regs, sigma = baselines.fit_gbt(feats, targets, iterations=6, depth=4)
+    regs, sigma = baselines.fit_gbt(feats, targets, iterations=(6, 3, 3, 3), depth=4)
     path = tmp_path_factory.mktemp("gbt") / "gbt.npz"
     baselines.export_gbt(regs, sigma, path, {"val_sources": []})
     return regs, sigma, path
@@ -138,7 +138,7 @@ def test_tiny_training_run_writes_a_working_model(tmp_path):
         anim = performer.perform(4.0, seed=len(source), fps=60.0)
         io.save(anim, tmp_path / source / "take.csv")
     out = tmp_path / "gbt.npz"
-    facts = baselines.train("gbt", out, data=tmp_path, val_sources=["two"], iterations=3)
+    facts = baselines.train("gbt", out, data=tmp_path, val_sources=["two"], iterations=(3, 2, 2, 2))
     assert facts["val_sources"] == ["two"] and facts["train_sources"] == ["one"]
     gbt = BoostedTrees(model=out)
     assert gbt.config["val_sources"] == ["two"]

@@ -22,11 +22,11 @@ Checkpoints are npz (``allow_pickle=False``) written by ``faceclean.neural.basel
   (out, in), ``fc.{l}.b``, ReLU between layers; output (K·M,) order-major, times
   ``out_std`` plus ``out_mean``.
 - GBT (``faceclean-gbt/1``), trees shared by all channels, one ensemble per order, on
-  raw per-channel features plus the channel's group index: flat node arrays
-  ``tree.feature``, ``tree.threshold`` (go left when ``x <= threshold``), ``tree.left``,
-  ``tree.right`` (leaves point to themselves), ``tree.value``; ``tree.root`` and
-  ``tree.order`` per tree; ``baseline`` (K,) and ``out_std`` (K,): order k's
-  prediction is ``out_std[k] * (baseline[k] + Σ value[leaf])``.
+  raw per-channel features plus the channel's group index, as T complete binary trees
+  of depth D in implicit layout (children of node i: 2i+1, 2i+2): ``tree.feature`` and
+  ``tree.threshold`` (T, 2^D - 1) (go left when ``x <= threshold``), ``tree.value``
+  (T, 2^D) leaves, ``tree.order`` (T,) the order each tree predicts; ``baseline`` (K,)
+  and ``out_std`` (K,): order k is ``out_std[k] * (baseline[k] + Σ value[leaf])``.
 """
 
 from __future__ import annotations
@@ -233,17 +233,17 @@ class BoostedTrees(_DerivativeNet):
     batched = True
 
     def _load(self, a: dict) -> None:
-        self._feat = a["tree.feature"].astype(np.intp)
-        self._thr = a["tree.threshold"].astype(np.float64)
-        self._left = a["tree.left"].astype(np.intp)
-        self._right = a["tree.right"].astype(np.intp)
-        self._val = a["tree.value"].astype(np.float64)
-        self._root = a["tree.root"].astype(np.intp)  # (T,)
+        self._feat = a["tree.feature"].astype(np.intp)  # (T, 2^D - 1)
+        self._thr = a["tree.threshold"].astype(np.float64)  # (T, 2^D - 1)
+        self._val = a["tree.value"].astype(np.float64)  # (T, 2^D)
         self._order = a["tree.order"].astype(np.intp)  # (T,)
         self._base = a["baseline"].astype(np.float64)  # (K,)
         self._ostd = a["out_std"].astype(np.float64)  # (K,)
-        self._depth = int(a["tree.depth"])
-        self._groups = None
+        t, n_in = self._feat.shape
+        self._depth = int(np.log2(n_in + 1))
+        self._in_off = np.arange(t) * n_in  # (T,) first internal node of each tree
+        self._leaf_off = np.arange(t) * (n_in + 1) - n_in  # leaf position -> flat index
+        self._groups: np.ndarray | None = None
 
     def predict(self, feats: np.ndarray) -> np.ndarray:
         n, m, _ = feats.shape
@@ -252,19 +252,21 @@ class BoostedTrees(_DerivativeNet):
         x = np.concatenate([feats, np.broadcast_to(self._groups[None, :, None], (n, m, 1))], -1)
         x = x.reshape(n * m, -1)
         out = np.empty((n * m, self.K))
-        step = max(1, 400_000 // len(self._root))  # samples per chunk: bounded memory
+        step = max(1, 400_000 // len(self._order))  # samples per chunk: bounded memory
         for s in range(0, n * m, step):
             out[s : s + step] = self.predict_features(x[s : s + step])
         return out.reshape(n, m, self.K)
 
     def predict_features(self, x: np.ndarray) -> np.ndarray:
         """(n, K) predictions from (n, F) raw per-channel features (last one: group)."""
-        node = np.broadcast_to(self._root, (len(x), len(self._root))).copy()  # (n, T)
+        feat, thr = self._feat.ravel(), self._thr.ravel()
         rows = np.arange(len(x))[:, None]
+        pos = np.zeros((len(x), len(self._order)), np.intp)  # (n, T) node in each tree
         for _ in range(self._depth):  # every tree descends one level per pass
-            go_left = x[rows, self._feat[node]] <= self._thr[node]
-            node = np.where(go_left, self._left[node], self._right[node])
-        leaf = self._val[node]  # (n, T)
+            flat = pos + self._in_off
+            right = ~(x[rows, feat[flat]] <= thr[flat])  # go left when x <= threshold
+            pos = 2 * pos + 1 + right
+        leaf = self._val.ravel()[pos + self._leaf_off]  # (n, T)
         out = np.zeros((len(x), self.K))
         for k in range(self.K):  # each row summed alone: the same bits for any n
             out[:, k] = leaf[:, self._order == k].sum(axis=1)

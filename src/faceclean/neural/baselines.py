@@ -17,8 +17,9 @@ Loss, L_der: Σ_k mean((x̂^(k) − x_gt^(k)) / σ_k)², each order scaled by it
   layers (ReLU, dropout) -> K·M outputs; Adam, lr 1e-3, α_r = 0.9.
 - GBT: scikit-learn HistGradientBoostingRegressor, one ensemble per order, shared by all
   channels: the samples are channels, with the 1 + 2K raw features plus the channel's
-  group index (eyes, brows, jaw, mouth, cheeks_nose); trees exported as flat arrays with
-  raw-value thresholds; α_r = 0.97.
+  group index (eyes, brows, jaw, mouth, cheeks_nose); depth <= 5, 30 trees for the first
+  order (the one the blend feeds to the output), 10 for each higher one; exported as
+  complete binary trees with raw-value thresholds; α_r = 0.97.
 """
 
 from __future__ import annotations
@@ -178,10 +179,33 @@ def fit_fc(
             opt.zero_grad()
             loss.backward()
             opt.step()
-            total += float(loss) * len(idx)
+            total += float(loss.detach()) * len(idx)
         if progress:
             progress(f"fc epoch {epoch + 1}/{epochs}: L_der {total / n:.4f}")
     return model.eval()
+
+
+def _complete(nodes: np.ndarray, depth: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One sklearn tree as a complete binary tree of ``depth`` levels, in implicit layout
+    (children of i: 2i+1, 2i+2): feature, threshold (2^D - 1,), leaf value (2^D,). A leaf
+    above the last level becomes splits that always go left (threshold +inf) down to
+    copies of itself."""
+    n_in = 2**depth - 1
+    feat, thr, val = np.zeros(n_in, np.int64), np.full(n_in, np.inf), np.zeros(2**depth)
+    stack = [(0, 0, 0)]  # (sklearn node, position, level)
+    while stack:
+        node, pos, level = stack.pop()
+        leaf = bool(nodes["is_leaf"][node])
+        if level == depth:
+            val[pos - n_in] = nodes["value"][node]
+            continue
+        if leaf:
+            stack += [(node, 2 * pos + 1, level + 1), (node, 2 * pos + 2, level + 1)]
+        else:
+            feat[pos], thr[pos] = nodes["feature_idx"][node], nodes["num_threshold"][node]
+            stack += [(int(nodes["left"][node]), 2 * pos + 1, level + 1)]
+            stack += [(int(nodes["right"][node]), 2 * pos + 2, level + 1)]
+    return feat, thr, val
 
 
 def export_gbt(
@@ -191,24 +215,11 @@ def export_gbt(
     extra: dict[str, Any] | None = None,
 ) -> None:
     """Flatten fitted HistGradientBoostingRegressors (one per order) into a GBT checkpoint."""
-    feat, thr, left, right, val, root, order = [], [], [], [], [], [], []
-    depth, offset = 0, 0
-    for k, reg in enumerate(regressors):
-        for (pred,) in reg._predictors:  # one TreePredictor per iteration
-            nodes = pred.nodes
-            idx = np.arange(len(nodes)) + offset
-            leaf = nodes["is_leaf"].astype(bool)
-            if nodes["is_categorical"].any():
-                raise FacecleanError("categorical splits are not supported")
-            feat.append(np.where(leaf, 0, nodes["feature_idx"]))
-            thr.append(np.where(leaf, 0.0, nodes["num_threshold"]))
-            left.append(np.where(leaf, idx, nodes["left"].astype(np.int64) + offset))
-            right.append(np.where(leaf, idx, nodes["right"].astype(np.int64) + offset))
-            val.append(np.where(leaf, nodes["value"], 0.0))
-            root.append(offset)
-            order.append(k)
-            depth = max(depth, int(nodes["depth"].max()))
-            offset += len(nodes)
+    trees = [(k, p.nodes) for k, reg in enumerate(regressors) for (p,) in reg._predictors]
+    if any(nodes["is_categorical"].any() for _, nodes in trees):
+        raise FacecleanError("categorical splits are not supported")
+    depth = max(int(nodes["depth"].max()) for _, nodes in trees)
+    feat, thr, val = zip(*(_complete(nodes, depth) for _, nodes in trees), strict=True)
     config = {
         "format": "faceclean-gbt/1",
         "channels": list(ARKIT52),
@@ -220,14 +231,10 @@ def export_gbt(
         **(extra or {}),
     }
     arrays = {
-        "tree.feature": np.concatenate(feat).astype(np.int16),
-        "tree.threshold": np.concatenate(thr).astype(np.float64),
-        "tree.left": np.concatenate(left).astype(np.int32),
-        "tree.right": np.concatenate(right).astype(np.int32),
-        "tree.value": np.concatenate(val).astype(np.float64),
-        "tree.root": np.asarray(root, np.int32),
-        "tree.order": np.asarray(order, np.int8),
-        "tree.depth": np.asarray(depth, np.int32),
+        "tree.feature": np.stack(feat).astype(np.int8),
+        "tree.threshold": np.stack(thr),
+        "tree.value": np.stack(val),
+        "tree.order": np.array([k for k, _ in trees], np.int8),
         "baseline": np.array([float(np.ravel(r._baseline_prediction)[0]) for r in regressors]),
         "out_std": np.asarray(out_std, np.float64),
     }
@@ -239,7 +246,7 @@ def fit_gbt(
     targets: np.ndarray,
     *,
     seed: int = 0,
-    iterations: int = 30,
+    iterations: Sequence[int] = (30, 10, 10, 10),
     depth: int = 5,
     learning_rate: float = 0.2,
     max_samples: int = 1_500_000,
@@ -261,7 +268,7 @@ def fit_gbt(
     regs = []
     for k in range(K):
         reg = HistGradientBoostingRegressor(
-            max_iter=iterations,
+            max_iter=iterations[k],
             max_depth=depth,
             learning_rate=learning_rate,
             early_stopping=False,
@@ -269,7 +276,7 @@ def fit_gbt(
         )
         regs.append(reg.fit(x, y[:, k] / sigma[k]))
         if progress:
-            progress(f"gbt order {k + 1}/{K}: {iterations} trees")
+            progress(f"gbt order {k + 1}/{K}: {iterations[k]} trees")
     return regs, sigma
 
 
@@ -282,7 +289,7 @@ def train(
     seed: int = 0,
     repeats: int = 1,
     epochs: int = 8,
-    iterations: int = 30,
+    iterations: Sequence[int] = (30, 10, 10, 10),
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Train ``arch`` ("fc" or "gbt") on the takes of every source not in ``val_sources``
@@ -312,7 +319,7 @@ def train(
         save_fc(model, out, facts)
     else:
         regs, sigma = fit_gbt(feats, targets, seed=seed, iterations=iterations, progress=progress)
-        facts.update(iterations=iterations, depth=5, learning_rate=0.2)
+        facts.update(iterations=list(iterations), depth=5, learning_rate=0.2)
         facts["seconds"] = round(time.perf_counter() - start, 1)
         export_gbt(regs, sigma, out, facts)
     return facts
