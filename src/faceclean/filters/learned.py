@@ -9,8 +9,9 @@ One step, when frame n+1 arrives dt[n] seconds after frame n (K = 1):
     x̂[n+1] = clamp(x̂[n] + dt x̂'[n], value_range)        # integrate
 
 Speed: the weights are fused (lstm_weights.Fused): one matrix product per layer with the
-state laid out beside the input in one preallocated float32 row buffer
-[x̂ | x̂' | x_c | h_0 | 1], and S streams are S rows of the same products. When every
+state laid out beside the input in one preallocated float32 buffer [x̂ | x̂' | x_c | h_0 | 1]
+(lstm_kernel.Workspace), S streams being S columns of the same products; a compiled
+kernel (learned_jit, when numba is installed) serves a few streams. When every
 stream advances normally (the common case) ``step`` runs that kernel in place with no
 array allocation but the returned frame; anything else (first frame, missing values,
 a gap, a repeated timestamp) takes the base class's generic rules, which a test proves
@@ -30,7 +31,8 @@ from faceclean.errors import FacecleanError
 from faceclean.filters import learned_jit
 from faceclean.filters.base import State, StreamCleaner
 from faceclean.filters.channel_map import ChannelMap
-from faceclean.filters.lstm_weights import Fused, LSTMWeights
+from faceclean.filters.lstm_kernel import Workspace, step_numpy
+from faceclean.filters.lstm_weights import LSTMWeights
 
 
 def default_model_path():
@@ -38,80 +40,6 @@ def default_model_path():
     from faceclean.settings import MODELS
 
     return MODELS / "default.npz"
-
-
-class _Workspace:
-    """Preallocated float32 buffers for S streams; the state lives inside them."""
-
-    def __init__(self, S: int, M: int, H: int, n_layers: int) -> None:
-        self.streams, self.M, self.H = S, M, H
-        f32 = np.float32
-        z0 = np.zeros((S, 3 * M + H + 1), f32)  # [x̂ | x̂' | x_c | h_0 | 1]
-        zl = [np.zeros((S, 2 * H + 1), f32) for _ in range(1, n_layers)]  # [in | h_l | 1]
-        self.z = (z0, *zl)
-        self.c = tuple(np.zeros((S, H), f32) for _ in range(n_layers))
-        self.top = np.zeros((S, H + 1), f32)  # [o_{L-1} | 1], input of the head
-        for z in (*self.z, self.top):
-            z[:, -1] = 1.0
-        self.gates = np.zeros((S, 4 * H), f32)  # (i, f, o, g)
-        self.tmp = np.zeros((S, H), f32)
-        self.hv = np.zeros(H, f32)  # scratch of the compiled kernel
-        self.flip = False  # weight-row order of the compiled kernel (see learned_jit)
-        self.out = np.zeros((S, M))  # x̂[n+1] in float64, model channel order
-        self.head = np.zeros((S, M), f32)
-        self.x = np.zeros((S, M), f32)  # the new input frame, model channel order
-        self.dt = np.zeros((S, 1), f32)  # s
-        self.dt64 = np.zeros(S)  # s, scratch for the time checks
-        self.y, self.d, self.xc = z0[:, :M], z0[:, M : 2 * M], z0[:, 2 * M : 3 * M]
-        self.h = [z0[:, 3 * M : 3 * M + H]] + [z[:, H : 2 * H] for z in self.z[1:]]
-
-    def state(self) -> State:
-        """Copies of the state: (x̂, x̂', h_0, c_0, h_1, c_1, ...), each (S, ·)."""
-        parts = [self.y, self.d]
-        for h, c in zip(self.h, self.c, strict=True):
-            parts += [h, c]
-        return tuple(p.copy() for p in parts)
-
-    def load(self, state: State) -> None:
-        """Copy a state tuple (as from ``state()``) into the buffers."""
-        targets = [self.y, self.d]
-        for h, c in zip(self.h, self.c, strict=True):
-            targets += [h, c]
-        for dst, src in zip(targets, state, strict=True):
-            np.copyto(dst, src, casting="unsafe")
-
-
-def _kernel_numpy(ws: _Workspace, fused: Fused, lo: float, hi: float) -> None:
-    """Advance every row of ``ws`` by ws.dt with input ws.x, in place (no allocation)."""
-    H = ws.H
-    np.subtract(ws.x, ws.y, out=ws.xc)
-    np.divide(ws.xc, ws.dt, out=ws.xc)  # Eq. 2
-    g = ws.gates
-    sig, cand = g[:, : 3 * H], g[:, 3 * H :]  # (i, f, o), g
-    i, f, o = g[:, :H], g[:, H : 2 * H], g[:, 2 * H : 3 * H]
-    n = len(ws.z)
-    for layer in range(n):
-        z, c, h = ws.z[layer], ws.c[layer], ws.h[layer]
-        np.matmul(z, fused.layers[layer], out=g)  # (S, 4H) = [in | h | 1] @ W
-        np.tanh(g, out=g)  # (i, f, o) rows were pre-scaled by 1/2:
-        np.multiply(sig, 0.5, out=sig)
-        np.add(sig, 0.5, out=sig)  # sigmoid(a) = (1 + tanh(a / 2)) / 2
-        np.multiply(c, f, out=c)
-        np.multiply(i, cand, out=ws.tmp)
-        np.add(c, ws.tmp, out=c)  # c = f c + i g
-        np.tanh(c, out=ws.tmp)
-        np.multiply(o, ws.tmp, out=h)  # h = o tanh(c)
-        nxt = ws.z[layer + 1][:, :H] if layer + 1 < n else ws.top[:, :H]
-        if layer == 0:
-            np.copyto(nxt, h)
-        else:
-            np.add(h, z[:, :H], out=nxt)  # residual around layers l >= 1
-    np.matmul(ws.top, fused.head, out=ws.head)  # out_scale * dense(o), (S, M)
-    np.add(ws.xc, ws.head, out=ws.d)  # x̂'[n] = x_c + correction
-    np.multiply(ws.d, ws.dt, out=ws.head)
-    np.add(ws.y, ws.head, out=ws.y)  # x̂[n+1] = x̂[n] + dt x̂'[n]
-    np.maximum(ws.y, lo, out=ws.y)
-    np.minimum(ws.y, hi, out=ws.y)
 
 
 class Learned(StreamCleaner):
@@ -151,9 +79,9 @@ class Learned(StreamCleaner):
             kernel if kernel != "auto" else "numba" if learned_jit.available() else "numpy"
         )
         self.weights = weights
-        self.fused = weights.fused(half_sigmoid=True)
-        self._wts = tuple(np.ascontiguousarray(w.T) for w in self.fused.layers)  # (4H, in)
-        self._head_t = np.ascontiguousarray(self.fused.head.T)  # (M, H + 1)
+        fused = weights.fused(half_sigmoid=True)
+        self._wts = tuple(np.ascontiguousarray(w.T) for w in fused.layers)  # (4H, in + H + 1)
+        self._head_t = np.ascontiguousarray(fused.head.T)  # (M, H + 1)
         self.max_gap = float(max_gap)
         self.names = tuple(names)
         self.lo, self.hi = (np.float32(v) for v in weights.value_range)
@@ -168,25 +96,24 @@ class Learned(StreamCleaner):
 
     def reset(self) -> None:
         super().reset()
-        self._ws: _Workspace | None = None
+        self._ws: Workspace | None = None
 
-    def _run(self, ws: _Workspace, x: np.ndarray, out: np.ndarray) -> bool:
+    def _run(self, ws: Workspace, x: np.ndarray, out: np.ndarray) -> bool:
         """Advance every stream by ws.dt with frames x (S, M) in model order, writing
         x̂[n+1] to ``out`` (S, M); False, with nothing changed, if x is not all finite.
         Compiled for a few streams, numpy (BLAS matrix products) for many."""
         if self.kernel == "numba" and ws.streams <= self.jit_max_streams:
             ws.flip = not ws.flip
             return learned_jit.step(
-                x, ws.dt, ws.z, ws.c, ws.top, ws.gates[0], ws.hv,
+                x, ws.dt, ws.z, ws.c, ws.top, ws.gates[:, 0], ws.col, ws.hv,
                 self._wts, self._head_t, self.lo, self.hi, out, ws.flip,
             )  # fmt: skip
-        if x is not ws.x:
-            flat = x.reshape(-1)
-            if not math.isfinite(float(np.dot(flat, flat))):  # NaN/inf (or overflow)
-                return False
-            np.copyto(ws.x, x, casting="unsafe")
-        _kernel_numpy(ws, self.fused, self.lo, self.hi)
-        np.copyto(out, ws.y)
+        flat = x.reshape(-1)
+        if not math.isfinite(float(np.dot(flat, flat))):  # NaN/inf (or overflow)
+            return False
+        np.copyto(ws.x, x.T, casting="unsafe")
+        step_numpy(ws, self._wts, self._head_t, self.lo, self.hi)
+        np.copyto(out, ws.y.T)
         return True
 
     # -- the generic path (base class rules) -----------------------------------------------
@@ -201,17 +128,17 @@ class Learned(StreamCleaner):
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         ws = self._ws
         ws.load(state)
-        self.map.gather(x, ws.y, ws.x)
-        np.copyto(ws.dt, dt, casting="unsafe")
-        self._run(ws, ws.x, ws.out)
-        return ws.state(), self.map.scatter(x, ws.y)
+        self.map.gather(x, ws.y.T, ws.xs)
+        np.copyto(ws.dt, dt.T, casting="unsafe")
+        self._run(ws, ws.xs, ws.out)
+        return ws.state(), self.map.scatter(x, ws.out)
 
     def _generic_step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
         x = np.array(frame, dtype=np.float64, ndmin=1)
         S = 1 if x.ndim == 1 else x.shape[0]
         if self._ws is None or self._ws.streams != S:
             M = len(self.weights.channels)
-            self._ws = _Workspace(S, M, self.weights.hidden, self.weights.layers)
+            self._ws = Workspace(S, M, self.weights.hidden, self.weights.layers)
         if self._state is not None:
             self._state = self._ws.state()
         y = super().step(frame, t)
@@ -245,7 +172,7 @@ class Learned(StreamCleaner):
             dt = np.subtract(t, self._t, out=ws.dt64)
             if not (np.all(dt > 0.0) and np.all(dt <= self.max_gap)):
                 return self._generic_step(frame, t)
-            np.copyto(ws.dt[:, 0], dt, casting="unsafe")
+            np.copyto(ws.dt[0], dt, casting="unsafe")
         if x.dtype.kind != "f":
             return self._generic_step(frame, t)
         x2 = x.reshape(ws.streams, -1)
@@ -256,9 +183,9 @@ class Learned(StreamCleaner):
             flat = x.reshape(-1)
             if not math.isfinite(float(np.dot(flat, flat))):
                 return self._generic_step(frame, t)
-            self.map.gather(x2, ws.y, ws.x)
-            self._run(ws, ws.x, ws.out)
-            last[...] = self.map.scatter(x2, ws.y)
+            self.map.gather(x2, ws.y.T, ws.xs)
+            self._run(ws, ws.xs, ws.out)
+            last[...] = self.map.scatter(x2, ws.out)
         if single:
             self._t[0] = tf
         else:

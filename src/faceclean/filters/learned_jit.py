@@ -7,7 +7,7 @@ in one pass halves the step (docs/BENCHMARKS.md). Many streams stay with numpy, 
 BLAS matrix-matrix products are faster than these per-row loops.
 
 The gate nonlinearity uses a rational tanh (Eigen's float approximation: max absolute
-error 2.6e-7 against float64 tanh over [-12, 12], tested), which vectorises; libm's
+error 3.3e-7 against float64 tanh, tested), which vectorises; libm's
 scalar tanh would cost more than the products. Without numba, ``available()`` is False
 and the runtime uses its numpy kernel only.
 """
@@ -30,7 +30,7 @@ def available() -> bool:
 
 
 def _tanh(x):
-    """tanh in float32 arithmetic, |error| <= 2.6e-7 (Eigen's rational approximation)."""
+    """tanh in float32 arithmetic, |error| <= 3.3e-7 (Eigen's rational approximation)."""
     c = np.float32(7.99881172180175781)  # tanh is 1 - 2e-7 beyond this
     x = min(max(x, -c), c)
     x2 = x * x
@@ -46,60 +46,65 @@ def _tanh(x):
     return x * p / q
 
 
-def _step(x, dt, zs, cs, top, g, hv, wts, head_t, lo, hi, out, flip):
-    """One step for every row s of the workspace, in place; False (nothing changed) if
-    ``x`` holds a non-finite value.
+def _step(x, dt, zs, cs, top, g, col, hv, wts, head_t, lo, hi, out, flip):
+    """One step for every stream s, in place (lstm_kernel's layout: one column per
+    stream); False, with nothing changed, if ``x`` holds a non-finite value.
 
-    x (S, M) new input (any float dtype); dt (S, 1) s; zs[l] (S, in_l + H + 1) rows
-    [in | h_l | 1] with zs[0] = [x̂ | x̂' | x_c | h_0 | 1]; cs[l] (S, H); top (S, H + 1);
-    g (4H,), hv (H,) scratch; wts[l] (4H, in_l + H + 1) fused weights transposed, gates
-    (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t (M, H + 1); out (S, M)
-    receives x̂[n+1]. ``flip`` walks the weight rows backwards: alternating it from step
-    to step keeps most of the ~1.1 MB of weights in a 1 MB L2 cache (LRU sees the rows it
-    kept first) instead of missing on all of them; the result does not depend on it.
+    x (S, M) new frames (any float dtype); dt (1, S) s; zs, cs, top: the workspace's
+    buffers; g (4H,), col (rows of zs[0],), hv (H,): scratch; wts[l] (4H, rows of zs[l])
+    fused weights, gates (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t
+    (M, H + 1); out (S, M) receives x̂[n+1]. ``flip`` walks the weight rows backwards:
+    alternating it from step to step lets an LRU cache smaller than the weights (1.1 MB
+    against a 1 MB L2) keep the rows it will read first; the result does not depend on it.
     """
     S, M = x.shape
     for s in range(S):
         for m in range(M):
             if not np.isfinite(x[s, m]):
                 return False
-    H = cs[0].shape[1]
+    H = cs[0].shape[0]
     L = len(zs)
     half = np.float32(0.5)
     for s in range(S):
         z0 = zs[0]
+        dts = dt[0, s]
         for m in range(M):
-            z0[s, 2 * M + m] = (np.float32(x[s, m]) - z0[s, m]) / dt[s, 0]  # Eq. 2
+            z0[2 * M + m, s] = (np.float32(x[s, m]) - z0[m, s]) / dts  # Eq. 2
         for layer in range(L):
             z, c, w = zs[layer], cs[layer], wts[layer]
-            width = z.shape[1]
-            for r in range(4 * H):  # gates = W [in | h | 1]
+            width = z.shape[0]
+            for k in range(width):
+                col[k] = z[k, s]  # [in | h | 1] of this stream, contiguous
+            for r in range(4 * H):  # gates = W^T [in | h | 1]
                 n = 4 * H - 1 - r if flip else r
                 acc = np.float32(0.0)
                 for k in range(width):
-                    acc += w[n, k] * z[s, k]
+                    acc += w[n, k] * col[k]
                 g[n] = acc
             for n in range(4 * H):
                 g[n] = _tanh(g[n])
             for j in range(H):
                 i = half + half * g[j]  # sigmoid(a) = (1 + tanh(a / 2)) / 2
                 f = half + half * g[H + j]
-                c[s, j] = f * c[s, j] + i * g[3 * H + j]
-                hv[j] = _tanh(c[s, j])
+                cj = f * c[j, s] + i * g[3 * H + j]
+                c[j, s] = cj
+                hv[j] = _tanh(cj)
             off = width - 1 - H  # where h_l sits in z
             nxt = zs[layer + 1] if layer + 1 < L else top
             for j in range(H):
                 h = (half + half * g[2 * H + j]) * hv[j]  # h = o tanh(c)
-                z[s, off + j] = h
-                nxt[s, j] = h + z[s, j] if layer > 0 else h  # residual for l >= 1
+                z[off + j, s] = h
+                nxt[j, s] = h + col[j] if layer > 0 else h  # residual for l >= 1
+        for k in range(H + 1):
+            col[k] = top[k, s]
         for m in range(M):
             acc = np.float32(0.0)
             for k in range(H + 1):
-                acc += head_t[m, k] * top[s, k]
-            dm = z0[s, 2 * M + m] + acc  # x̂'[n] = x_c + correction
-            z0[s, M + m] = dm
-            ym = min(max(z0[s, m] + dt[s, 0] * dm, lo), hi)  # integrate, clamp
-            z0[s, m] = ym
+                acc += head_t[m, k] * col[k]
+            dm = z0[2 * M + m, s] + acc  # x̂'[n] = x_c + correction
+            z0[M + m, s] = dm
+            ym = min(max(z0[m, s] + dts * dm, lo), hi)  # integrate, clamp
+            z0[m, s] = ym
             out[s, m] = ym
     return True
 

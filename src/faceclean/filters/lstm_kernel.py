@@ -1,0 +1,106 @@
+"""The learned runtime's step on preallocated buffers: the workspace and the numpy kernel.
+
+Layout, one column per stream (S streams): every buffer is (rows, S), so each gate,
+state or feature block is a contiguous run of rows and every ufunc below works on
+contiguous memory (numpy copies strided operands, which would allocate per step):
+
+    z[0]   (3M + H + 1, S)  [x̂ | x̂' | x_c | h_0 | 1]   features and layer 0's h
+    z[l]   (2H + 1, S)      [o_{l-1} | h_l | 1]          l >= 1
+    c[l]   (H, S)           cell state
+    top    (H + 1, S)       [o_{L-1} | 1]                input of the head
+    gates  (4H, S)          (i, f, o, g)
+
+With the fused weights W_l^T (4H, rows of z[l]) one matrix product per layer gives every
+gate of every stream: gates = W_l^T z[l]; the head is head^T (M, H + 1) top.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceclean.filters.base import State
+
+
+class Workspace:
+    """Preallocated float32 buffers for S streams; the state lives inside them."""
+
+    def __init__(self, S: int, M: int, H: int, n_layers: int) -> None:
+        self.streams, self.M, self.H = S, M, H
+        f32 = np.float32
+        z0 = np.zeros((3 * M + H + 1, S), f32)
+        zl = [np.zeros((2 * H + 1, S), f32) for _ in range(1, n_layers)]
+        self.z = (z0, *zl)
+        self.c = tuple(np.zeros((H, S), f32) for _ in range(n_layers))
+        self.top = np.zeros((H + 1, S), f32)
+        for z in (*self.z, self.top):
+            z[-1] = 1.0  # the bias row
+        self.gates = np.zeros((4 * H, S), f32)
+        self.tmp = np.zeros((H, S), f32)
+        self.head = np.zeros((M, S), f32)
+        self.x = np.zeros((M, S), f32)  # the new frames, model channel order
+        self.xs = np.zeros((S, M), f32)  # the same, one row per stream (gathered)
+        self.out = np.zeros((S, M))  # x̂[n+1], float64, one row per stream
+        self.dt = np.zeros((1, S), f32)  # s
+        self.dtm = np.zeros((M, S), f32)  # s, dt broadcast (contiguous)
+        self.dt64 = np.zeros(S)  # s, scratch for the time checks
+        self.col = np.zeros(3 * M + H + 1, f32)  # compiled kernel: one stream's column
+        self.hv = np.zeros(H, f32)  # compiled kernel: tanh(c) of one stream
+        self.flip = False  # compiled kernel: weight-row order (see learned_jit)
+        self.y, self.d, self.xc = z0[:M], z0[M : 2 * M], z0[2 * M : 3 * M]
+        self.h = [z0[3 * M : 3 * M + H]] + [z[H : 2 * H] for z in self.z[1:]]
+
+    def _parts(self) -> list[np.ndarray]:
+        parts = [self.y, self.d]
+        for h, c in zip(self.h, self.c, strict=True):
+            parts += [h, c]
+        return parts
+
+    def state(self) -> State:
+        """Copies of the state, one row per stream: (x̂, x̂', h_0, c_0, h_1, c_1, ...)."""
+        return tuple(p.T.copy() for p in self._parts())
+
+    def load(self, state: State) -> None:
+        """Copy a state tuple (as from ``state()``) into the buffers."""
+        for dst, src in zip(self._parts(), state, strict=True):
+            np.copyto(dst, src.T, casting="unsafe")
+
+
+def step_numpy(
+    ws: Workspace, wts: tuple[np.ndarray, ...], head_t: np.ndarray, lo: float, hi: float
+) -> None:
+    """Advance every stream by ws.dt with frames ws.x, in place, allocating nothing.
+
+    wts[l]: (4H, rows of z[l]) fused weights, the (i, f, o) rows pre-scaled by 1/2;
+    head_t: (M, H + 1) with out_scale folded in; [lo, hi]: the value range.
+    """
+    H = ws.H
+    half = np.float32(0.5)
+    np.copyto(ws.dtm, ws.dt)  # (M, S)
+    np.subtract(ws.x, ws.y, out=ws.xc)
+    np.divide(ws.xc, ws.dtm, out=ws.xc)  # Eq. 2: x_c = (x_i[n+1] - x̂[n]) / dt
+    g = ws.gates
+    sig, cand = g[: 3 * H], g[3 * H :]  # (i, f, o), g
+    i, f, o = g[:H], g[H : 2 * H], g[2 * H : 3 * H]
+    n = len(ws.z)
+    for layer in range(n):
+        z, c, h = ws.z[layer], ws.c[layer], ws.h[layer]
+        np.matmul(wts[layer], z, out=g)  # (4H, S) = W^T [in | h | 1]
+        np.tanh(g, out=g)  # the (i, f, o) rows were pre-scaled by 1/2:
+        np.multiply(sig, half, out=sig)
+        np.add(sig, half, out=sig)  # sigmoid(a) = (1 + tanh(a / 2)) / 2
+        np.multiply(c, f, out=c)
+        np.multiply(i, cand, out=ws.tmp)
+        np.add(c, ws.tmp, out=c)  # c = f c + i g
+        np.tanh(c, out=ws.tmp)
+        np.multiply(o, ws.tmp, out=h)  # h = o tanh(c)
+        nxt = ws.z[layer + 1][:H] if layer + 1 < n else ws.top[:H]
+        if layer == 0:
+            np.copyto(nxt, h)
+        else:
+            np.add(h, z[:H], out=nxt)  # residual around layers l >= 1
+    np.matmul(head_t, ws.top, out=ws.head)  # out_scale * dense(o), (M, S)
+    np.add(ws.xc, ws.head, out=ws.d)  # x̂'[n] = x_c + correction
+    np.multiply(ws.d, ws.dtm, out=ws.head)
+    np.add(ws.y, ws.head, out=ws.y)  # x̂[n+1] = x̂[n] + dt x̂'[n]
+    np.maximum(ws.y, lo, out=ws.y)
+    np.minimum(ws.y, hi, out=ws.y)
