@@ -23,6 +23,8 @@ def _model(K: int = 1, seed: int = 0, **kw) -> LSTMCleaner:
         m.feat_mean.uniform_(-0.1, 0.1)
         m.feat_std.uniform_(0.5, 2.0)
         m.out_scale.uniform_(0.5, 2.0)
+        m.head.weight.normal_(0.0, 0.3)  # the head starts at zero: make it do something
+        m.head.bias.normal_(0.0, 0.3)
     return m.eval()
 
 
@@ -35,6 +37,7 @@ def _curve(fps: float, seconds: float = 1.0, B: int = 2):
 
 @pytest.mark.parametrize("K", [1, 2])
 def test_zero_network_follows_the_input(K):
+    assert not LSTMCleaner(NAMES, K=K).head.weight.any()  # a new model starts there
     m = _model(K)
     with torch.no_grad():
         m.head.weight.zero_()

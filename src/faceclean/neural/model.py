@@ -24,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -72,6 +73,8 @@ class LSTMCleaner(nn.Module):
             nn.LSTMCell(self.F if i == 0 else hidden, hidden) for i in range(layers)
         )
         self.head = nn.Linear(hidden, self.K * self.M)
+        nn.init.zeros_(self.head.weight)  # start as the identity: follow the input
+        nn.init.zeros_(self.head.bias)
         self.drop = nn.Dropout(self.dropout)
         self.register_buffer("feat_mean", torch.zeros(self.F))
         self.register_buffer("feat_std", torch.ones(self.F))
@@ -145,38 +148,64 @@ class LSTMCleaner(nn.Module):
         """
         B, T, M = x.shape
         bad = torch.isnan(x)
-        missing = bad.all(-1) | torch.isnan(t)  # (B, T)
         x = torch.where(bad, torch.zeros_like(x), x)
+        advance, start = _time_rules(bad.all(-1) | torch.isnan(t), t)
+        dt_all = torch.from_numpy(advance.dt).to(t)  # (B, T) s since the last accepted frame
+        everywhere = advance.mask.all(0)  # (T,) python-side: no per-step syncs
+        adv_t = torch.from_numpy(advance.mask).to(x.device)
+        start_t = torch.from_numpy(start).to(x.device)
         state = self.init_state(B, x[:, 0])
-        t_last = torch.where(missing[:, 0], torch.full_like(t[:, 0], float("nan")), t[:, 0])
-        ys, ds, stepped = [state.y], [], []
+        ys, ds = [state.y], []
         for n in range(1, T):
             xn = torch.where(bad[:, n], state.y, x[:, n])  # NaN channel: last output
-            dt = t[:, n] - t_last
-            start = ~missing[:, n] & ~(dt <= MAX_GAP)  # first frame or long pause
-            advance = ~missing[:, n] & (dt > 0) & ~start
-            new, y = self.step(state, xn, torch.where(advance, dt, torch.ones_like(dt)))
-            if not bool(advance.all()):
+            new, y = self.step(state, xn, dt_all[:, n])
+            if not everywhere[n]:
                 fresh = self.init_state(B, xn)
-                state = State(
-                    *(
-                        _pick(advance, start, a, b, o)
-                        for a, b, o in zip(new, fresh, state, strict=True)
-                    )
+                picked = (
+                    _pick(adv_t[:, n], start_t[:, n], a, b, o)
+                    for a, b, o in zip(new, fresh, state, strict=True)
                 )
+                state = State(*picked)
                 y = state.y
             else:
                 state = new
-            t_last = torch.where(advance | start, t[:, n], t_last)
             ys.append(y)
             ds.append(new.d)
-            stepped.append(advance)
+        stepped = adv_t[:, 1:]
         y = torch.stack(ys, 1)
         if not return_derivatives:
             return y
         if T < 2:
             return y, x.new_zeros(B, 0, self.K * M), torch.zeros(B, 0, dtype=torch.bool)
-        return y, torch.stack(ds, 1), torch.stack(stepped, 1)
+        return y, torch.stack(ds, 1), stepped
+
+
+class _Advance(NamedTuple):
+    mask: np.ndarray  # (B, T) bool: frame n advances the state by dt[:, n]
+    dt: np.ndarray  # (B, T) s, 1.0 where not advancing (any positive value does)
+
+
+def _time_rules(missing: Tensor, t: Tensor) -> tuple[_Advance, np.ndarray]:
+    """The runtime's time rules over a batch: (advance, start (B, T) bool).
+
+    Missing frames hold; the first frame and pauses over MAX_GAP restart; a time not
+    after the last accepted frame's holds.
+    """
+    miss = missing.detach().cpu().numpy()
+    tt = t.detach().cpu().double().numpy()
+    B, T = miss.shape
+    adv = np.zeros((B, T), bool)
+    start = np.zeros((B, T), bool)
+    dt = np.ones((B, T))
+    last = np.full(B, np.nan)  # time of the last accepted frame
+    with np.errstate(invalid="ignore"):
+        for n in range(T):
+            gap = tt[:, n] - last
+            start[:, n] = ~miss[:, n] & ~(gap <= MAX_GAP)
+            adv[:, n] = ~miss[:, n] & (gap > 0) & ~start[:, n]
+            dt[adv[:, n], n] = gap[adv[:, n]]
+            last = np.where(adv[:, n] | start[:, n], tt[:, n], last)
+    return _Advance(adv, dt), start
 
 
 def _pick(advance: Tensor, start: Tensor, new, fresh, old):
