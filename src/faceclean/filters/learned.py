@@ -105,7 +105,7 @@ class Learned(StreamCleaner):
         if self.kernel == "numba" and ws.streams <= self.jit_max_streams:
             ws.flip = not ws.flip
             return learned_jit.step(
-                x, ws.dt, ws.z, ws.c, ws.top, ws.gates[:, 0], ws.col, ws.hv,
+                x, ws.dt, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp,
                 self._wts, self._head_t, self.lo, self.hi, out, ws.flip,
             )  # fmt: skip
         flat = x.reshape(-1)

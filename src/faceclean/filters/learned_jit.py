@@ -46,16 +46,17 @@ def _tanh(x):
     return x * p / q
 
 
-def _step(x, dt, zs, cs, top, g, col, hv, wts, head_t, lo, hi, out, flip):
-    """One step for every stream s, in place (lstm_kernel's layout: one column per
-    stream); False, with nothing changed, if ``x`` holds a non-finite value.
+def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out, flip):
+    """One step for every stream, in place (lstm_kernel's layout: one column per stream);
+    False, with nothing changed, if ``x`` holds a non-finite value.
 
     x (S, M) new frames (any float dtype); dt (1, S) s; zs, cs, top: the workspace's
-    buffers; g (4H,), col (rows of zs[0],), hv (H,): scratch; wts[l] (4H, rows of zs[l])
-    fused weights, gates (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t
-    (M, H + 1); out (S, M) receives x̂[n+1]. ``flip`` walks the weight rows backwards:
-    alternating it from step to step lets an LRU cache smaller than the weights (1.1 MB
-    against a 1 MB L2) keep the rows it will read first; the result does not depend on it.
+    buffers; g (4H, S), cols (S, rows of zs[0]), hv (H, S): scratch; wts[l]
+    (4H, rows of zs[l]) fused weights, gates (i, f, o, g), the (i, f, o) rows pre-scaled
+    by 1/2; head_t (M, H + 1); out (S, M) receives x̂[n+1]. Each weight row is read once
+    for all S streams. ``flip`` walks the rows backwards: alternating it from step to
+    step lets an LRU cache smaller than the weights (1.1 MB against a 1 MB L2) keep the
+    rows it reads first; the result does not depend on it.
     """
     S, M = x.shape
     for s in range(S):
@@ -65,45 +66,51 @@ def _step(x, dt, zs, cs, top, g, col, hv, wts, head_t, lo, hi, out, flip):
     H = cs[0].shape[0]
     L = len(zs)
     half = np.float32(0.5)
+    z0 = zs[0]
     for s in range(S):
-        z0 = zs[0]
-        dts = dt[0, s]
         for m in range(M):
-            z0[2 * M + m, s] = (np.float32(x[s, m]) - z0[m, s]) / dts  # Eq. 2
-        for layer in range(L):
-            z, c, w = zs[layer], cs[layer], wts[layer]
-            width = z.shape[0]
+            z0[2 * M + m, s] = (np.float32(x[s, m]) - z0[m, s]) / dt[0, s]  # Eq. 2
+    for layer in range(L):
+        z, c, w = zs[layer], cs[layer], wts[layer]
+        width = z.shape[0]
+        for s in range(S):
             for k in range(width):
-                col[k] = z[k, s]  # [in | h | 1] of this stream, contiguous
-            for r in range(4 * H):  # gates = W^T [in | h | 1]
-                n = 4 * H - 1 - r if flip else r
+                cols[s, k] = z[k, s]  # [in | h | 1] of stream s, contiguous
+        for r in range(4 * H):  # gates = W^T [in | h | 1]
+            n = 4 * H - 1 - r if flip else r
+            for s in range(S):
                 acc = np.float32(0.0)
                 for k in range(width):
-                    acc += w[n, k] * col[k]
-                g[n] = acc
-            for n in range(4 * H):
-                g[n] = _tanh(g[n])
-            for j in range(H):
-                i = half + half * g[j]  # sigmoid(a) = (1 + tanh(a / 2)) / 2
-                f = half + half * g[H + j]
-                cj = f * c[j, s] + i * g[3 * H + j]
+                    acc += w[n, k] * cols[s, k]
+                g[n, s] = acc
+        for n in range(4 * H):
+            for s in range(S):
+                g[n, s] = _tanh(g[n, s])
+        for j in range(H):
+            for s in range(S):
+                i = half + half * g[j, s]  # sigmoid(a) = (1 + tanh(a / 2)) / 2
+                f = half + half * g[H + j, s]
+                cj = f * c[j, s] + i * g[3 * H + j, s]
                 c[j, s] = cj
-                hv[j] = _tanh(cj)
-            off = width - 1 - H  # where h_l sits in z
-            nxt = zs[layer + 1] if layer + 1 < L else top
-            for j in range(H):
-                h = (half + half * g[2 * H + j]) * hv[j]  # h = o tanh(c)
+                hv[j, s] = _tanh(cj)
+        off = width - 1 - H  # where h_l sits in z
+        nxt = zs[layer + 1] if layer + 1 < L else top
+        for j in range(H):
+            for s in range(S):
+                h = (half + half * g[2 * H + j, s]) * hv[j, s]  # h = o tanh(c)
                 z[off + j, s] = h
-                nxt[j, s] = h + col[j] if layer > 0 else h  # residual for l >= 1
+                nxt[j, s] = h + cols[s, j] if layer > 0 else h  # residual for l >= 1
+    for s in range(S):
         for k in range(H + 1):
-            col[k] = top[k, s]
-        for m in range(M):
+            cols[s, k] = top[k, s]
+    for m in range(M):
+        for s in range(S):
             acc = np.float32(0.0)
             for k in range(H + 1):
-                acc += head_t[m, k] * col[k]
+                acc += head_t[m, k] * cols[s, k]
             dm = z0[2 * M + m, s] + acc  # x̂'[n] = x_c + correction
             z0[M + m, s] = dm
-            ym = min(max(z0[m, s] + dts * dm, lo), hi)  # integrate, clamp
+            ym = min(max(z0[m, s] + dt[0, s] * dm, lo), hi)  # integrate, clamp
             z0[m, s] = ym
             out[s, m] = ym
     return True
