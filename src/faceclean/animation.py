@@ -51,7 +51,11 @@ class Animation:
     @property
     def valid(self) -> np.ndarray:
         """(N,) bool: frames that carry values (not tracking loss)."""
-        return ~np.all(np.isnan(self.values), axis=1) if self.n_channels else np.ones(0, bool)
+        return (
+            ~np.all(np.isnan(self.values), axis=1)
+            if self.n_channels
+            else np.ones(self.n_frames, bool)
+        )
 
     @property
     def duration(self) -> float:

@@ -2,7 +2,9 @@
 
 The output format follows OUT's extension (``--format`` forces one); a ``.csv`` out of a
 Live Link Face CSV stays Live Link, with only the blendshape values changed. OUT may be
-IN: the input is read whole and the output replaces it atomically.
+IN: the output replaces it atomically once complete. A causal cleaner on a Live Link or
+plain CSV written to the same format streams the file in blocks (constant memory,
+faceclean.io.stream); anything else is read whole.
 """
 
 from __future__ import annotations
@@ -13,11 +15,14 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from faceclean.animation import Animation
     from faceclean.filters.base import Cleaner
 
 HELP = "clean an animation file (Live Link CSV, CSV, JSON, NPZ, glTF/GLB)"
 PROGRESS_FRAMES = 5000  # show a progress bar from this many frames on
+PROGRESS_BYTES = 8 << 20  # ... or, when streaming a file, from this many bytes on
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -64,32 +69,69 @@ def parse_params(items: list[str]) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import filters, io
+    from pathlib import Path
+
+    from faceclean import io
+    from faceclean.io import stream
+
+    params = parse_params(args.params)
+    src = Path(args.input)
+    fmt_in = io.detect(src) if src.is_file() else None
+    if fmt_in in stream.FORMATS and io.output_format(args.output, fmt_in, args.fmt) == fmt_in:
+        names = stream.channel_names(src, fmt_in)
+        cleaner, what = build_cleaner(args, params, names)
+        if names and stream.can_stream(cleaner, fmt_in, fmt_in):
+            frames, missing = _stream(src, args.output, cleaner, fmt_in)
+            _report(args.output, frames, missing, len(names), what)
+            return 0
+    anim = io.load(src)
+    cleaner, what = build_cleaner(args, params, anim.names)
+    cleaned = clean_with_progress(cleaner, anim)
+    io.save(cleaned, args.output, fmt=args.fmt)
+    _report(args.output, anim.n_frames, int((~anim.valid).sum()), anim.n_channels, what)
+    return 0
+
+
+def build_cleaner(
+    args: argparse.Namespace, params: dict[str, Any], names: tuple[str, ...]
+) -> tuple[Cleaner, str]:
+    """The cleaner ``--method``/``--preset``/``--set`` ask for, and how to name it."""
+    from faceclean import filters
     from faceclean.errors import FacecleanError
 
-    anim = io.load(args.input)
-    params = parse_params(args.params)
     if args.preset is not None:
         if args.method:
             raise FacecleanError("--preset names its method: give --preset or --method, not both")
         from faceclean.filters import presets
 
-        cleaner = presets.build(args.preset, anim.names, overrides=params or None)
+        cleaner = presets.build(args.preset, names, overrides=params or None)
         what = f"{cleaner.name} (preset {args.preset})"
     else:
         method = args.method or filters.default_method()
-        cleaner = filters.make(method, params, names=anim.names)
+        cleaner = filters.make(method, params, names=names)
         what = method
-    what += f" {json.dumps(params)}" if params else ""
-    cleaned = clean_with_progress(cleaner, anim)
-    io.save(cleaned, args.output, fmt=args.fmt)
-    missing = int((~anim.valid).sum())
+    return cleaner, what + (f" {json.dumps(params)}" if params else "")
+
+
+def _report(out: str, frames: int, missing: int, channels: int, what: str) -> None:
     print(
-        f"wrote {args.output}: {anim.n_frames} frames"
+        f"wrote {out}: {frames} frames"
         + (f" ({missing} missing)" if missing else "")
-        + f", {anim.n_channels} channels, cleaned with {what}"
+        + f", {channels} channels, cleaned with {what}"
     )
-    return 0
+
+
+def _stream(src: Path, out: str, cleaner: Cleaner, fmt: str) -> tuple[int, int]:
+    """``stream.clean_file`` with a progress bar (bytes) on stderr for big files."""
+    from tqdm import tqdm
+
+    from faceclean.io import stream
+
+    size = src.stat().st_size
+    if size < PROGRESS_BYTES:
+        return stream.clean_file(src, out, cleaner, fmt)
+    with tqdm(total=size, unit="B", unit_scale=True, file=sys.stderr, leave=False) as bar:
+        return stream.clean_file(src, out, cleaner, fmt, progress=bar.update)
 
 
 def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:

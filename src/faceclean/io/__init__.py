@@ -102,6 +102,8 @@ def checked(anim: Animation, label: str) -> Animation:
     """
     if anim.n_frames == 0:
         raise FacecleanError(f"{label}: no frames")
+    if anim.n_channels == 0:
+        raise FacecleanError(f"{label}: no channels")
     bad = np.flatnonzero(~np.isfinite(anim.times))
     if len(bad):
         raise FacecleanError(f"{label}: frame {bad[0]} has no finite time")
@@ -118,16 +120,22 @@ def _short(e: BaseException) -> str:
     return text[:200]
 
 
+def output_format(path: str | os.PathLike, source: str | None, fmt: str | None = None) -> str:
+    """The format a write to ``path`` uses: ``fmt``, else by extension, the ``source``
+    format when the extension allows it (a Live Link take to ``.csv`` stays Live Link)."""
+    if fmt is not None:
+        return fmt
+    p = Path(path)
+    candidates = EXTENSIONS.get(p.suffix.lower())
+    if candidates is None:
+        raise FacecleanError(f"{p.name}: unknown output type {p.suffix or '(none)'!r}")
+    return source if source in candidates else candidates[-1]
+
+
 def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> None:
     """Write atomically; the format comes from ``fmt``, the extension, or the source format."""
     p = Path(path)
-    if fmt is None:
-        candidates = EXTENSIONS.get(p.suffix.lower())
-        if candidates is None:
-            raise FacecleanError(f"{p.name}: unknown output type {p.suffix or '(none)'!r}")
-        source = anim.meta.get("format")
-        fmt = source if source in candidates else candidates[-1]
-    module = _module(fmt)
+    module = _module(output_format(p, anim.meta.get("format"), fmt))
     with atomic_open(p, "wb") as f:
         if getattr(module, "WRITE_NEEDS_PATH", False):  # glTF: .glb or .gltf by the name
             module.write(anim, f, path=p)

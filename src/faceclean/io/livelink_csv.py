@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
@@ -42,6 +43,7 @@ from faceclean.errors import FacecleanError
 FPS = 60.0  # the timecode's frame rate, Hz
 DAY = 86400.0  # s
 DECIMALS = 10  # the app's number format for fresh files
+DECIMALS_SAMPLE = 50  # rows whose cells decide the decimals of changed values
 
 # The app's column order (differs from ARKit's: JawRight before JawLeft, MouthRight first).
 ORDER: tuple[str, ...] = tuple(
@@ -104,11 +106,51 @@ def read(path: str | os.PathLike) -> Animation:
     lines = tuple(data.splitlines(keepends=True))
     if not lines or not sniff(lines[0]):
         raise FacecleanError(f"{p.name}: not a Live Link Face CSV (no Timecode,BlendshapeCount)")
-    header = [h.strip().decode("utf-8") for h in _content(lines[0]).removeprefix(_BOM).split(b",")]
-    n_fields = len(header)
+    head = parse_header(lines[0], p.name)
+    rows, missing, stamps, table = parse_rows(lines[1:], 1, len(head.fields), p.name)
+    if not rows:
+        raise FacecleanError(f"{p.name}: no frames")
+    numbers = parse_numbers(table, p.name)
+    values = numbers[:, head.columns - 2]
+    pose = numbers[:, head.pose_cols - 2]
+    absolute = np.array(stamps)
+    times, _ = relative_times(absolute, absolute[0], absolute[0], 0)
+    source = Source(
+        lines=lines,
+        rows=np.array(rows),
+        missing=np.array(missing, bool),
+        columns=head.columns,
+        names=head.names,
+        values=values.copy(),
+        times=times.copy(),
+        decimals=_decimals(table[~np.array(missing, bool)][:DECIMALS_SAMPLE, head.columns - 2]),
+    )
+    meta = {
+        "format": "livelink",
+        "livelink": source,
+        "timecode_start": float(absolute[0]),
+        "pose": pose,
+        "pose_names": tuple(head.fields[j] for j in head.pose_cols),
+    }
+    return Animation(times, values, head.names, meta)
+
+
+@dataclass(frozen=True, eq=False)
+class Header:
+    """The header line, parsed: which fields are channels and which pass through."""
+
+    fields: tuple[str, ...]  # every column name, stripped
+    columns: np.ndarray  # (M,) field index of each blendshape channel
+    names: tuple[str, ...]  # (M,) channel names as spelled
+    pose_cols: np.ndarray  # (P,) field index of every other column after the count
+
+
+def parse_header(line: bytes, label: str) -> Header:
+    """The first line -> Header; the first spelling of a blendshape wins, repeats pass."""
+    fields = tuple(h.strip().decode("utf-8") for h in _content(line).removeprefix(_BOM).split(b","))
     columns, names, pose_cols = [], [], []
     seen: set[str] = set()
-    for j, h in enumerate(header[2:], start=2):
+    for j, h in enumerate(fields[2:], start=2):
         c = canonical(h)
         if c is not None and c not in seen:
             seen.add(c)
@@ -117,59 +159,55 @@ def read(path: str | os.PathLike) -> Animation:
         else:
             pose_cols.append(j)
     if not columns:
-        raise FacecleanError(f"{p.name}: no blendshape columns in the header")
+        raise FacecleanError(f"{label}: no blendshape columns in the header")
+    return Header(fields, np.array(columns), tuple(names), np.array(pose_cols, dtype=int))
 
+
+def parse_rows(
+    lines: Sequence[bytes], first: int, n_fields: int, label: str
+) -> tuple[list[int], list[bool], list[float], np.ndarray]:
+    """Data lines (``first``: index of lines[0] in the file) -> (row line indices, missing
+    flags, timecodes in s of the day, (R, n_fields - 2) cells as bytes). Blank lines are
+    skipped (they pass through on write)."""
     rows, missing, stamps, cells = [], [], [], []
-    for k, line in enumerate(lines[1:], start=1):
+    for k, line in enumerate(lines, start=first):
         fields = _content(line).split(b",")
         if fields == [b""]:
             continue  # blank line: passthrough
         try:
             stamps.append(timecode_seconds(fields[0]))
         except FacecleanError as e:
-            raise FacecleanError(f"{p.name} line {k + 1}: {e}") from None
+            raise FacecleanError(f"{label} line {k + 1}: {e}") from None
         empty = len(fields) <= 2 or all(not f.strip() for f in fields[2:])
         if not empty and len(fields) != n_fields:
             raise FacecleanError(
-                f"{p.name} line {k + 1}: {len(fields)} fields, the header has {n_fields}"
+                f"{label} line {k + 1}: {len(fields)} fields, the header has {n_fields}"
             )
         rows.append(k)
         missing.append(empty)
         cells.append([b""] * (n_fields - 2) if empty else fields[2:])
-    if not rows:
-        raise FacecleanError(f"{p.name}: no frames")
-
     table = np.array(cells, dtype=bytes).reshape(len(rows), n_fields - 2)
-    try:
-        numbers = np.where(np.char.strip(table) == b"", b"nan", table).astype(np.float64)
-    except ValueError as e:
-        raise FacecleanError(f"{p.name}: a value is not a number ({e})") from None
-    values = numbers[:, np.array(columns) - 2]
-    pose = numbers[:, np.array(pose_cols, dtype=int) - 2]
+    return rows, missing, stamps, table
 
-    absolute = np.array(stamps)
-    times = absolute - absolute[0]
-    # A drop of more than 12 h is a wrap past midnight: count on from 24:00.
-    wraps = np.cumsum(np.diff(absolute, prepend=absolute[0]) < -DAY / 2)
-    times = times + DAY * wraps
-    source = Source(
-        lines=lines,
-        rows=np.array(rows),
-        missing=np.array(missing, bool),
-        columns=np.array(columns),
-        names=tuple(names),
-        values=values.copy(),
-        times=times.copy(),
-        decimals=_decimals(table[~np.array(missing, bool)][:50, np.array(columns) - 2]),
-    )
-    meta = {
-        "format": "livelink",
-        "livelink": source,
-        "timecode_start": float(absolute[0]),
-        "pose": pose,
-        "pose_names": tuple(header[j] for j in pose_cols),
-    }
-    return Animation(times, values, tuple(names), meta)
+
+def parse_numbers(table: np.ndarray, label: str) -> np.ndarray:
+    """(R, C) cells as bytes -> float64; an empty cell is NaN."""
+    try:
+        return np.where(np.char.strip(table) == b"", b"nan", table).astype(np.float64)
+    except ValueError as e:
+        raise FacecleanError(f"{label}: a value is not a number ({e})") from None
+
+
+def relative_times(
+    absolute: np.ndarray, start: float, previous: float, wraps: int
+) -> tuple[np.ndarray, int]:
+    """Timecodes (R,) s of the day -> s since the file's first row ``start``.
+
+    A drop of more than 12 h from the row before (``previous`` for the first) is a wrap
+    past midnight: count on from 24:00. ``wraps`` so far in, wraps after the block out.
+    """
+    n = wraps + np.cumsum(np.diff(absolute, prepend=previous) < -DAY / 2)
+    return (absolute - start) + DAY * n, int(n[-1]) if len(n) else wraps
 
 
 def write(anim: Animation, f: BinaryIO) -> None:
@@ -218,18 +256,32 @@ def _patched(src: Source, anim: Animation) -> bytes:
         i = by_name.get(n, by_canon.get(canonical(n)))
         if i is not None:
             new[:, i] = anim.values[:, j]
-    changed = ~np.isnan(new) & ~(new == src.values)  # NaN keeps the original text
-    changed[src.missing] = False
     lines = list(src.lines)
+    patch_lines(lines, src.rows, src.missing, src.columns, src.values, new, src.decimals)
+    return b"".join(lines)
+
+
+def patch_lines(
+    lines: list[bytes],
+    rows: np.ndarray,
+    missing: np.ndarray,
+    columns: np.ndarray,
+    old: np.ndarray,
+    new: np.ndarray,
+    decimals: int,
+) -> None:
+    """Replace, in place, the text of the cells whose value changed from ``old`` to ``new``
+    (both (R, M)); rows (R,) index ``lines``. NaN and missing rows keep their text."""
+    changed = ~np.isnan(new) & ~(new == old)
+    changed[missing] = False
     for r in np.flatnonzero(changed.any(axis=1)):
-        k = src.rows[r]
+        k = rows[r]
         line = lines[k]
         body = _content(line)
         fields = body.split(b",")
         for i in np.flatnonzero(changed[r]):
-            fields[src.columns[i]] = _number(new[r, i], src.decimals)
+            fields[columns[i]] = _number(new[r, i], decimals)
         lines[k] = b",".join(fields) + line[len(body) :]
-    return b"".join(lines)
 
 
 def _fresh(anim: Animation) -> bytes:

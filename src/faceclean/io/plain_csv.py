@@ -34,33 +34,59 @@ def read(path: str | os.PathLike) -> Animation:
     lines = p.read_bytes().removeprefix(_BOM).splitlines()
     if not lines or not sniff(lines[0]):
         raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
-    header = [c.strip().strip(b'"').decode("utf-8") for c in lines[0].split(b",")]
+    t_col, names = parse_header(lines[0])
+    times, values, _ = parse_rows(lines[1:], 0, t_col, len(names) + 1, p.name)
+    return Animation(times, values, names, {"format": "csv"})
+
+
+def parse_header(line: bytes) -> tuple[int, tuple[str, ...]]:
+    """The header line (no BOM) -> (index of the time column, channel names)."""
+    header = [c.strip().strip(b'"').decode("utf-8") for c in line.split(b",")]
     t_col = [h.lower() for h in header].index("time")
-    rows = [line.split(b",") for line in lines[1:] if line.strip()]
-    for k, row in enumerate(rows):
-        if len(row) != len(header):
+    return t_col, tuple(h for j, h in enumerate(header) if j != t_col)
+
+
+def parse_rows(
+    lines: list[bytes], done: int, t_col: int, n_fields: int, label: str
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Data lines -> (times (R,) s, values (R, M), rows read so far). Blank lines are
+    skipped; ``done`` rows were read before these (for the row numbers in errors)."""
+    rows = [line.split(b",") for line in lines if line.strip()]
+    for k, row in enumerate(rows, start=done):
+        if len(row) != n_fields:
             raise FacecleanError(
-                f"{p.name}: row {k + 1} has {len(row)} fields, the header has {len(header)}"
+                f"{label}: row {k + 1} has {len(row)} fields, the header has {n_fields}"
             )
-    table = np.array(rows, dtype=bytes).reshape(len(rows), len(header))
+    table = np.array(rows, dtype=bytes).reshape(len(rows), n_fields)
     try:
         numbers = np.where(np.char.strip(table) == b"", b"nan", table).astype(np.float64)
     except ValueError as e:
-        raise FacecleanError(f"{p.name}: a value is not a number ({e})") from None
+        raise FacecleanError(f"{label}: a value is not a number ({e})") from None
     times = numbers[:, t_col]
     if not np.isfinite(times).all():
-        raise FacecleanError(f"{p.name}: every row needs a finite time")
-    keep = [j for j in range(len(header)) if j != t_col]
-    return Animation(times, numbers[:, keep], tuple(header[j] for j in keep), {"format": "csv"})
+        raise FacecleanError(f"{label}: every row needs a finite time")
+    keep = [j for j in range(n_fields) if j != t_col]
+    return times, numbers[:, keep], done + len(rows)
 
 
 def write(anim: Animation, f: BinaryIO) -> None:
     """Write ``time`` and every channel, repr-exact; NaN as an empty cell."""
-    for n in anim.names:
+    f.write(header_text(anim.names))
+    f.write(rows_text(anim.times, anim.values))
+
+
+def header_text(names: tuple[str, ...]) -> bytes:
+    """The header line for channels ``names``; a name a CSV cannot hold is refused."""
+    for n in names:
         if "," in n or "\n" in n or "\r" in n:
             raise FacecleanError(f"channel name {n!r} cannot go in a CSV header")
-    out = [",".join(("time", *anim.names)) + "\n"]
-    for t, row in zip(anim.times.tolist(), anim.values.tolist(), strict=True):
+    return (",".join(("time", *names)) + "\n").encode("utf-8")
+
+
+def rows_text(times: np.ndarray, values: np.ndarray) -> bytes:
+    """Rows for (R,) times and (R, M) values: repr-exact numbers, NaN as an empty cell."""
+    out = []
+    for t, row in zip(times.tolist(), values.tolist(), strict=True):
         cells = ["" if v != v else repr(v) for v in row]  # v != v: NaN
         out.append(",".join([repr(t), *cells]) + "\n")
-    f.write("".join(out).encode("utf-8"))
+    return "".join(out).encode("utf-8")

@@ -1,0 +1,220 @@
+"""Clean a row-format file (Live Link Face CSV, plain CSV) in constant memory.
+
+A causal cleaner needs only the past, so a huge take can go through it in blocks of
+lines: read a block, parse it with the format's own row parser, step the cleaner over
+its valid frames, write the cleaned block to the atomic output, forget it. Memory is
+one block (``BLOCK`` lines) whatever the file's size. The bytes written are exactly
+those of the in-memory path (``io.load``, ``cleaner.clean``, ``io.save``; a test
+proves it): the same parsers, the same writers, the same cleaner calls in the same
+order. A refused file (a bad row half-way) leaves no output: the temporary file is
+removed and an existing OUT is untouched.
+
+Only a cleaner whose ``clean`` is reset-then-step can stream (offline cleaners and
+cleaners with their own batch path load the whole file), and only into the same format.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import Cleaner
+from faceclean.io import livelink_csv, plain_csv
+from faceclean.io.atomic import atomic_open
+
+BLOCK = 4096  # lines per block
+CHUNK = 1 << 20  # bytes per read
+MAX_LINE = 16 << 20  # bytes; a longer line is not a CSV row
+FORMATS = ("livelink", "csv")
+
+Progress = Callable[[int], None]  # called with the bytes consumed since the last call
+
+
+def can_stream(cleaner: Cleaner, fmt_in: str, fmt_out: str) -> bool:
+    """Whether ``clean_file`` applies: a row format in and out, a step-by-step cleaner."""
+    return (
+        fmt_in in FORMATS
+        and fmt_out == fmt_in
+        and not cleaner.offline
+        and type(cleaner).clean is Cleaner.clean
+    )
+
+
+def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
+    """The channel names of a row-format file, from its header line alone."""
+    p = Path(path)
+    with open(p, "rb") as f:
+        first = next(iter_lines(f), b"")
+    try:
+        if fmt == "livelink":
+            if not livelink_csv.sniff(first):
+                raise FacecleanError(f"{p.name}: not a Live Link Face CSV")
+            return livelink_csv.parse_header(first, p.name).names
+        head = first.removeprefix(plain_csv._BOM).rstrip(b"\r\n")
+        if not plain_csv.sniff(head):
+            raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
+        return plain_csv.parse_header(head)[1]
+    except UnicodeDecodeError as e:
+        raise FacecleanError(f"{p.name}: header is not UTF-8 ({e})") from None
+
+
+def clean_file(
+    src: str | os.PathLike,
+    dst: str | os.PathLike,
+    cleaner: Cleaner,
+    fmt: str,
+    progress: Progress | None = None,
+) -> tuple[int, int]:
+    """Clean ``src`` (format ``fmt``) into ``dst`` block by block; (frames, missing frames).
+
+    OUT may be IN: the output replaces it only once the whole file is through.
+    """
+    if fmt not in FORMATS:
+        raise FacecleanError(f"cannot stream format {fmt!r} (only {', '.join(FORMATS)})")
+    p = Path(src)
+    step = _livelink if fmt == "livelink" else _plain
+    cleaner.reset()
+    with open(p, "rb") as f, atomic_open(dst, "wb") as out:
+        try:
+            return step(p.name, _counted(f, progress), out, cleaner)
+        except UnicodeDecodeError as e:
+            raise FacecleanError(f"{p.name}: not UTF-8 text ({e})") from None
+
+
+def iter_lines(f: BinaryIO, chunk: int = CHUNK) -> Iterator[bytes]:
+    """The lines of a binary file with their endings, exactly as
+    ``f.read().splitlines(keepends=True)`` gives them, reading ``chunk`` bytes at a time."""
+    buf = b""
+    while data := f.read(chunk):
+        lines = (buf + data).splitlines(keepends=True)
+        buf = b"" if lines[-1].endswith(b"\n") else lines.pop()  # "\r" may precede "\n"
+        if len(buf) > MAX_LINE:
+            raise FacecleanError(f"a line longer than {MAX_LINE >> 20} MiB: not a CSV file")
+        yield from lines
+    if buf:
+        yield from buf.splitlines(keepends=True)
+
+
+def _counted(f: BinaryIO, progress: Progress | None) -> Iterator[list[bytes]]:
+    """Blocks of up to BLOCK lines; reports bytes consumed to ``progress``."""
+    block: list[bytes] = []
+    size = 0
+    for line in iter_lines(f):
+        block.append(line)
+        size += len(line)
+        if len(block) == BLOCK:
+            yield block
+            if progress is not None:
+                progress(size)
+            block, size = [], 0
+    if block:
+        yield block
+        if progress is not None:
+            progress(size)
+
+
+def _step_rows(cleaner: Cleaner, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Cleaned (R, M) values: valid rows stepped in order, missing rows NaN (Cleaner.clean)."""
+    out = np.full_like(values, np.nan)
+    valid = ~np.all(np.isnan(values), axis=1) if values.shape[1] else np.ones(len(values), bool)
+    for i in np.flatnonzero(valid):
+        out[i] = cleaner.step(values[i], times[i])
+    return out
+
+
+def _livelink(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, cleaner: Cleaner):
+    first = next(blocks, None)
+    if not first or not livelink_csv.sniff(first[0]):
+        raise FacecleanError(f"{name}: not a Live Link Face CSV (no Timecode,BlendshapeCount)")
+    head = livelink_csv.parse_header(first[0], name)
+    n_fields = len(head.fields)
+    cols = head.columns - 2
+    out.write(first[0])
+    pending: list[tuple[list[bytes], tuple]] = []  # blocks parsed before the decimals are known
+    decimals: int | None = None
+    start = previous = None
+    wraps = frames = missing_total = 0
+    done = 1  # lines before the current block
+    sample: list[np.ndarray] = []  # cells of the first DECIMALS_SAMPLE valid rows
+
+    def flush(lines: list[bytes], parsed: tuple) -> None:
+        nonlocal start, previous, wraps, frames, missing_total
+        first_line, rows, missing, stamps, table = parsed
+        if rows:
+            absolute = np.array(stamps)
+            if start is None:
+                start = previous = float(absolute[0])
+            times, wraps = livelink_csv.relative_times(absolute, start, previous, wraps)
+            previous = float(absolute[-1])
+            values = livelink_csv.parse_numbers(table, name)[:, cols]
+            new = _step_rows(cleaner, times, values)
+            local = np.array(rows) - first_line
+            livelink_csv.patch_lines(
+                lines, local, np.array(missing, bool), head.columns, values, new, decimals
+            )
+            frames += len(rows)
+            missing_total += int(np.sum(missing))
+        out.write(b"".join(lines))
+
+    blocks_iter = _chain([first[1:]], blocks)
+    for lines in blocks_iter:
+        rows, missing, stamps, table = livelink_csv.parse_rows(lines, done, n_fields, name)
+        parsed = (done, rows, missing, stamps, table)
+        done += len(lines)
+        if decimals is None:
+            sample.append(table[~np.array(missing, bool)][:, cols])
+            pending.append((lines, parsed))
+            if sum(len(s) for s in sample) < livelink_csv.DECIMALS_SAMPLE:
+                continue
+            decimals = _decimals(sample)
+            for item in pending:
+                flush(*item)
+            pending.clear()
+        else:
+            flush(lines, parsed)
+    if decimals is None:
+        decimals = _decimals(sample)
+        for item in pending:
+            flush(*item)
+    if not frames:
+        raise FacecleanError(f"{name}: no frames")
+    return frames, missing_total
+
+
+def _decimals(sample: list[np.ndarray]) -> int:
+    cells = [s for s in sample if len(s)]
+    if not cells:
+        return livelink_csv.DECIMALS
+    width = max(c.dtype.itemsize for c in cells)
+    table = np.concatenate([c.astype(f"S{width}") for c in cells])
+    return livelink_csv._decimals(table[: livelink_csv.DECIMALS_SAMPLE])
+
+
+def _plain(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, cleaner: Cleaner):
+    first = next(blocks, None)
+    head = first[0].removeprefix(plain_csv._BOM).rstrip(b"\r\n") if first else b""
+    if not first or not plain_csv.sniff(head):
+        raise FacecleanError(f"{name}: not a plain CSV (no 'time' column in the header)")
+    t_col, names = plain_csv.parse_header(head)
+    out.write(plain_csv.header_text(names))
+    done = frames = missing = 0
+    for lines in _chain([first[1:]], blocks):
+        stripped = [line.rstrip(b"\r\n") for line in lines]
+        times, values, done = plain_csv.parse_rows(stripped, done, t_col, len(names) + 1, name)
+        new = _step_rows(cleaner, times, values)
+        out.write(plain_csv.rows_text(times, new))
+        frames += len(times)
+        missing += int(np.all(np.isnan(values), axis=1).sum()) if values.shape[1] else 0
+    if not frames:
+        raise FacecleanError(f"{name}: no frames")
+    return frames, missing
+
+
+def _chain(head: list[list[bytes]], rest: Iterator[list[bytes]]) -> Iterator[list[bytes]]:
+    yield from (b for b in head if b)
+    yield from rest
