@@ -7,7 +7,6 @@ Ctrl-C or SIGTERM stops it with exit 0 and a final stats line. See docs/RELAY.md
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import signal
 import sys
 from typing import Any
@@ -55,18 +54,12 @@ def build_cleaner(args: argparse.Namespace) -> tuple[Any, str]:
         if filters.cleaner_class(args.method).offline:
             raise FacecleanError(f"{args.method} is offline (non-causal): it cannot run live")
         return filters.make(args.method, params, names=ARKIT52), args.method
-    if args.model:
-        return filters.make("lstm", {"path": args.model}, names=ARKIT52), f"model {args.model}"
-    if args.preset:
-        from faceclean.filters import presets
+    from faceclean.cleaner import Cleaner
 
-        return presets.build(args.preset, ARKIT52), f"preset {args.preset}"
-    if importlib.util.find_spec("faceclean.cleaner") is not None:
-        from faceclean import Cleaner
-
-        return Cleaner.load(None), "default"
-    method = filters.default_method()
-    return filters.make(method, names=ARKIT52), method
+    cleaner = Cleaner.load(args.model or args.preset)  # None: the shipped default
+    if cleaner.offline:
+        raise FacecleanError(f"{cleaner.source} is offline (non-causal): it cannot run live")
+    return cleaner, cleaner.source + (f"; {cleaner.note}" if cleaner.note else "")
 
 
 def run(args: argparse.Namespace) -> int:

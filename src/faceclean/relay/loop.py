@@ -19,12 +19,12 @@ import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from faceclean.channels import ARKIT52, canonical
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner
 from faceclean.relay.frame import Frame, Malformed
 from faceclean.relay.url import Endpoint
 
@@ -33,6 +33,14 @@ MAX_DATAGRAM = 65535  # bytes
 MAX_DRAIN = 256  # datagrams read per wake-up before the newest frame is processed
 WINDOW = 8192  # latency samples kept for the percentiles
 RCVBUF = 1 << 20  # bytes asked for the receive buffer (the kernel may cap it)
+
+
+class Stepper(Protocol):
+    """Any streaming cleaner: ``filters`` cleaners and the ``faceclean.Cleaner`` facade."""
+
+    def reset(self) -> None: ...
+
+    def step(self, frame: np.ndarray, t: float) -> np.ndarray: ...
 
 
 @dataclass
@@ -85,7 +93,7 @@ class Relay:
         self,
         listen: Endpoint,
         send: Endpoint,
-        cleaner: Cleaner,
+        cleaner: Stepper,
         *,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
