@@ -1,0 +1,40 @@
+"""``faceclean report NOISY -o report.html``: one self-contained HTML file with the
+measures, curves per channel group and the input and cleaned animation on a 3D face."""
+
+from __future__ import annotations
+
+import argparse
+
+from faceclean.cli.plot import add_method_arguments
+
+HELP = "write a self-contained HTML report: measures, curves and a 3D face, input vs cleaned"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="NOISY", help="animation file to clean and show")
+    add_method_arguments(p)
+    p.add_argument(
+        "--mesh",
+        metavar="FILE",
+        help="face mesh with ARKit morph targets (.glb or .npz; default: faceclean's own face)",
+    )
+    p.add_argument("-o", "--output", metavar="HTML", required=True, help="report file (.html)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from faceclean import facemesh, report
+    from faceclean.cli.plot import comparison_from
+    from faceclean.errors import FacecleanError
+
+    if Path(args.output).suffix.lower() not in (".html", ".htm"):
+        raise FacecleanError(f"{args.output}: the report must be an .html file")
+    face = facemesh.load(args.mesh) if args.mesh else None
+    comp = comparison_from(args)
+    size = report.write(comp, args.output, face, source=Path(args.input).name)
+    print(
+        f"wrote {args.output} ({size / 1e6:.1f} MB): {comp.input.n_frames} frames, "
+        f"cleaned with {', '.join(comp.outputs)}"
+    )
+    return 0

@@ -1,0 +1,195 @@
+"""One clip's versions side by side: input, truth, and the outputs of several cleaners.
+
+What ``faceclean plot`` and ``faceclean report`` show. Everything is on the input's
+timestamps: a truth recorded at other instants is interpolated onto them. Measures that
+need no truth (jitter energy, spikes, gaps) live here too; those that need one are in
+:mod:`faceclean.metrics`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import canonical
+from faceclean.errors import FacecleanError
+
+SPIKE = 0.15  # weight units: a frame this far from its neighbours' median is a spike
+SPIKE_HALF_WIDTH = 2  # frames each side in that median
+
+
+@dataclass(eq=False)
+class Comparison:
+    """Input, truth (or None) and cleaned versions, all at the input's timestamps.
+
+    ``outputs`` maps a label (the method spec) to its output; the first is the main
+    cleaner's, the one the report's face shows next to the input.
+    """
+
+    input: Animation
+    truth: Animation | None
+    outputs: dict[str, Animation] = field(default_factory=dict)
+
+    @property
+    def main(self) -> str:
+        return next(iter(self.outputs))
+
+    @property
+    def times(self) -> np.ndarray:
+        """(N,) seconds from the clip's first frame."""
+        return self.input.times - self.input.times[0]
+
+
+def parse_method(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"one-euro:min_cutoff=1.5,beta=0.3"`` -> ``("one-euro", {...})``; values as JSON."""
+    name, _, rest = spec.strip().partition(":")
+    params: dict[str, Any] = {}
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        key, eq, text = item.partition("=")
+        if not eq or not key.strip():
+            raise FacecleanError(f"method {spec!r}: expected NAME:KEY=VALUE,KEY=VALUE")
+        try:
+            params[key.strip().replace("-", "_")] = json.loads(text)
+        except json.JSONDecodeError:
+            params[key.strip().replace("-", "_")] = text
+    if not name:
+        raise FacecleanError(f"method {spec!r}: no method name")
+    return name, params
+
+
+def clean_with(spec: str, anim: Animation) -> Animation:
+    """The output of the cleaner ``spec`` (see :func:`parse_method`) on ``anim``."""
+    from faceclean import filters
+
+    name, params = parse_method(spec)
+    return filters.make(name, params, names=anim.names).clean(anim)
+
+
+def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Animation:
+    """``anim`` linearly interpolated at ``times`` (N,) s, columns in the order of
+    ``names`` (matched by canonical name); NaN outside its time span or where absent."""
+    times = np.asarray(times, dtype=np.float64)
+    cols = {canonical(n) or n: j for j, n in reversed(list(enumerate(anim.names)))}
+    out = np.full((len(times), len(names)), np.nan)
+    found = False
+    for i, n in enumerate(names):
+        j = cols.get(canonical(n) or n)
+        if j is None:
+            continue
+        t, v = anim.times, anim.values[:, j]
+        ok = np.isfinite(t) & np.isfinite(v)
+        if ok.sum() < 2:
+            continue
+        found = True
+        t, v = t[ok], v[ok]
+        order = np.argsort(t, kind="stable")
+        t, v = t[order], v[order]
+        inside = (times >= t[0]) & (times <= t[-1])
+        out[inside, i] = np.interp(times[inside], t, v)
+    if not found:
+        raise FacecleanError("the truth shares no channel with the input")
+    return Animation(times.copy(), out, tuple(names), {"format": "truth"})
+
+
+def compare(
+    noisy: Animation,
+    truth: Animation | None = None,
+    methods: tuple[str, ...] | list[str] = (),
+) -> Comparison:
+    """Clean ``noisy`` with each method spec (the first is the main one; default: the
+    shipped default cleaner) and bring ``truth`` onto the input's timestamps."""
+    from faceclean import filters
+
+    if noisy.n_frames < 2 or not noisy.valid.any():
+        raise FacecleanError("the input has fewer than 2 frames with values")
+    specs = list(dict.fromkeys(methods)) or [filters.default_method()]
+    if truth is not None:
+        same = truth.n_frames == noisy.n_frames and np.array_equal(truth.times, noisy.times)
+        names_match = [canonical(n) or n for n in truth.names] == [
+            canonical(n) or n for n in noisy.names
+        ]
+        if not (same and names_match):
+            truth = at_times(truth, noisy.times, noisy.names)
+    return Comparison(noisy, truth, {s: clean_with(s, noisy) for s in specs})
+
+
+def jitter_energy(times: np.ndarray, values: np.ndarray) -> float:
+    """Mean squared second time-derivative ((weight/s^2)^2) over channels and frames.
+
+    Three-point formula on the real (possibly irregular) times; missing frames skipped.
+    """
+    ok = np.isfinite(times) & ~np.all(np.isnan(values), axis=1)
+    t, x = times[ok], values[ok]
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    t, x = t[keep], x[keep]
+    if len(t) < 3:
+        return float("nan")
+    h = np.diff(t)[:, None]  # (N-1, 1) s
+    d2 = 2.0 * np.diff(np.diff(x, axis=0) / h, axis=0) / (h[1:] + h[:-1])
+    d2 = d2[np.isfinite(d2)]
+    return float(np.mean(d2**2)) if d2.size else float("nan")
+
+
+def _local_median(x: np.ndarray, k: int) -> np.ndarray:
+    """(N, M) median of each frame's +-k neighbours, itself excluded (edges padded)."""
+    pad = np.pad(x, ((k, k), (0, 0)), mode="edge")
+    n = len(x)
+    around = [pad[i : i + n] for i in range(2 * k + 1) if i != k]
+    return np.nanmedian(np.stack(around), axis=0)
+
+
+def spikes(input_values: np.ndarray, output_values: np.ndarray) -> tuple[int, int]:
+    """(spikes in the input, spikes the output removed) over valid frames.
+
+    A spike: a value more than SPIKE from the median of its +-2 neighbours. Removed: the
+    output there is within half that distance of the same median.
+    """
+    rows = ~np.all(np.isnan(input_values), axis=1)
+    x, y = input_values[rows], output_values[rows]
+    if len(x) < 2 * SPIKE_HALF_WIDTH + 1:
+        return 0, 0
+    med = _local_median(x, SPIKE_HALF_WIDTH)
+    dev = np.abs(x - med)
+    found = dev > SPIKE
+    removed = found & (np.abs(y - med) < 0.5 * dev)
+    return int(found.sum()), int(removed.sum())
+
+
+def gaps(input_values: np.ndarray, output_values: np.ndarray) -> tuple[int, int]:
+    """(missing values in the input, of which the output filled) over all frames."""
+    missing = np.isnan(input_values)
+    return int(missing.sum()), int((missing & np.isfinite(output_values)).sum())
+
+
+def change(input_values: np.ndarray, output_values: np.ndarray) -> np.ndarray:
+    """(M,) RMS of output - input per channel (NaN-safe): how much cleaning changed it."""
+    d = output_values - input_values
+    ok = np.isfinite(d)
+    sq = np.where(ok, d, 0.0) ** 2
+    count = ok.sum(0)
+    return np.sqrt(sq.sum(0) / np.maximum(count, 1))
+
+
+def untruthed(comp: Comparison) -> dict[str, dict[str, float]]:
+    """Measures without a truth, per output: jitter energy before/after, spikes, gaps."""
+    t, x = comp.input.times, comp.input.values
+    before = jitter_energy(t, x)
+    rows = {}
+    for label, out in comp.outputs.items():
+        after = jitter_energy(t, out.values)
+        found, removed = spikes(x, out.values)
+        missing, filled = gaps(x, out.values)
+        rows[label] = {
+            "jitter_before": before,
+            "jitter_after": after,
+            "jitter_ratio": after / before if before > 0 else float("nan"),
+            "spikes": found,
+            "spikes_removed": removed,
+            "missing": missing,
+            "filled": filled,
+        }
+    return rows

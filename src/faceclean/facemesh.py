@@ -1,0 +1,270 @@
+"""Face meshes to look at: the stylised face, a user's mesh (npz or GLB), GLB export.
+
+A :class:`FaceMesh` is a triangle mesh with one morph target per ARKit channel, in
+canonical order (zeros where the mesh lacks a shape), and optional vertex colours.
+Vertices for weights w (52,): ``v = vertices + tensordot(w, deltas, 1)``.
+
+GLB files carry the targets on the first primitive of the first mesh that has them, with
+their ARKit names in ``mesh.extras.targetNames`` (the convention Blender and three.js
+read); node transforms are ignored (the viewer frames the mesh by its bounding box).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, INDEX, canonical
+from faceclean.errors import FacecleanError
+from faceclean.io.atomic import atomic_write
+
+# glTF componentType -> numpy dtype; accessor type -> components per element.
+_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+
+@dataclass(eq=False)
+class FaceMesh:
+    """A face mesh with ARKit morph targets."""
+
+    vertices: np.ndarray  # (V, 3) float32, mesh units (m for ours)
+    faces: np.ndarray  # (F, 3) uint32 vertex indices
+    deltas: np.ndarray  # (52, V, 3) float32, canonical ARKit order
+    colors: np.ndarray | None = None  # (V, 3) float32 linear RGB in [0, 1], or None
+    name: str = "face"
+
+    @property
+    def present(self) -> np.ndarray:
+        """(52,) bool: channels whose target moves at least one vertex."""
+        return np.any(self.deltas != 0, axis=(1, 2))
+
+    def pose(self, weights: np.ndarray) -> np.ndarray:
+        """(V, 3) vertices for weights (52,)."""
+        w = np.asarray(weights, dtype=np.float64).reshape(len(ARKIT52))
+        return self.vertices + np.tensordot(w, self.deltas, axes=1)
+
+
+def stylised() -> FaceMesh:
+    """faceclean's own stylised face (see faceclean.facerig), 52 targets, coloured."""
+    from faceclean import facerig
+
+    neutral, faces, colors, deltas = facerig.build()
+    linear = np.asarray(colors, np.float64) ** 2.2  # sRGB-looking palette -> linear (glTF)
+    return FaceMesh(
+        neutral.astype(np.float32),
+        faces.astype(np.uint32),
+        deltas.astype(np.float32),
+        linear.astype(np.float32),
+        "faceclean stylised face",
+    )
+
+
+def load(path: str | os.PathLike) -> FaceMesh:
+    """A face mesh from an npz (``neutral_vertices``, ``faces``/``triangles``, deltas and
+    names as in ../shared/data/meshes) or a GLB/glTF with ARKit-named morph targets."""
+    p = Path(path)
+    if not p.is_file():
+        raise FacecleanError(f"no such mesh file: {p}")
+    suffix = p.suffix.lower()
+    if suffix == ".npz":
+        mesh = _read_npz(p)
+    elif suffix in (".glb", ".gltf"):
+        mesh = _read_gltf(p)
+    else:
+        raise FacecleanError(f"{p.name}: a face mesh must be .npz, .glb or .gltf")
+    if not mesh.present.any():
+        raise FacecleanError(f"{p.name}: no morph target has an ARKit name")
+    if len(mesh.faces) == 0 or int(mesh.faces.max()) >= len(mesh.vertices):
+        raise FacecleanError(f"{p.name}: triangle indices do not match the vertices")
+    return mesh
+
+
+def _arkit_deltas(label: str, vertices: np.ndarray, deltas, names) -> np.ndarray:
+    """(52, V, 3) from targets in any order and spelling (unknown names dropped)."""
+    out = np.zeros((len(ARKIT52), *vertices.shape), np.float32)
+    if len(names) != len(deltas):
+        raise FacecleanError(f"{label}: {len(names)} target names for {len(deltas)} targets")
+    for j, n in enumerate(names):
+        c = canonical(str(n))
+        if c is not None:
+            out[INDEX[c]] = deltas[j]
+    return out
+
+
+def _read_npz(path: Path) -> FaceMesh:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            keys = set(z.files)
+            vertices = np.asarray(z["neutral_vertices"], np.float32)
+            faces = z["faces"] if "faces" in keys else z["triangles"]
+            if {"arkit_deltas", "arkit_names"} <= keys:
+                deltas, names = z["arkit_deltas"], z["arkit_names"]
+            else:
+                deltas, names = z["blendshape_deltas"], z["names"]
+            deltas = np.asarray(deltas, np.float32)
+    except (KeyError, ValueError, OSError, EOFError) as e:
+        raise FacecleanError(f"{path.name}: not a face mesh npz ({e})") from None
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or deltas.shape[1:] != vertices.shape:
+        raise FacecleanError(f"{path.name}: vertices {vertices.shape}, deltas {deltas.shape}")
+    faces = np.asarray(faces).reshape(-1, 3).astype(np.uint32)
+    out = _arkit_deltas(path.name, vertices, deltas, list(names))
+    return FaceMesh(vertices, faces, out, None, path.stem)
+
+
+def _read_gltf(path: Path) -> FaceMesh:
+    import pygltflib
+
+    try:
+        gltf = pygltflib.GLTF2().load(str(path))
+    except Exception as e:  # pygltflib raises many kinds on a bad file
+        raise FacecleanError(f"{path.name}: not a readable glTF file ({e})") from None
+    try:
+        for mesh in gltf.meshes or []:
+            extras = mesh.extras if isinstance(mesh.extras, dict) else {}
+            names = extras.get("targetNames")
+            prim = mesh.primitives[0] if mesh.primitives else None
+            if not names or prim is None or not prim.targets:
+                continue
+            vertices = _accessor(gltf, prim.attributes.POSITION).astype(np.float32)
+            if prim.indices is None:
+                faces = np.arange(len(vertices), dtype=np.uint32).reshape(-1, 3)
+            else:
+                faces = _accessor(gltf, prim.indices).reshape(-1, 3).astype(np.uint32)
+            deltas = np.stack([_accessor(gltf, t["POSITION"]) for t in prim.targets])
+            colors = None
+            if prim.attributes.COLOR_0 is not None:
+                colors = _accessor(gltf, prim.attributes.COLOR_0)[:, :3].astype(np.float32)
+            out = _arkit_deltas(path.name, vertices, deltas, names)
+            return FaceMesh(vertices, faces, out, colors, mesh.name or path.stem)
+    except (KeyError, IndexError, ValueError, TypeError) as e:
+        raise FacecleanError(f"{path.name}: unreadable mesh data ({e})") from None
+    raise FacecleanError(f"{path.name}: no mesh with named morph targets (extras.targetNames)")
+
+
+def _accessor(gltf, index: int) -> np.ndarray:
+    """(count, width) float64 (or integer for indices) values of an accessor, dense or sparse."""
+    acc = gltf.accessors[index]
+    width, dtype = _WIDTH[acc.type], np.dtype(_DTYPES[acc.componentType])
+    if acc.bufferView is None:
+        out = np.zeros((acc.count, width), dtype)
+    else:
+        out = _view(gltf, acc.bufferView, acc.byteOffset or 0, acc.count, width, dtype)
+    if acc.sparse is not None and acc.sparse.count:
+        sp = acc.sparse
+        idx_type = np.dtype(_DTYPES[sp.indices.componentType])
+        idx = _view(gltf, sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, 1, idx_type)
+        vals = _view(gltf, sp.values.bufferView, sp.values.byteOffset or 0, sp.count, width, dtype)
+        out = out.copy()
+        out[idx[:, 0].astype(np.int64)] = vals
+    if acc.normalized and dtype.kind in "iu":
+        return out.astype(np.float64) / np.iinfo(dtype).max
+    return out.astype(np.float64) if dtype.kind == "f" else out
+
+
+def _view(gltf, view_index: int, offset: int, count: int, width: int, dtype) -> np.ndarray:
+    """(count, width) elements of a buffer view, honouring byteStride."""
+    view = gltf.bufferViews[view_index]
+    buf = gltf.buffers[view.buffer]
+    data = gltf.binary_blob() if buf.uri is None else gltf.get_data_from_buffer_uri(buf.uri)
+    item = width * dtype.itemsize
+    stride = view.byteStride or item
+    start = (view.byteOffset or 0) + offset
+    if count and start + stride * (count - 1) + item > len(data):
+        raise ValueError("accessor runs past its buffer")
+    raw = np.frombuffer(data, np.uint8, count=stride * max(count - 1, 0) + item, offset=start)
+    rows = np.lib.stride_tricks.as_strided(raw, (count, item), (stride, 1))
+    return rows.copy().view(dtype).reshape(count, width)
+
+
+def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit area-weighted vertex normals."""
+    tri = vertices[faces.astype(np.int64)]
+    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(n, faces[:, k].astype(np.int64), fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 0.0, 1.0])
+
+
+def to_glb(mesh: FaceMesh) -> bytes:
+    """The mesh as GLB bytes: positions, normals, colours, indices and 52 dense morph
+    targets named in ``mesh.extras.targetNames`` (weights 0)."""
+    import pygltflib as G
+
+    blob = bytearray()
+    views: list = []
+    accessors: list = []
+
+    def add(data: np.ndarray, kind: str, ctype: int, target: int | None, minmax=False) -> int:
+        while len(blob) % 4:
+            blob.append(0)
+        views.append(
+            G.BufferView(buffer=0, byteOffset=len(blob), byteLength=data.nbytes, target=target)
+        )
+        blob.extend(data.tobytes())
+        acc = G.Accessor(bufferView=len(views) - 1, componentType=ctype, count=len(data), type=kind)
+        if minmax:
+            acc.min, acc.max = data.min(0).tolist(), data.max(0).tolist()
+        accessors.append(acc)
+        return len(accessors) - 1
+
+    v = np.ascontiguousarray(mesh.vertices, "<f4")
+    attrs = G.Attributes(
+        POSITION=add(v, "VEC3", G.FLOAT, G.ARRAY_BUFFER, minmax=True),
+        NORMAL=add(_normals(v, mesh.faces).astype("<f4"), "VEC3", G.FLOAT, G.ARRAY_BUFFER),
+    )
+    if mesh.colors is not None:
+        attrs.COLOR_0 = add(
+            np.ascontiguousarray(mesh.colors, "<f4"), "VEC3", G.FLOAT, G.ARRAY_BUFFER
+        )
+    indices = np.ascontiguousarray(mesh.faces.reshape(-1), "<u4")
+    index_acc = add(indices, "SCALAR", G.UNSIGNED_INT, G.ELEMENT_ARRAY_BUFFER)
+    targets = [
+        {
+            "POSITION": add(
+                np.ascontiguousarray(d, "<f4"), "VEC3", G.FLOAT, G.ARRAY_BUFFER, minmax=True
+            )
+        }
+        for d in mesh.deltas
+    ]
+    material = G.Material(
+        name="skin",
+        pbrMetallicRoughness=G.PbrMetallicRoughness(
+            baseColorFactor=[1, 1, 1, 1], metallicFactor=0.0, roughnessFactor=0.75
+        ),
+        doubleSided=True,
+    )
+    prim = G.Primitive(attributes=attrs, indices=index_acc, material=0, targets=targets)
+    gltf = G.GLTF2(
+        asset=G.Asset(generator="faceclean face-mesh", version="2.0"),
+        scene=0,
+        scenes=[G.Scene(nodes=[0])],
+        nodes=[G.Node(mesh=0, name="face")],
+        meshes=[
+            G.Mesh(
+                name=mesh.name,
+                primitives=[prim],
+                weights=[0.0] * len(ARKIT52),
+                extras={"targetNames": list(ARKIT52)},
+            )
+        ],
+        materials=[material],
+        accessors=accessors,
+        bufferViews=views,
+        buffers=[G.Buffer(byteLength=len(blob))],
+    )
+    gltf.set_binary_blob(bytes(blob))
+    return b"".join(gltf.save_to_bytes())
+
+
+def save_glb(mesh: FaceMesh, path: str | os.PathLike) -> None:
+    """Write the mesh as a GLB file, atomically."""
+    data = to_glb(mesh)
+    if data[:4] != b"glTF" or struct.unpack_from("<I", data, 8)[0] != len(data):
+        raise FacecleanError("internal: malformed GLB")  # pragma: no cover
+    atomic_write(path, data)

@@ -1,0 +1,345 @@
+// faceclean report viewer: two faces (input, cleaned) played in sync, and the curves.
+// Reads the JSON in #fc-data (written by faceclean/report/build.py); three.js is inlined
+// into the page through the import map. Times in seconds; weights stored as
+// round(value * data.scale) integers, null where missing.
+import * as THREE from "three";
+
+const data = JSON.parse(document.getElementById("fc-data").textContent);
+const times = data.times; // (N,) s from the first frame
+const N = times.length;
+const duration = times[N - 1];
+const COLORS = { input: "#8d949c", truth: "#111111" };
+const OTHER = ["#1f6fd1", "#e8710a", "#2ca02c", "#9334e6", "#d62728", "#8c564b", "#e52592"];
+
+const state = { t: 0, playing: false, speed: 1, last: null, renders: 0 };
+const api = {
+  ready: false, seek, play, pause, duration,
+  get time() { return state.t; },
+  get renders() { return state.renders; },
+};
+window.faceclean = api;
+
+function decode(b64, Type) {
+  const bin = atob(b64);
+  const bytes = new Uint8Array(bin.length);
+  for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+  return new Type(bytes.buffer);
+}
+
+// Largest i with times[i] <= t (0 before the start).
+function frameAt(t) {
+  let lo = 0, hi = N - 1;
+  if (t <= times[0]) return 0;
+  if (t >= times[hi]) return hi;
+  while (hi - lo > 1) {
+    const mid = (lo + hi) >> 1;
+    if (times[mid] <= t) lo = mid; else hi = mid;
+  }
+  return lo;
+}
+
+// Value of channel column `col` of series `s` at time t: linear between frames; a
+// missing value takes the nearest earlier valid one (the face holds through a gap).
+function valueAt(s, col, t) {
+  const v = s.values[col];
+  if (!v) return 0;
+  let i = frameAt(t);
+  const a = v[i], b = i + 1 < N ? v[i + 1] : null;
+  if (a !== null && b !== null) {
+    const u = (t - times[i]) / Math.max(times[i + 1] - times[i], 1e-9);
+    return (a + (b - a) * Math.min(Math.max(u, 0), 1)) / data.scale;
+  }
+  while (i >= 0 && v[i] === null) i--;
+  return i >= 0 ? v[i] / data.scale : 0;
+}
+
+// ---- the 3D view -------------------------------------------------------------------
+const view = { faces: [] };
+
+function setupView() {
+  const canvas = document.getElementById("fc-canvas");
+  const m = data.mesh;
+  const base = decode(m.positions, Float32Array); // (V*3) mesh units
+  const index = decode(m.indices, Uint32Array);
+  const colors = m.colors ? decode(m.colors, Uint8Array) : null;
+  const tidx = decode(m.target_index, Uint32Array); // concatenated vertex indices
+  const tdel = decode(m.target_delta, Int16Array); // (sum n, 3) deltas / q
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+  renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+  renderer.setClearColor(0xe9edf2);
+  const scene = new THREE.Scene();
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x8d7f78, 1.4));
+  const key = new THREE.DirectionalLight(0xffffff, 2.2);
+  key.position.set(-0.6, 0.8, 1.2);
+  scene.add(key);
+  const fill = new THREE.DirectionalLight(0xdfe8ff, 0.7);
+  fill.position.set(0.9, 0.1, 0.6);
+  scene.add(fill);
+
+  let min = [Infinity, Infinity, Infinity], max = [-Infinity, -Infinity, -Infinity];
+  for (let i = 0; i < base.length; i += 3) {
+    for (let k = 0; k < 3; k++) {
+      min[k] = Math.min(min[k], base[i + k]);
+      max[k] = Math.max(max[k], base[i + k]);
+    }
+  }
+  const size = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
+  const centre = [(max[0] + min[0]) / 2, (max[1] + min[1]) / 2, (max[2] + min[2]) / 2];
+  const material = new THREE.MeshStandardMaterial({
+    vertexColors: !!colors, color: colors ? 0xffffff : 0xe8bfa8,
+    roughness: 0.62, metalness: 0.0, side: THREE.DoubleSide,
+  });
+  for (const side of [-1, 1]) {
+    const geometry = new THREE.BufferGeometry();
+    const pos = new Float32Array(base);
+    geometry.setAttribute("position", new THREE.BufferAttribute(pos, 3));
+    if (colors) geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3, true));
+    geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    geometry.computeVertexNormals();
+    const mesh = new THREE.Mesh(geometry, material);
+    scene.add(mesh);
+    view.faces.push({ geometry, pos, weights: null, mesh, side });
+  }
+  const camera = new THREE.PerspectiveCamera(24, 2, size[1] * 0.05, size[1] * 60);
+  view.fit = () => {
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    renderer.setSize(w, h, false);
+    camera.aspect = w / h;
+    // Each face fills its half of the view: height and half the width both fit.
+    const tan = Math.tan((camera.fov * Math.PI) / 360);
+    const dist = Math.max((size[1] * 1.08) / (2 * tan), (size[0] * 2.3) / (2 * tan * camera.aspect));
+    const width = 2 * dist * tan * camera.aspect; // visible width at the faces' plane
+    for (const f of view.faces) f.mesh.position.set((f.side * width) / 4 - centre[0], -centre[1], -centre[2]);
+    camera.position.set(0, size[1] * 0.03, dist + size[2] / 2);
+    camera.lookAt(0, 0, 0);
+    camera.updateProjectionMatrix();
+    render();
+  };
+  view.render = () => { renderer.render(scene, camera); state.renders++; };
+  view.pose = (face, w) => {
+    if (face.weights && face.weights.every((x, j) => Math.abs(x - w[j]) < 1e-5)) return;
+    face.weights = w.slice();
+    const p = face.pos;
+    p.set(base);
+    let start = 0;
+    for (const tg of m.targets) {
+      const wj = w[tg.ch];
+      if (Math.abs(wj) > 1e-4) {
+        const s = wj * tg.q;
+        for (let i = start; i < start + tg.n; i++) {
+          const v = 3 * tidx[i];
+          p[v] += s * tdel[3 * i];
+          p[v + 1] += s * tdel[3 * i + 1];
+          p[v + 2] += s * tdel[3 * i + 2];
+        }
+      }
+      start += tg.n;
+    }
+    face.geometry.attributes.position.needsUpdate = true;
+    face.geometry.computeVertexNormals();
+  };
+  new ResizeObserver(() => view.fit()).observe(canvas);
+}
+
+function faceWeights(s, t) {
+  const w = new Array(52).fill(0);
+  data.arkit.forEach((j, col) => { if (j >= 0) w[j] = valueAt(s, col, t); });
+  return w;
+}
+
+function render() {
+  if (!view.render) return;
+  view.faces.forEach((face, k) => view.pose(face, faceWeights(data.series[data.face[k]], state.t)));
+  view.render();
+}
+
+// ---- curves -------------------------------------------------------------------------
+const plots = [];
+
+function seriesStyle(s, k) {
+  if (s.kind === "input") return { color: COLORS.input, width: 1, dash: [] };
+  if (s.kind === "truth") return { color: COLORS.truth, width: 1.2, dash: [5, 3] };
+  return { color: OTHER[k % OTHER.length], width: k === 0 ? 1.8 : 1.3, dash: [] };
+}
+
+function setupCurves() {
+  const legend = document.getElementById("fc-legend");
+  let outK = 0;
+  data.series.forEach((s) => {
+    s.style = seriesStyle(s, s.kind === "output" ? outK++ : 0);
+    const item = document.createElement("span");
+    item.className = "key";
+    const swatch = document.createElement("i");
+    swatch.style.borderTop = `${s.kind === "truth" ? "2px dashed" : "3px solid"} ${s.style.color}`;
+    item.append(swatch, document.createTextNode(s.label));
+    legend.append(item);
+  });
+  const root = document.getElementById("fc-groups");
+  for (const g of data.groups) {
+    const section = document.createElement("section");
+    section.className = "group";
+    const h = document.createElement("h3");
+    h.textContent = g.title;
+    section.append(h);
+    let holder = section;
+    g.channels.forEach((col, k) => {
+      if (k === data.open_per_group) {
+        const more = document.createElement("details");
+        const summary = document.createElement("summary");
+        summary.textContent = `${g.channels.length - k} more ${g.title} channels`;
+        more.append(summary);
+        more.addEventListener("toggle", () => plots.forEach(drawPlot));
+        section.append(more);
+        holder = more;
+      }
+      holder.append(makePlot(col));
+    });
+    root.append(section);
+  }
+  new ResizeObserver(() => plots.forEach(drawPlot)).observe(root);
+}
+
+function makePlot(col) {
+  const row = document.createElement("div");
+  row.className = "plot";
+  const label = document.createElement("div");
+  label.className = "name";
+  label.textContent = data.channels[col];
+  const change = document.createElement("small");
+  change.textContent = `changed ${data.change[col].toFixed(3)}`;
+  label.append(document.createElement("br"), change);
+  const box = document.createElement("div");
+  box.className = "box";
+  const canvas = document.createElement("canvas");
+  const head = document.createElement("div");
+  head.className = "playhead";
+  box.append(canvas, head);
+  row.append(label, box);
+  const plot = { col, canvas, head, box };
+  plots.push(plot);
+  const seekFrom = (e) => {
+    const r = canvas.getBoundingClientRect();
+    seek(((e.clientX - r.left) / r.width) * duration);
+  };
+  canvas.addEventListener("pointerdown", (e) => { seekFrom(e); canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointermove", (e) => { if (e.buttons) seekFrom(e); });
+  return row;
+}
+
+function niceStep(span, count) {
+  const raw = span / count, p = 10 ** Math.floor(Math.log10(raw));
+  return [1, 2, 5, 10].map((k) => k * p).find((s) => s >= raw);
+}
+
+function drawPlot(plot) {
+  const { canvas, col } = plot;
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (!w || !h) return;
+  const dpr = window.devicePixelRatio || 1;
+  canvas.width = Math.round(w * dpr);
+  canvas.height = Math.round(h * dpr);
+  const ctx = canvas.getContext("2d");
+  ctx.scale(dpr, dpr);
+  let lo = 0, hi = 1;
+  for (const s of data.series) {
+    for (const v of s.values[col] || []) {
+      if (v !== null) { lo = Math.min(lo, v / data.scale); hi = Math.max(hi, v / data.scale); }
+    }
+  }
+  const top = 4, bottom = h - 14;
+  const X = (t) => (t / duration) * w;
+  const Y = (v) => bottom - ((v - lo) / (hi - lo)) * (bottom - top);
+  ctx.font = "10px system-ui, sans-serif";
+  ctx.fillStyle = "#6b7280";
+  ctx.strokeStyle = "#eceff3";
+  const step = niceStep(duration, Math.max(2, Math.floor(w / 90)));
+  for (let t = 0; t <= duration + 1e-9; t += step) {
+    ctx.beginPath(); ctx.moveTo(X(t), top); ctx.lineTo(X(t), bottom); ctx.stroke();
+    ctx.fillText(`${+t.toFixed(3)} s`, Math.min(X(t) + 2, w - 34), h - 3);
+  }
+  for (const v of [lo, hi]) {
+    ctx.beginPath(); ctx.moveTo(0, Y(v)); ctx.lineTo(w, Y(v)); ctx.stroke();
+  }
+  ctx.fillText(hi.toFixed(2), 2, top + 9);
+  ctx.fillText(lo.toFixed(2), 2, bottom - 2);
+  for (const s of data.series) {
+    const v = s.values[col];
+    if (!v) continue;
+    ctx.strokeStyle = s.style.color;
+    ctx.lineWidth = s.style.width;
+    ctx.setLineDash(s.style.dash);
+    ctx.beginPath();
+    let pen = false;
+    for (let i = 0; i < N; i++) {
+      if (v[i] === null) { pen = false; continue; }
+      const x = X(times[i]), y = Y(v[i] / data.scale);
+      if (pen) ctx.lineTo(x, y); else ctx.moveTo(x, y);
+      pen = true;
+    }
+    ctx.stroke();
+  }
+  ctx.setLineDash([]);
+  placeHead(plot);
+}
+
+function placeHead(plot) {
+  plot.head.style.left = `${(state.t / duration) * plot.box.clientWidth}px`;
+}
+
+// ---- playback -----------------------------------------------------------------------
+const playButton = document.getElementById("fc-play");
+const scrub = document.getElementById("fc-scrub");
+const clock = document.getElementById("fc-time");
+
+function seek(t) {
+  state.t = Math.min(Math.max(Number(t) || 0, 0), duration);
+  scrub.value = String(Math.round((state.t / duration) * Number(scrub.max)));
+  clock.textContent = `${state.t.toFixed(2)} / ${duration.toFixed(2)} s`;
+  plots.forEach(placeHead);
+  render();
+}
+
+function tick(now) {
+  if (!state.playing) return;
+  if (state.last !== null) {
+    let t = state.t + ((now - state.last) / 1000) * state.speed;
+    if (t > duration) t = 0; // loop
+    seek(t);
+  }
+  state.last = now;
+  requestAnimationFrame(tick);
+}
+
+function play() {
+  if (state.playing) return;
+  state.playing = true;
+  state.last = null;
+  playButton.textContent = "❚❚ pause";
+  requestAnimationFrame(tick);
+}
+
+function pause() {
+  state.playing = false;
+  playButton.textContent = "▶ play";
+}
+
+playButton.addEventListener("click", () => (state.playing ? pause() : play()));
+scrub.addEventListener("input", () => { pause(); seek((Number(scrub.value) / Number(scrub.max)) * duration); });
+document.getElementById("fc-speed").addEventListener("change", (e) => { state.speed = Number(e.target.value); });
+document.addEventListener("keydown", (e) => {
+  if (e.code === "Space" && e.target === document.body) { e.preventDefault(); playButton.click(); }
+});
+
+setupCurves();
+try {
+  setupView();
+  view.fit();
+} catch (err) {
+  const note = document.getElementById("fc-noview");
+  note.hidden = false;
+  note.textContent = `The 3D view could not start (${err.message}); the curves below still work.`;
+  console.warn(err);
+}
+plots.forEach(drawPlot);
+seek(0);
+api.ready = true;
