@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -84,10 +85,13 @@ class LSTMWeights:
         p = Path(path)
         if not p.is_file():
             raise FacecleanError(f"no such model file: {p}")
+        with open(p, "rb") as f:
+            if f.read(4) != b"PK\x03\x04":  # an .npz is a zip archive
+                raise FacecleanError(f"{p.name}: not a model .npz (not a zip archive)")
         try:
             with np.load(p, allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError) as e:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
             raise FacecleanError(f"{p.name}: not a model .npz ({e})") from None
         return cls.from_arrays(arrays, p.name)
 
