@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,7 @@ class FaceMesh:
     deltas: np.ndarray  # (52, V, 3) float32, canonical ARKit order
     colors: np.ndarray | None = None  # (V, 3) float32 linear RGB in [0, 1], or None
     name: str = "face"
+    landmarks: dict[str, int] = field(default_factory=dict)  # named vertex indices
 
     @property
     def present(self) -> np.ndarray:
@@ -60,6 +61,7 @@ def stylised() -> FaceMesh:
         deltas.astype(np.float32),
         linear.astype(np.float32),
         "faceclean stylised face",
+        facerig.landmarks(),
     )
 
 
@@ -139,7 +141,8 @@ def _read_gltf(path: Path) -> FaceMesh:
             if prim.attributes.COLOR_0 is not None:
                 colors = _accessor(gltf, prim.attributes.COLOR_0)[:, :3].astype(np.float32)
             out = _arkit_deltas(path.name, vertices, deltas, names)
-            return FaceMesh(vertices, faces, out, colors, mesh.name or path.stem)
+            marks = {str(k): int(v) for k, v in (extras.get("landmarks") or {}).items()}
+            return FaceMesh(vertices, faces, out, colors, mesh.name or path.stem, marks)
     except (KeyError, IndexError, ValueError, TypeError) as e:
         raise FacecleanError(f"{path.name}: unreadable mesh data ({e})") from None
     raise FacecleanError(f"{path.name}: no mesh with named morph targets (extras.targetNames)")
@@ -250,7 +253,7 @@ def to_glb(mesh: FaceMesh) -> bytes:
                 name=mesh.name,
                 primitives=[prim],
                 weights=[0.0] * len(ARKIT52),
-                extras={"targetNames": list(ARKIT52)},
+                extras={"targetNames": list(ARKIT52), "landmarks": mesh.landmarks},
             )
         ],
         materials=[material],

@@ -20,6 +20,8 @@ AX, AY, AZ = 0.074, 0.098, 0.088  # m, head ellipsoid semi-axes
 Y_MOUTH, W_MOUTH = -0.040, 0.022  # m, mouth line height and half width
 EYE_X, EYE_Y, EYE_R = 0.031, 0.026, 0.0125  # m, eye centre (|x|, y) and eyeball radius
 SIDES = ((1.0, "Left"), (-1.0, "Right"))
+LID_GRID = (17, 9)  # eyelid vertices: across the eye x from the far edge to the rim
+LIP_GRID = (49, 12)  # lip vertices: corner to corner x around the tube
 
 SKIN, HAIR, LIP = (0.93, 0.74, 0.63), (0.24, 0.16, 0.11), (0.78, 0.38, 0.40)
 LID, LASH, WHITE = (0.90, 0.68, 0.58), (0.10, 0.07, 0.06), (0.96, 0.96, 0.94)
@@ -301,7 +303,7 @@ def _lid_edges(S: float, side: str, g: _Weights) -> tuple[float, float]:
 
 def _lids(g: _Weights):
     """Upper and lower eyelids: spherical shells around each eyeball, lash line on the upper."""
-    n_beta, n_v, beta_max = 17, 9, np.radians(74)
+    n_beta, n_v, beta_max = LID_GRID[0], LID_GRID[1], np.radians(74)
     beta = np.linspace(-beta_max, beta_max, n_beta)
     v = np.linspace(0.0, 1.0, n_v)
     bb, vv = np.meshgrid(beta, v, indexing="ij")
@@ -325,7 +327,7 @@ def _lids(g: _Weights):
 
 def _lips(g: _Weights):
     """Upper and lower lips: tubes along the mouth line, thinner at the corners."""
-    n_s, n_r = 49, 12
+    n_s, n_r = LIP_GRID
     s = np.linspace(-1.0, 1.0, n_s)
     psi = np.linspace(0.0, 2 * np.pi, n_r, endpoint=False)
     taper = np.maximum(np.sqrt(np.clip(1 - s**2, 0, 1)), 0.2)
@@ -440,6 +442,26 @@ def _all_parts(w: np.ndarray):
 def positions(w: np.ndarray) -> np.ndarray:
     """(V, 3) vertex positions in m for weights w (52,), through the full (non-linear) rig."""
     return np.concatenate([p for p, _, _ in _all_parts(w)]).astype(np.float64)
+
+
+def landmarks() -> dict[str, int]:
+    """Vertex indices of the lid rims and lip edges at their middles (for measuring).
+
+    ``upper_lid_left`` / ``lower_lid_left`` (and right): the rims at the eye's centre
+    line; ``upper_lip`` / ``lower_lip``: the lips' inner edges at the mouth's middle.
+    """
+    sizes = [len(p) for p, _, _ in _all_parts(np.zeros(len(ARKIT52)))]
+    start = np.concatenate([[0], np.cumsum(sizes)])  # head, 2 eyes, 4 lids, 2 lips, ...
+    lid_rim = (LID_GRID[0] // 2) * LID_GRID[1] + LID_GRID[1] - 1
+    lip_mid = (LIP_GRID[0] // 2) * LIP_GRID[1]
+    return {
+        "upper_lid_left": int(start[3] + lid_rim),
+        "lower_lid_left": int(start[4] + lid_rim),
+        "upper_lid_right": int(start[5] + lid_rim),
+        "lower_lid_right": int(start[6] + lid_rim),
+        "upper_lip": int(start[7] + lip_mid + LIP_GRID[1] // 2),  # psi = pi: its underside
+        "lower_lip": int(start[8] + lip_mid),  # psi = 0: its top
+    }
 
 
 @lru_cache(maxsize=1)

@@ -109,7 +109,11 @@ function setupView() {
     const tan = Math.tan((camera.fov * Math.PI) / 360);
     const dist = Math.max((size[1] * 1.08) / (2 * tan), (size[0] * 2.3) / (2 * tan * camera.aspect));
     const width = 2 * dist * tan * camera.aspect; // visible width at the faces' plane
-    for (const f of view.faces) f.mesh.position.set((f.side * width) / 4 - centre[0], -centre[1], -centre[2]);
+    for (const f of view.faces) {
+      const x = (f.side * width) / 4;
+      f.mesh.position.set(x - centre[0], -centre[1], -centre[2]);
+      f.mesh.rotation.y = -Math.atan2(x, dist + size[2] / 2); // face the camera squarely
+    }
     camera.position.set(0, size[1] * 0.03, dist + size[2] / 2);
     camera.lookAt(0, 0, 0);
     camera.updateProjectionMatrix();
