@@ -166,7 +166,7 @@ def test_fast_step_allocates_only_its_output(weights, kernel):
         c.step(x, np.zeros(S) if S > 1 else 0.0)
         c.step(x, np.full(S, 0.01) if S > 1 else 0.01)  # warm (compiles, allocates)
         tracemalloc.start()
-        for i in range(2, 200):
+        for i in range(2, 60):
             t = 0.01 * i
             y = c.step(x, np.full(S, t) if S > 1 else t)
         _, peak = tracemalloc.get_traced_memory()
@@ -285,3 +285,30 @@ def test_cleaner_classical_and_errors(tmp_path):
         Cleaner.load("kalman", backend="onnx")
     with pytest.raises(FacecleanError, match="streams"):
         Cleaner.load("kalman", streams=0)
+
+
+# -- the benchmark (structure only: tiny sizes, no timing assertions) --------------------
+
+
+def test_bench_quick_structure(tmp_path, capsys):
+    import json
+
+    from faceclean.cli import main
+
+    out, md = tmp_path / "b.json", tmp_path / "B.md"
+    md.write_text("# Title\n\nprose\n<!-- bench:begin -->\nold\n<!-- bench:end -->\ntail\n")
+    args = ["bench", "--quick", "--no-pin", "--streams", "1,2", "--json", str(out)]
+    assert main([*args, "--markdown", str(md)]) == 0
+    result = json.loads(out.read_text())
+    rows = {r["name"]: r for r in result["rows"]}
+    assert {"ema", "one-euro", "kalman", "lstm-numpy", "gaussian", "savgol"} <= set(rows)
+    for name in ("ema", "lstm-numpy"):
+        assert rows[name]["p99_us"] >= rows[name]["p50_us"] > 0
+        assert set(rows[name]["throughput"]) == {"1", "2"}
+        assert rows[name]["hour_s"] > 0 and rows[name]["state_bytes"] > 0
+    assert rows["lstm-numpy"]["state_bytes"] == 2464 + 52 * 8 + 8
+    assert rows["gaussian"]["p50_us"] is None and rows["gaussian"]["hour_s"] > 0
+    text = md.read_text()
+    assert text.startswith("# Title\n\nprose\n") and text.endswith("tail\n") and "old" not in text
+    assert "| lstm-numpy |" in text and "Machine:" in text
+    assert "| lstm-numpy |" in capsys.readouterr().out

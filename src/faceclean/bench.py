@@ -1,0 +1,320 @@
+"""The runtime benchmark: every cleaner side by side, and the eager-torch reference.
+
+Per cleaner, in one process (the CLI pins it to one core with one BLAS thread):
+- latency: per-frame ``step`` time for one stream, p50 and p99 (us);
+- throughput: stream-frames per second with S streams stepped together (S = 1, 64, 1024);
+- hour: seconds to clean one hour of 60 fps animation offline (``clean``), measured on a
+  shorter clip and scaled linearly (the cost per frame is constant), and said so;
+- state: bytes of per-stream state the cleaner holds (all per-stream arrays).
+The reference is faceclean.neural.reference (the same weights, eager PyTorch); every
+figure also appears as a cost ratio to it: our time / its time (< 1 is faster).
+Inputs are a seeded random walk in [0, 1] at 60 fps; speed does not depend on values.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+
+FPS = 60.0  # Hz
+HOUR = 3600.0  # s
+
+
+@dataclass
+class Sizes:
+    """How much to measure (``quick`` is for smoke tests: seconds, not accuracy)."""
+
+    streams: tuple[int, ...] = (1, 64, 1024)
+    latency_steps: int = 3000
+    target_s: float = 0.5  # s of measuring per throughput figure
+    clip_s: float = 120.0  # s of 60 fps animation cleaned, then scaled to an hour
+
+    @classmethod
+    def quick(cls, streams: tuple[int, ...] = (1, 4)) -> Sizes:
+        return cls(streams=streams, latency_steps=20, target_s=0.0, clip_s=0.5)
+
+
+@dataclass
+class Row:
+    name: str
+    p50_us: float | None = None
+    p99_us: float | None = None
+    throughput: dict[int, float] = field(default_factory=dict)  # streams -> frames/s
+    hour_s: float | None = None
+    state_bytes: int | None = None
+    note: str = ""
+
+
+def _walk(n: int, S: int, seed: int) -> np.ndarray:
+    """(n, S, 52) random-walk frames in [0, 1]."""
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(0.0, 0.01, (n, S, 52)).astype(np.float64)
+    return np.clip(0.3 + np.cumsum(steps, axis=0), 0.0, 1.0)
+
+
+def _times(n: int, S: int, start: int = 0) -> np.ndarray:
+    """(n, S) s: 60 fps, the streams a little out of phase."""
+    return (np.arange(start, start + n)[:, None] + np.linspace(0, 0.5, S)[None]) / FPS
+
+
+class _Stepper:
+    """The one interface the timing loops need: ``begin(S, x0, t0)``, ``step(x, t)``."""
+
+    def __init__(self, make: Callable[[], Any], reference: bool = False) -> None:
+        self.make, self.reference = make, reference
+        self.cleaner: Any = None
+        self.t_last: np.ndarray | None = None
+
+    def begin(self, x0: np.ndarray, t0: np.ndarray) -> None:
+        self.cleaner = self.make()
+        if self.reference:
+            self.cleaner.start(x0)
+            self.t_last = t0
+        else:
+            self.cleaner.step(x0[0] if len(x0) == 1 else x0, t0[0] if len(t0) == 1 else t0)
+
+    def step(self, x: np.ndarray, t: np.ndarray) -> None:
+        if self.reference:
+            self.cleaner.step(x, t - self.t_last)
+            self.t_last = t
+        elif len(x) == 1:
+            self.cleaner.step(x[0], float(t[0]))
+        else:
+            self.cleaner.step(x, t)
+
+
+def _latency(st: _Stepper, n: int) -> tuple[float, float]:
+    x, t = _walk(n + 21, 1, 1), _times(n + 21, 1)
+    st.begin(x[0], t[0])
+    for i in range(1, 21):  # warm (compiles, caches)
+        st.step(x[i], t[i])
+    clock = time.perf_counter_ns
+    dts = np.empty(n)
+    for i in range(n):
+        t0 = clock()
+        st.step(x[i + 21], t[i + 21])
+        dts[i] = clock() - t0
+    return float(np.percentile(dts, 50) / 1e3), float(np.percentile(dts, 99) / 1e3)
+
+
+def _throughput(st: _Stepper, S: int, target_s: float) -> float:
+    probe = _walk(4, S, 2)
+    t = _times(4, S)
+    st.begin(probe[0], t[0])
+    t0 = time.perf_counter()
+    for i in range(1, 4):
+        st.step(probe[i], t[i])
+    per_step = max((time.perf_counter() - t0) / 3, 1e-7)
+    n = int(min(max(target_s / per_step, 5), 20000))
+    x, t = _walk(n, S, 3), _times(n, S, start=4)
+    t0 = time.perf_counter()
+    for i in range(n):
+        st.step(x[i], t[i])
+    return S * n / (time.perf_counter() - t0)
+
+
+def _hour(clean: Callable[[Animation], Any], clip_s: float) -> float:
+    n = int(clip_s * FPS)
+    anim = Animation.from_arkit(np.arange(n) / FPS, _walk(n, 1, 4)[:, 0])
+    clean(Animation.from_arkit(anim.times[:30], anim.values[:30]))  # warm
+    t0 = time.perf_counter()
+    clean(anim)
+    return (time.perf_counter() - t0) * HOUR / clip_s
+
+
+def _state_bytes(cleaner: Any, S: int) -> int:
+    """Bytes per stream of the state a stepped cleaner keeps: its recurrent state plus
+    the last output and time every StreamCleaner holds (scratch buffers not counted)."""
+    kept = (cleaner._y.nbytes + cleaner._t.nbytes) // S
+    if hasattr(cleaner, "state_bytes"):  # the learned runtimes report theirs
+        return int(cleaner.state_bytes + kept)
+    return int(sum(a.nbytes for a in cleaner._state) // S + kept)
+
+
+def _reference_hour(make: Callable[[], Any], clip_s: float) -> float:
+    n = int(clip_s * FPS)
+    x, dt = _walk(n, 1, 4), np.full(1, 1 / FPS)
+    ref = make()
+    ref.start(x[0])
+    t0 = time.perf_counter()
+    for i in range(1, n):
+        ref.step(x[i], dt)
+    return (time.perf_counter() - t0) * HOUR / clip_s
+
+
+def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
+    """name -> (factory, note) for every streaming cleaner benchmarked."""
+    from faceclean.filters import learned_jit, make, presets
+    from faceclean.filters.learned import Learned
+
+    out: dict[str, tuple[Callable[[], Any], str]] = {}
+    for name in ("ema", "one-euro", "kalman"):
+        if name in presets.shipped():
+            out[name] = (lambda n=name: presets.build(n), "shipped preset")
+        else:
+            out[name] = (lambda n=name: make(n), "default parameters")
+    if learned_jit.available():
+        out["lstm"] = (lambda: Learned(weights=model), "numba kernel <= 8 streams, numpy above")
+    out["lstm-numpy"] = (lambda: Learned(weights=model, kernel="numpy"), "numpy + BLAS only")
+    try:
+        from faceclean.filters.onnx_backend import OnnxLearned
+        from faceclean.neural.export import build
+
+        graph = build(model).SerializeToString()
+        out["lstm-onnx"] = (lambda: OnnxLearned(graph), "onnxruntime, 1 thread")
+    except Exception as e:  # onnx or onnxruntime missing: say so in the table
+        out["lstm-onnx"] = (None, f"skipped: {str(e).splitlines()[0]}")
+    return out
+
+
+def run(
+    sizes: Sizes | None = None,
+    model_path: str | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Measure everything; returns a JSON-ready dict (machine, model, rows, reference)."""
+    from faceclean.filters import make
+    from faceclean.filters.learned import default_model_path
+    from faceclean.filters.lstm_weights import LSTMWeights
+
+    sizes = sizes or Sizes()
+    say = progress or (lambda s: None)
+    path = model_path or (str(default_model_path()) if default_model_path().is_file() else None)
+    model = LSTMWeights.load(path) if path else LSTMWeights.random(ARKIT52, seed=0)
+    model_note = path or "random init (no shipped model yet): same architecture, same cost"
+
+    rows: list[Row] = []
+    for name, (factory, note) in cleaners(model).items():
+        row = Row(name, note=note)
+        rows.append(row)
+        if factory is None:
+            continue
+        say(f"{name}: latency")
+        st = _Stepper(factory)
+        row.p50_us, row.p99_us = _latency(st, sizes.latency_steps)
+        for n in sizes.streams:
+            say(f"{name}: {n} streams")
+            row.throughput[n] = _throughput(st, n, sizes.target_s)
+            if n == max(sizes.streams):
+                row.state_bytes = _state_bytes(st.cleaner, n)
+        say(f"{name}: one hour")
+        row.hour_s = _hour(lambda a, f=factory: f().clean(a), sizes.clip_s)
+    for name in ("gaussian", "savgol"):
+        say(f"{name}: one hour")
+        rows.append(Row(name, hour_s=_hour(make(name).clean, sizes.clip_s), note="offline"))
+
+    reference = None
+    try:
+        import torch
+
+        from faceclean.neural.reference import NaiveReference
+
+        torch.set_num_threads(1)
+        ref = Row(NaiveReference.name, note=f"torch {torch.__version__}, 1 thread")
+        st = _Stepper(lambda: NaiveReference(model), reference=True)
+        say("reference: latency")
+        ref.p50_us, ref.p99_us = _latency(st, sizes.latency_steps)
+        for n in sizes.streams:
+            say(f"reference: {n} streams")
+            ref.throughput[n] = _throughput(st, n, sizes.target_s)
+        ref.state_bytes = st.cleaner.state_bytes
+        ref.hour_s = _reference_hour(lambda: NaiveReference(model), sizes.clip_s)
+        reference = ref
+    except ImportError:
+        pass
+    return {
+        "machine": machine(),
+        "model": {"source": model_note, "layers": model.layers, "hidden": model.hidden},
+        "sizes": asdict(sizes),
+        "rows": [asdict(r) for r in rows],
+        "reference": asdict(reference) if reference else None,
+        "hour_extrapolated_from_s": sizes.clip_s,
+    }
+
+
+def machine() -> dict[str, Any]:
+    """CPU model, cores usable, Python and library versions, BLAS, load."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in f if "model name" in ln), cpu)
+    except OSError:
+        pass
+    info: dict[str, Any] = {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "pinned_to": sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None,
+        "threads_env": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")},
+    }
+    try:
+        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        info["blas"] = f"{blas.get('name')} {blas.get('version')}"
+    except Exception:  # the config layout differs across numpy versions
+        info["blas"] = "unknown"
+    for mod in ("numba", "onnxruntime", "torch"):
+        try:
+            info[mod] = __import__(mod).__version__
+        except ImportError:
+            info[mod] = None
+    return info
+
+
+def _ratio(ours: float | None, ref: float | None) -> str:
+    return f" ({ours / ref:.2f}x)" if ours and ref else ""
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The results table (GitHub markdown) with the machine, ratios to the reference."""
+    rows = [*result["rows"]] + ([result["reference"]] if result["reference"] else [])
+    ref = result["reference"] or {}
+    streams = [int(s) for s in result["sizes"]["streams"]]
+    head = ["cleaner", "step p50 us", "p99 us"]
+    head += [f"{s} stream{'s' * (s > 1)}: us/stream-frame" for s in streams]
+    head += ["1 h of 60 fps: s", "state B/stream", "note"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["name"]]
+        if r["p50_us"] is None:
+            cells += ["", ""]
+        else:
+            cells += [f"{r['p50_us']:.1f}{_ratio(r['p50_us'], ref.get('p50_us'))}"]
+            cells += [f"{r['p99_us']:.1f}"]
+        for s in streams:
+            thr = r["throughput"].get(s) or r["throughput"].get(str(s))
+            ref_thr = (ref.get("throughput") or {}).get(s) or (ref.get("throughput") or {}).get(
+                str(s)
+            )
+            cost = 1e6 / thr if thr else None  # us per stream-frame
+            ref_cost = 1e6 / ref_thr if ref_thr else None
+            cells.append(f"{cost:.2f}{_ratio(cost, ref_cost)}" if cost else "")
+        hour = r["hour_s"]
+        cells.append(f"{hour:.2f}{_ratio(hour, ref.get('hour_s'))}" if hour else "")
+        cells.append(str(r["state_bytes"]) if r["state_bytes"] else "")
+        cells.append(r["note"])
+        lines.append("| " + " | ".join(cells) + " |")
+    m = result["machine"]
+    lines += [
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, pinned to core(s) {m['pinned_to']}, "
+        f"load average {', '.join(f'{v:.2f}' for v in m['load_average'] or ())} at the end; "
+        f"Python {m['python']}, numpy {m['numpy']} ({m['blas']}), numba {m['numba']}, "
+        f"onnxruntime {m['onnxruntime']}, torch {m['torch']}; "
+        f"threads {m['threads_env']}.",
+        f"Model: {result['model']['layers']} x {result['model']['hidden']} LSTM, "
+        f"{result['model']['source']}. (x) = our time / the reference's (< 1 is faster). "
+        f"Hour: {result['hour_extrapolated_from_s']:g} s of 60 fps cleaned, scaled x"
+        f"{HOUR / result['hour_extrapolated_from_s']:g}.",
+    ]
+    return "\n".join(lines) + "\n"

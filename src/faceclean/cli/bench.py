@@ -1,0 +1,96 @@
+"""``faceclean bench [--json OUT] [--markdown FILE] [--quick]``: the runtime benchmark.
+
+Every cleaner side by side with the eager-torch reference (faceclean.bench). For the
+headline the process runs on one core with one BLAS/OpenMP thread: the command re-runs
+itself with OMP/OPENBLAS/MKL/NUMBA thread counts set to 1 before numpy loads, and pins
+itself with ``os.sched_setaffinity``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "benchmark every cleaner's speed against the eager-torch reference"
+CHILD = "FACECLEAN_BENCH_CHILD"
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", metavar="OUT", help="write the full results as JSON")
+    p.add_argument(
+        "--markdown",
+        metavar="FILE",
+        help=f"write the table into FILE (between {BEGIN} and {END} if present)",
+    )
+    p.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not numbers)")
+    p.add_argument("--model", help="learned model .npz (default: the shipped one, else random)")
+    p.add_argument(
+        "--streams", default=None, help="comma-separated stream counts (default 1,64,1024)"
+    )
+    p.add_argument("--cpu", type=int, default=None, help="core to pin to (default: the last)")
+    p.add_argument("--no-pin", action="store_true", help="run in this process, unpinned")
+
+
+def _argv(args: argparse.Namespace) -> list[str]:
+    out = ["bench"]
+    for key in ("json", "markdown", "model", "streams", "cpu"):
+        value = getattr(args, key)
+        if value is not None:
+            out += [f"--{key}", str(value)]
+    return out + (["--quick"] if args.quick else [])
+
+
+def run(args: argparse.Namespace) -> int:
+    import os
+    import subprocess
+    import sys
+
+    from faceclean.errors import FacecleanError
+
+    if not args.no_pin and os.environ.get(CHILD) != "1":
+        env = dict(os.environ, **{v: "1" for v in THREAD_VARS}, **{CHILD: "1"})
+        return subprocess.run([sys.executable, "-m", "faceclean", *_argv(args)], env=env).returncode
+
+    import json
+
+    from faceclean import bench
+    from faceclean.io.atomic import atomic_write
+
+    if not args.no_pin and hasattr(os, "sched_setaffinity"):
+        cores = sorted(os.sched_getaffinity(0))
+        cpu = cores[-1] if args.cpu is None else args.cpu
+        if cpu not in cores:
+            raise FacecleanError(f"--cpu {cpu}: not one of this process's cores {cores}")
+        os.sched_setaffinity(0, {cpu})
+    try:
+        streams = tuple(int(s) for s in args.streams.split(",")) if args.streams else None
+    except ValueError:
+        raise FacecleanError(f"--streams {args.streams!r}: expected e.g. 1,64,1024") from None
+    if streams is not None and (not streams or min(streams) < 1):
+        raise FacecleanError("--streams: counts must be >= 1")
+    if args.quick:
+        sizes = bench.Sizes.quick(streams or (1, 4))
+    else:
+        sizes = bench.Sizes(streams=streams) if streams else bench.Sizes()
+    result = bench.run(sizes, args.model, progress=lambda s: print(f"  {s}", file=sys.stderr))
+    table = bench.markdown(result)
+    print(table)
+    if args.json:
+        atomic_write(args.json, json.dumps(result, indent=2) + "\n")
+    if args.markdown:
+        atomic_write(args.markdown, _spliced(args.markdown, table))
+    return 0
+
+
+def _spliced(path: str, table: str) -> str:
+    """FILE's text with the block between the markers replaced (or a new document)."""
+    from pathlib import Path
+
+    p = Path(path)
+    block = f"{BEGIN}\n{table}{END}\n"
+    text = p.read_text(encoding="utf-8") if p.is_file() else ""
+    if BEGIN in text and END in text:
+        head, rest = text.split(BEGIN, 1)
+        return head + block + rest.split(END, 1)[1].lstrip("\n")
+    return (text + "\n" if text else "# Benchmarks\n\n") + block
