@@ -13,7 +13,15 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q -e '.[neural,onnx,fast,dev]'
 	touch $(STAMP)
 
-venv: $(STAMP)
+# three.js for the HTML report: from the npm registry, pinned by package-lock.json, kept
+# in node_modules/ (never committed). Without npm, `faceclean report` explains what to run.
+NODE_STAMP := node_modules/.faceclean-installed
+
+$(NODE_STAMP): package.json package-lock.json
+	@if command -v npm >/dev/null; then npm ci --no-audit --no-fund && touch $(NODE_STAMP); \
+	else echo "npm not found: faceclean report and its browser tests need node_modules/three"; fi
+
+venv: $(STAMP) $(NODE_STAMP)
 
 demo: $(STAMP)
 	$(BIN)/faceclean demo
@@ -22,7 +30,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
 
-test: $(STAMP) lint
+test: $(STAMP) $(NODE_STAMP) lint
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)
