@@ -108,3 +108,17 @@ def test_onnx_stepped_equals_torch(model_path, take, torch_sequence, tmp_path):
     got = OnnxLearned(onnx_path).clean(take).values
     v = take.valid
     np.testing.assert_allclose(got[v], torch_sequence[v], atol=TOL)
+
+
+def test_bench_reference_computes_the_same_function(model_path, take):
+    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.neural.reference import NaiveReference
+
+    w = LSTMWeights.load(model_path)
+    ref, ours = NaiveReference(w), Learned(weights=w, kernel="numpy")
+    x, t = take.values[:220], take.times[:220]  # 220 frames, all valid, 30 Hz
+    ref.start(x[:1])
+    ours.step(x[0], t[0])
+    for n in range(1, 220):
+        a = ref.step(x[n : n + 1], np.array([t[n] - t[n - 1]]))[0]
+        np.testing.assert_allclose(a, ours.step(x[n], t[n]), atol=TOL)
