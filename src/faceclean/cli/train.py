@@ -52,7 +52,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads per process")
     p.add_argument("--resume", metavar="CKPT", help="continue from MODEL.last.npz")
     p.add_argument("--quiet", action="store_true", help="no progress bar (epoch lines only)")
-    p.add_argument("--out", required=True, metavar="MODEL", help="best model (.npz)")
+    p.add_argument(
+        "--report",
+        metavar="MODEL",
+        help="no training: evaluate MODEL on the validation takes at 30/60/120 "
+        "fps and webcam timing, print a markdown table",
+    )
+    p.add_argument("--out", metavar="MODEL", help="best model (.npz)")
     # fmt: skip
 
 
@@ -65,7 +71,10 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.neural.losses import Weights
     from faceclean.neural.train import Config, train
 
-    if not args.out.endswith(".npz"):
+    if args.report:
+        print(_report(args))
+        return 0
+    if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
     if args.epochs < 1 or args.batch < 1:
         raise FacecleanError("--epochs and --batch must be at least 1")
@@ -102,6 +111,22 @@ def run(args: argparse.Namespace) -> int:
     if best:
         print(f"best epoch {best['epoch']}: {args.out}", file=sys.stderr)
     return 0
+
+
+def _report(args: argparse.Namespace) -> str:
+    from faceclean import dataset
+    from faceclean.neural import checkpoint
+    from faceclean.neural.validate import CONDITIONS, corrupted, evaluate, table
+
+    model = checkpoint.load(args.report)
+    takes = dataset.load_takes(args.data)
+    if args.val_sources:
+        _, val = dataset.split(takes, val_sources=args.val_sources)
+    else:
+        _, val = dataset.split(takes, val_fraction=0.2, seed=args.seed)
+    results = evaluate(model, corrupted(val, list(CONDITIONS)), lag=True)
+    names = sorted({t.source for t in val})
+    return f"{args.report} on {', '.join(names)} ({len(val)} takes)\n\n{table(results)}"
 
 
 def _epoch_line(e: dict) -> str:

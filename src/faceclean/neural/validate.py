@@ -148,3 +148,20 @@ def _loss(model: LSTMCleaner, loss: Loss, streams) -> float:
     y, d, stepped = model(xt, tt, return_derivatives=True)
     total, _ = loss(y, d, stepped, xt, torch.from_numpy(g), tt, torch.from_numpy(valid))
     return float(total)
+
+
+def table(results: dict[str, dict[str, float]]) -> str:
+    """A markdown table of :func:`evaluate` results (with ``lag=True``): raw vs model."""
+    lines = [
+        "| condition | MSE raw | MSE model | ratio | jitter raw | jitter model "
+        "| lag raw ms | lag model ms | blink raw | blink model |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for cond, r in results.items():
+        lines.append(
+            f"| {cond} | {r['raw_mse']:.5f} | {r['mse']:.5f} | {r['mse_ratio']:.2f} "
+            f"| {r['raw_jitter_ratio']:.2f} | {r['jitter_ratio']:.2f} "
+            f"| {r.get('raw_lag_ms', float('nan')):.1f} | {r.get('lag_ms', float('nan')):.1f} "
+            f"| {r['raw_blink_closure']:.2f} | {r['blink_closure']:.2f} |"
+        )
+    return "\n".join(lines)
