@@ -14,6 +14,11 @@ backward derivatives at n+1 (the slope from n to n+1 for k = 1, the SPEC's forwa
 X̂^(k+1)[n]). With the SPEC's form only X̂^(1) reaches the output; X_r^(1..K-1) are
 the smoothed derivative estimates, kept as state.
 
+α: the paper's per-frame α_r (0.9 FC, 0.97 GBT) was chosen at its 60 fps test rate; it is
+applied as α = α_r^(dt · 60 Hz), the same blend time constant at every rate
+(τ = −1 / (60 ln α_r): 0.16 s FC, 0.55 s GBT) and exactly the paper's at 60 fps.
+``per_frame=True`` gives the literal per-frame form (its smoothing then depends on fps).
+
 Checkpoints are npz (``allow_pickle=False``) written by ``faceclean.neural.baselines``:
 ``config`` (JSON: format, channels, K, alpha, value_range, val_sources, ...) plus
 - FC (``faceclean-fc/1``), a whole-face MLP: ``feat_mean``, ``feat_std`` (F·M,) over
@@ -44,6 +49,7 @@ from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 
 GROUP_NAMES = tuple(GROUPS)
+ALPHA_RATE = 60.0  # Hz; α_r is the paper's per-frame value at its 60 fps test rate
 BIG = 1e30  # derivatives are clipped to +-BIG (a dt of 1e-9 s must not overflow)
 
 
@@ -61,7 +67,7 @@ def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], 
 
 
 def blend(
-    r: Sequence[np.ndarray], d_hat: Sequence[np.ndarray], x: np.ndarray, dt, alpha: float
+    r: Sequence[np.ndarray], d_hat: Sequence[np.ndarray], x: np.ndarray, dt, alpha
 ) -> list[np.ndarray]:
     """One complementary-blend step. r: X_r^(0..K-1)[n]; d_hat: X̂^(1..K); x: X_i[n+1].
 
@@ -93,6 +99,7 @@ class _DerivativeNet(StreamCleaner):
         *,
         model: str | os.PathLike | None = None,
         alpha: float | None = None,
+        per_frame: bool = False,
         names: Sequence[str] = ARKIT52,
     ) -> None:
         from faceclean.settings import MODELS
@@ -100,15 +107,18 @@ class _DerivativeNet(StreamCleaner):
         path = model if model is not None else MODELS / self.default_file
         config, arrays = load_checkpoint(path, self.fmt)
         self._load(arrays)
-        self._setup(config, names, alpha)
+        self._setup(config, names, alpha, per_frame)
 
-    def _setup(self, config: dict, names: Sequence[str], alpha: float | None) -> None:
+    def _setup(
+        self, config: dict, names: Sequence[str], alpha: float | None, per_frame: bool = False
+    ) -> None:
         self.config = config
         self.channels = tuple(config["channels"])  # model channels (M,)
         self.K = int(config["K"])
         self.alpha = float(config["alpha"] if alpha is None else alpha)
         if not 0.0 <= self.alpha <= 1.0:
             raise FacecleanError(f"{self.name}: alpha must be in [0, 1], got {self.alpha}")
+        self.per_frame = bool(per_frame)
         self.lo, self.hi = (float(v) for v in config.get("value_range", [0.0, 1.0]))
         # frame column of each model channel (-1: the frame lacks it; it sees zeros)
         cols = {canonical(n) or n: j for j, n in reversed(list(enumerate(names)))}
@@ -152,7 +162,9 @@ class _DerivativeNet(StreamCleaner):
             pred = self._pending.pop()
         else:
             pred = self.predict(feats)  # (S, M, K)
-        r_new = blend(r_old, [pred[..., k] for k in range(K)], d_new[0], dt, self.alpha)
+        # α per frame at ALPHA_RATE, as a time constant: the same blend at every rate.
+        alpha = self.alpha if self.per_frame else self.alpha ** (dt * ALPHA_RATE)  # (S, 1)
+        r_new = blend(r_old, [pred[..., k] for k in range(K)], d_new[0], dt, alpha)
         r_new[0] = np.clip(r_new[0], self.lo, self.hi)
         y = x.copy()
         y[:, self._cols[self._have]] = r_new[0][:, self._have]
@@ -260,13 +272,14 @@ class BoostedTrees(_DerivativeNet):
     def predict_features(self, x: np.ndarray) -> np.ndarray:
         """(n, K) predictions from (n, F) raw per-channel features (last one: group)."""
         feat, thr = self._feat.ravel(), self._thr.ravel()
-        rows = np.arange(len(x))[:, None]
-        pos = np.zeros((len(x), len(self._order)), np.intp)  # (n, T) node in each tree
+        n, f = x.shape
+        xf, row = x.ravel(), (np.arange(n) * f)[:, None]  # x[i, j] = xf[i f + j]
+        pos = np.zeros((n, len(self._order)), np.intp)  # (n, T) node in each tree
         for _ in range(self._depth):  # every tree descends one level per pass
             flat = pos + self._in_off
-            right = ~(x[rows, feat[flat]] <= thr[flat])  # go left when x <= threshold
+            right = xf.take(row + feat.take(flat)) > thr.take(flat)  # left when x <= thr
             pos = 2 * pos + 1 + right
-        leaf = self._val.ravel()[pos + self._leaf_off]  # (n, T)
+        leaf = self._val.ravel().take(pos + self._leaf_off)  # (n, T)
         out = np.zeros((len(x), self.K))
         for k in range(self.K):  # each row summed alone: the same bits for any n
             out[:, k] = leaf[:, self._order == k].sum(axis=1)
