@@ -112,6 +112,22 @@ def test_fast_path_equals_generic_rules(weights, kernel):
         )
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_clean_equals_stepping_every_frame(weights, clip, kernel):
+    t, x = clip
+    t, x = t.copy(), x.copy()
+    x[30] = np.nan  # missing frame
+    x[40, 2:5] = np.nan  # NaN channels
+    t[60] = t[59]  # repeated timestamp (held), then the next frame follows it
+    t[100:] += 2.0  # a pause: restart
+    anim = Animation.from_arkit(t, x)
+    fast = Learned(weights=weights, kernel=kernel).clean(anim).values
+    stepped = Learned(weights=weights, kernel=kernel)
+    slow = super(Learned, stepped).clean(anim).values  # the base loop: step every frame
+    np.testing.assert_array_equal(fast, slow)
+    assert np.isnan(fast[30]).all() and np.isfinite(np.delete(fast, 30, 0)).all()
+
+
 def test_time_rules(weights):
     c = Learned(weights=weights)
     x0, x1 = np.full(52, 0.2), np.full(52, 0.6)

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters import learned_jit
@@ -103,10 +104,9 @@ class Learned(StreamCleaner):
         x̂[n+1] to ``out`` (S, M); False, with nothing changed, if x is not all finite.
         Compiled for a few streams, numpy (BLAS matrix products) for many."""
         if self.kernel == "numba" and ws.streams <= self.jit_max_streams:
-            ws.flip = not ws.flip
             return learned_jit.step(
                 x, ws.dt, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp,
-                self._wts, self._head_t, self.lo, self.hi, out, ws.flip,
+                self._wts, self._head_t, self.lo, self.hi, out,
             )  # fmt: skip
         flat = x.reshape(-1)
         if not math.isfinite(float(np.dot(flat, flat))):  # NaN/inf (or overflow)
@@ -191,3 +191,45 @@ class Learned(StreamCleaner):
         else:
             np.copyto(self._t, np.broadcast_to(t, self._t.shape))
         return last[0].copy() if single else last.copy()
+
+    # -- whole clips -----------------------------------------------------------------------
+
+    def clean(self, anim: Animation) -> Animation:
+        """Reset, then step every valid frame (filters.base); runs of ordinary frames
+        (finite, 0 < dt <= max_gap after an accepted frame) go through the kernel in one
+        call, with the same numbers as stepping them one by one (tested)."""
+        if not self.map.identity or anim.n_channels != len(self.names):
+            return super().clean(anim)
+        self.reset()
+        out = np.full_like(anim.values, np.nan)
+        idx = np.flatnonzero(anim.valid)
+        x, t = anim.values[idx], anim.times[idx]
+        dt = np.diff(t, prepend=np.nan)  # s, to the previous valid frame
+        ok = np.isfinite(x).all(axis=1) & (dt > 0) & (dt <= self.max_gap)
+        k = 0
+        while k < len(idx):
+            if ok[k] and self._state is not None and self._t[0] == t[k - 1]:
+                j = k + int(np.argmin(ok[k:])) if not ok[k:].all() else len(idx)
+                out[idx[k:j]] = self._run_many(x[k:j], dt[k:j])
+                self._t[0], self._y[0] = t[j - 1], out[idx[j - 1]]
+                k = j
+            else:
+                out[idx[k]] = self.step(x[k], t[k])
+                k += 1
+        return anim.with_values(out)
+
+    def _run_many(self, xs: np.ndarray, dts: np.ndarray) -> np.ndarray:
+        """One stream advanced over frames xs (N, M) by dts (N,) s: outputs (N, M)."""
+        ws, out = self._ws, np.empty_like(xs)
+        if self.kernel == "numba":
+            learned_jit.run(
+                xs, dts, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp,
+                self._wts, self._head_t, self.lo, self.hi, ws.dt, out,
+            )  # fmt: skip
+            return out
+        for n in range(len(xs)):
+            ws.dt[0, 0] = dts[n]
+            np.copyto(ws.x[:, 0], xs[n], casting="unsafe")
+            step_numpy(ws, self._wts, self._head_t, self.lo, self.hi)
+            out[n] = ws.y[:, 0]
+        return out

@@ -46,7 +46,7 @@ def _tanh(x):
     return x * p / q
 
 
-def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out, flip):
+def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out):
     """One step for every stream, in place (lstm_kernel's layout: one column per stream);
     False, with nothing changed, if ``x`` holds a non-finite value.
 
@@ -54,9 +54,7 @@ def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out, flip):
     buffers; g (4H, S), cols (S, rows of zs[0]), hv (H, S): scratch; wts[l]
     (4H, rows of zs[l]) fused weights, gates (i, f, o, g), the (i, f, o) rows pre-scaled
     by 1/2; head_t (M, H + 1); out (S, M) receives x̂[n+1]. Each weight row is read once
-    for all S streams. ``flip`` walks the rows backwards: alternating it from step to
-    step lets an LRU cache smaller than the weights (1.1 MB against a 1 MB L2) keep the
-    rows it reads first; the result does not depend on it.
+    for all S streams.
     """
     S, M = x.shape
     for s in range(S):
@@ -76,8 +74,7 @@ def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out, flip):
         for s in range(S):
             for k in range(width):
                 cols[s, k] = z[k, s]  # [in | h | 1] of stream s, contiguous
-        for r in range(4 * H):  # gates = W^T [in | h | 1]
-            n = 4 * H - 1 - r if flip else r
+        for n in range(4 * H):  # gates = W^T [in | h | 1]
             for s in range(S):
                 acc = np.float32(0.0)
                 for k in range(width):
@@ -116,8 +113,17 @@ def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out, flip):
     return True
 
 
+def _run(xs, dts, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, dt, out):
+    """``_step`` over frames xs (N, M) with dts (N,) s, one stream; out (N, M) gets
+    x̂ after each. The frames must be finite (the caller checked); dt (1, 1) scratch."""
+    for n in range(xs.shape[0]):
+        dt[0, 0] = dts[n]
+        step(xs[n : n + 1], dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out[n : n + 1])
+
+
 if njit is not None:
     _tanh = njit(fastmath=_FAST, inline="always", cache=True)(_tanh)
     step = njit(fastmath=_FAST, boundscheck=False, nogil=True, cache=True)(_step)
+    run = njit(boundscheck=False, nogil=True, cache=True)(_run)
 else:  # pragma: no cover
-    step = None
+    step = run = None
