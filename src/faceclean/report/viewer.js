@@ -11,7 +11,7 @@ const duration = times[N - 1];
 const COLORS = { input: "#8d949c", truth: "#111111" };
 const OTHER = ["#1f6fd1", "#e8710a", "#2ca02c", "#9334e6", "#d62728", "#8c564b", "#e52592"];
 
-const state = { t: 0, playing: false, speed: 1, last: null, renders: 0 };
+const state = { t: 0, playing: false, speed: 1, last: null, renders: 0, w0: 0, span: duration };
 const api = {
   ready: false, seek, play, pause, duration,
   get time() { return state.t; },
@@ -178,6 +178,17 @@ function setupCurves() {
     item.append(swatch, document.createTextNode(s.label));
     legend.append(item);
   });
+  const outputs = data.series.filter((s) => s.kind === "output");
+  data.drawOrder = [...data.series.filter((s) => s.kind !== "output"), ...outputs.slice(1), outputs[0]];
+  const zoom = document.getElementById("fc-zoom");
+  for (const span of [30, 10, 4]) {
+    if (span < duration) zoom.add(new Option(`${span} s`, String(span)));
+  }
+  zoom.addEventListener("change", () => {
+    state.span = Math.min(Number(zoom.value) || duration, duration);
+    follow(true);
+    plots.forEach(placeHead);
+  });
   const root = document.getElementById("fc-groups");
   for (const g of data.groups) {
     const section = document.createElement("section");
@@ -223,7 +234,7 @@ function makePlot(col) {
   plots.push(plot);
   const seekFrom = (e) => {
     const r = canvas.getBoundingClientRect();
-    seek(((e.clientX - r.left) / r.width) * duration);
+    seek(state.w0 + ((e.clientX - r.left) / r.width) * state.span);
   };
   canvas.addEventListener("pointerdown", (e) => { seekFrom(e); canvas.setPointerCapture(e.pointerId); });
   canvas.addEventListener("pointermove", (e) => { if (e.buttons) seekFrom(e); });
@@ -235,6 +246,17 @@ function niceStep(span, count) {
   return [1, 2, 5, 10].map((k) => k * p).find((s) => s >= raw);
 }
 
+// Value range of a channel over every series (fixed, so pages of a long clip compare).
+function range(col) {
+  let lo = 0, hi = 0;
+  for (const s of data.series) {
+    for (const v of s.values[col] || []) {
+      if (v !== null) { lo = Math.min(lo, v / data.scale); hi = Math.max(hi, v / data.scale); }
+    }
+  }
+  return [lo, Math.max(hi * 1.05, lo + 0.05)];
+}
+
 function drawPlot(plot) {
   const { canvas, col } = plot;
   const w = canvas.clientWidth, h = canvas.clientHeight;
@@ -244,20 +266,17 @@ function drawPlot(plot) {
   canvas.height = Math.round(h * dpr);
   const ctx = canvas.getContext("2d");
   ctx.scale(dpr, dpr);
-  let lo = 0, hi = 1;
-  for (const s of data.series) {
-    for (const v of s.values[col] || []) {
-      if (v !== null) { lo = Math.min(lo, v / data.scale); hi = Math.max(hi, v / data.scale); }
-    }
-  }
+  plot.range = plot.range || range(col);
+  const [lo, hi] = plot.range;
+  const [t0, span] = [state.w0, state.span];
   const top = 4, bottom = h - 14;
-  const X = (t) => (t / duration) * w;
+  const X = (t) => ((t - t0) / span) * w;
   const Y = (v) => bottom - ((v - lo) / (hi - lo)) * (bottom - top);
   ctx.font = "10px system-ui, sans-serif";
   ctx.fillStyle = "#6b7280";
   ctx.strokeStyle = "#eceff3";
-  const step = niceStep(duration, Math.max(2, Math.floor(w / 90)));
-  for (let t = 0; t <= duration + 1e-9; t += step) {
+  const step = niceStep(span, Math.max(2, Math.floor(w / 90)));
+  for (let t = Math.ceil(t0 / step) * step; t <= t0 + span + 1e-9; t += step) {
     ctx.beginPath(); ctx.moveTo(X(t), top); ctx.lineTo(X(t), bottom); ctx.stroke();
     ctx.fillText(`${+t.toFixed(3)} s`, Math.min(X(t) + 2, w - 34), h - 3);
   }
@@ -266,7 +285,8 @@ function drawPlot(plot) {
   }
   ctx.fillText(hi.toFixed(2), 2, top + 9);
   ctx.fillText(lo.toFixed(2), 2, bottom - 2);
-  for (const s of data.series) {
+  const first = Math.max(frameAt(t0) - 1, 0), last = Math.min(frameAt(t0 + span) + 2, N);
+  for (const s of data.drawOrder) {
     const v = s.values[col];
     if (!v) continue;
     ctx.strokeStyle = s.style.color;
@@ -274,7 +294,7 @@ function drawPlot(plot) {
     ctx.setLineDash(s.style.dash);
     ctx.beginPath();
     let pen = false;
-    for (let i = 0; i < N; i++) {
+    for (let i = first; i < last; i++) {
       if (v[i] === null) { pen = false; continue; }
       const x = X(times[i]), y = Y(v[i] / data.scale);
       if (pen) ctx.lineTo(x, y); else ctx.moveTo(x, y);
@@ -287,7 +307,18 @@ function drawPlot(plot) {
 }
 
 function placeHead(plot) {
-  plot.head.style.left = `${(state.t / duration) * plot.box.clientWidth}px`;
+  const u = (state.t - state.w0) / state.span;
+  plot.head.style.left = `${u * plot.box.clientWidth}px`;
+  plot.head.hidden = u < 0 || u > 1;
+}
+
+// The curves show [w0, w0 + span]; when the playhead leaves it, the next page shows.
+function follow(force = false) {
+  const w0 = state.span >= duration ? 0 : state.w0;
+  const outside = state.t < w0 || state.t > w0 + state.span;
+  if (!force && !outside && w0 === state.w0) return;
+  state.w0 = outside ? Math.min(Math.max(state.t - 0.05 * state.span, 0), duration - state.span) : w0;
+  plots.forEach(drawPlot);
 }
 
 // ---- playback -----------------------------------------------------------------------
@@ -299,6 +330,7 @@ function seek(t) {
   state.t = Math.min(Math.max(Number(t) || 0, 0), duration);
   scrub.value = String(Math.round((state.t / duration) * Number(scrub.max)));
   clock.textContent = `${state.t.toFixed(2)} / ${duration.toFixed(2)} s`;
+  follow();
   plots.forEach(placeHead);
   render();
 }
