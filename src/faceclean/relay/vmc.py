@@ -10,6 +10,7 @@ Names are the ARKit "perfect sync" ones in any spelling ``channels.canonical`` a
 
 from __future__ import annotations
 
+import re
 import struct
 
 import numpy as np
@@ -27,6 +28,8 @@ NAME_STYLES = ("keep", "arkit", "pascal", "lr")
 _APPLY_MSG = osc.message(APPLY.decode())
 _VAL_HEAD = osc.pad(VAL) + osc.pad(b",sf")
 _F32 = struct.Struct(">f")
+# One Val message with (string, float) arguments: the name, then its float's 4 bytes.
+_VAL_SF = re.compile(re.escape(_VAL_HEAD) + rb"([^\x00]*)\x00{1,4}(.{4})", re.DOTALL)
 
 
 class Decoder:
@@ -48,11 +51,11 @@ class Decoder:
         t: float | None = None
         applied = False
         for address, start, end in osc.messages(data):  # parse all before changing state
-            if address == VAL and data.startswith(_VAL_HEAD, start):  # fast path: ",sf"
-                name, at = osc.string(data, start + len(_VAL_HEAD), end)
-                if at + 4 != end:
-                    raise Malformed("vmc: Blend/Val needs (string, float)")
-                vals.append((name, _F32.unpack_from(data, at)[0]))
+            if address == VAL and (m := _VAL_SF.fullmatch(data, start, end)):  # fast path
+                try:
+                    vals.append((m.group(1).decode("utf-8"), _F32.unpack(m.group(2))[0]))
+                except UnicodeDecodeError:
+                    raise Malformed("vmc: name is not UTF-8") from None
             elif address == VAL:
                 args = osc.arguments(data, start, end)
                 if len(args) != 2 or not isinstance(args[0], str):
