@@ -239,6 +239,28 @@ def test_order_duplicates_silence_nan_and_restart():
     assert not np.array_equal(last, v[5])  # frames in between were cleaned
 
 
+def test_only_the_newest_waiting_frame_is_sent():
+    v = np.linspace(0.25, 0.75, 3 * 52).reshape(3, 52).astype(np.float32).astype(np.float64)
+    with raw_receiver() as rx:
+        relay = Relay(parse("livelink://:0"), parse(f"vmc://:{rx.getsockname()[1]}", "send"),
+                      filters.make("ema"))  # fmt: skip
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for i in range(3):  # all three wait in the socket before the relay runs
+                tx.sendto(ll(10.0 + i / 60, v[i]), ("127.0.0.1", relay.address.port))
+        thread = threading.Thread(target=relay.run, daemon=True)
+        thread.start()
+        msgs = OscPacket(rx.recv(65536)).messages
+        relay.stop()
+        thread.join(WAIT)
+        relay.close()
+        rx.settimeout(0.0)
+        with pytest.raises(BlockingIOError):  # one frame out, not three
+            rx.recv(65536)
+    got = np.array([m.message.params[1] for m in msgs[:-1]])
+    np.testing.assert_array_equal(got, v[2])  # the newest, which starts the cleaner
+    assert relay.stats.stale == 2 and relay.stats.frames_out == 1
+
+
 def test_vmc_to_livelink_and_passthrough():
     names = ("EyeBlink_L", "jawOpen", "Joy")  # ARKit in two spellings + a VRM clip
     with (
