@@ -269,7 +269,10 @@ def machine() -> dict[str, Any]:
         "python": platform.python_version(),
         "numpy": np.__version__,
         "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None,
-        "threads_env": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")},
+        "env": {
+            k: os.environ.get(k)
+            for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OPENBLAS_CORETYPE")
+        },
     }
     try:
         blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
@@ -324,7 +327,7 @@ def markdown(result: dict[str, Any]) -> str:
         f"load average {', '.join(f'{v:.2f}' for v in m['load_average'] or ())} at the end; "
         f"Python {m['python']}, numpy {m['numpy']} ({m['blas']}), numba {m['numba']}, "
         f"onnxruntime {m['onnxruntime']}, torch {m['torch']}; "
-        f"threads {m['threads_env']}.",
+        f"environment {m['env']}.",
         f"Model: {result['model']['layers']} x {result['model']['hidden']} LSTM, "
         f"{result['model']['source']}. (x) = our time / the reference's (< 1 is faster). "
         f"Hour: {result['hour_extrapolated_from_s']:g} s of 60 fps cleaned, scaled x"
