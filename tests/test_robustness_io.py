@@ -74,7 +74,7 @@ BAD_FILES = {
     "unknown extension": ("a.txt", b"time,jawOpen\n0,1\n", "unknown file type '.txt'"),
     "no extension": ("take", b"time,jawOpen\n0,1\n", "unknown file type '(none)'"),
     "foreign json": ("f.json", b'{"frames": [1, 2]}', "not a faceclean-animation/1 JSON"),
-    "foreign zip as npz": ("z.npz", None, "needs 'times', 'values' and 'names'"),
+    "foreign zip as npz": ("z.npz", None, "not an npz archive (holds 'readme.txt')"),
     "pickle renamed npz": ("p.npz", pickle.dumps({"times": [0.0]}), "not a readable npz"),
     "text in a number, live link": (
         "t.csv",
@@ -141,6 +141,41 @@ def test_truncated_npz_is_refused(tmp_path):
     p.write_bytes(p.read_bytes()[:300])
     with pytest.raises(FacecleanError, match="not a readable npz"):
         io.load(p)
+
+
+def _npz_bytes(**arrays) -> bytes:
+    import io as stdio
+
+    buf = stdio.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def test_npz_with_an_unsupported_compression_method_is_refused(tmp_path):
+    # found by `faceclean fuzz --target npz`: zipfile raised NotImplementedError
+    data = bytearray(_npz_bytes(times=np.zeros(2), values=np.zeros((2, 1)), names=np.array(["a"])))
+    for sig, at in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):  # local and central headers
+        i = data.find(sig)
+        while i >= 0:
+            data[i + at : i + at + 2] = (1).to_bytes(2, "little")  # method 1: "shrunk"
+            i = data.find(sig, i + 1)
+    p = tmp_path / "m.npz"
+    p.write_bytes(bytes(data))
+    with pytest.raises(FacecleanError, match="not a readable npz file"):
+        io.load(p)
+
+
+def test_npz_size_limits_refuse_big_files_and_zip_bombs(tmp_path):
+    from faceclean.io.npz_safe import MiB, load_arrays
+
+    p = tmp_path / "bomb.npz"
+    np.savez_compressed(p, zeros=np.zeros(3 * MiB // 8))  # 3 MiB of zeros in a few KiB
+    assert p.stat().st_size < MiB
+    with pytest.raises(FacecleanError, match="unpacks to 3.0 MiB, over the 2.0 MiB limit"):
+        load_arrays(p, max_bytes=2 * MiB)
+    with pytest.raises(FacecleanError, match="over the 1000 bytes limit"):
+        load_arrays(p, max_bytes=1000)
+    assert load_arrays(p, max_bytes=4 * MiB)["zeros"].shape == (3 * MiB // 8,)
 
 
 def test_missing_input_and_folder_input(tmp_path, capsys):

@@ -217,7 +217,10 @@ def _buffer(buffer: pygltflib.Buffer, bin_chunk: bytes | None, path: Path) -> by
         return bin_chunk
     if uri.startswith("data:"):
         return base64.b64decode(uri.split(",", 1)[1])
-    target = path.parent / urllib.parse.unquote(uri)
+    name = urllib.parse.unquote(uri)
+    if ":" in uri.split("/", 1)[0] or Path(name).is_absolute():  # a scheme or a root
+        raise FacecleanError(f"{path.name}: buffer URI {uri[:60]!r} is not a relative file path")
+    target = path.parent / name
     if not target.is_file():
         raise FacecleanError(f"{path.name}: buffer file {uri!r} not found beside it")
     return target.read_bytes()

@@ -10,7 +10,6 @@ On read, ``time`` and ``weights`` are accepted for ``times`` and ``values`` (the
 from __future__ import annotations
 
 import os
-import zipfile
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -18,6 +17,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.io.npz_safe import load_arrays
 
 FORMAT = "faceclean-animation/1"
 
@@ -29,11 +29,7 @@ def sniff(head: bytes) -> bool:
 def read(path: str | os.PathLike) -> Animation:
     """Read an ``.npz`` animation."""
     p = Path(path)
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError) as e:
-        raise FacecleanError(f"{p.name}: not a readable npz file ({e})") from None
+    arrays = load_arrays(p)
     if "format" in arrays and str(arrays["format"]) != FORMAT:
         raise FacecleanError(f"{p.name}: format {str(arrays['format'])!r}, expected {FORMAT!r}")
     times = arrays.get("times", arrays.get("time"))

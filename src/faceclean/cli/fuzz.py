@@ -1,0 +1,64 @@
+"""``faceclean fuzz [--target NAME] [--examples N | --seconds S]``: the long fuzz run.
+
+Feeds every file reader and relay decoder (or one) arbitrary and mutated real inputs
+(faceclean.fuzz) and prints, per target, how many inputs were tried, accepted and
+refused. Exit 0 when nothing broke the policy, 1 with the failure and its input otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+
+HELP = "fuzz the readers and relay decoders (hypothesis), reporting inputs tried and failures"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from faceclean.fuzz import TARGETS
+
+    p.add_argument("--target", choices=TARGETS, action="append", help="repeatable (default: all)")
+    budget = p.add_mutually_exclusive_group()
+    budget.add_argument("--examples", type=int, metavar="N", help="inputs per target")
+    budget.add_argument("--seconds", type=float, metavar="S", help="seconds per target")
+    p.add_argument("--save", metavar="FILE", help="write a failing input to this file")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from faceclean import fuzz
+    from faceclean.errors import FacecleanError
+    from faceclean.io.atomic import atomic_write
+
+    if importlib.util.find_spec("hypothesis") is None:
+        raise FacecleanError("fuzz needs hypothesis: pip install 'faceclean[dev]'")
+    examples, seconds = args.examples, args.seconds
+    if examples is None and seconds is None:
+        examples = 10_000
+    if (examples is not None and examples < 1) or (seconds is not None and not seconds > 0):
+        raise FacecleanError("--examples must be >= 1 and --seconds > 0")
+    total = 0
+    for target in args.target or fuzz.TARGETS:
+        report = fuzz.run(
+            target,
+            examples=examples,
+            seconds=seconds,
+            on_batch=lambda r: print(f"  {r.target}: {r.tried} so far", end="\r", flush=True),
+        )
+        total += report.tried
+        print(
+            f"{target:13s} tried {report.tried:8d}  accepted {report.accepted:7d}  "
+            f"refused {report.refused:8d}  {report.seconds:7.1f} s  "
+            f"{report.tried / max(report.seconds, 1e-9):7.0f}/s  "
+            + ("FAILED" if report.failure else "ok"),
+            flush=True,
+        )
+        if report.failure:
+            print(f"faceclean: {target}: {report.failure}", file=sys.stderr)
+            print(f"faceclean: input: {fuzz.failing_example(report)}", file=sys.stderr)
+            if args.save and report.failing_input is not None:
+                atomic_write(args.save, report.failing_input)
+                print(f"faceclean: input saved to {args.save}", file=sys.stderr)
+            return 1
+    print(f"all targets: {total} inputs, no failure")
+    return 0

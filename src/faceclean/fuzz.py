@@ -1,0 +1,391 @@
+"""Fuzzing: every file reader and every relay decoder, fed arbitrary and mutated real bytes.
+
+The property (docs/ROBUSTNESS.md): a reader returns an Animation that holds the
+invariants (at least one frame, finite times, (N, M) float64 values, M text names) or
+raises FacecleanError; a decoder returns a Frame (or None: nothing complete yet) or
+raises Malformed, the relay's counted rejection. Anything else is a bug. A readable
+file must also write back in its own format without any other error, and a Live Link
+file must come back byte for byte.
+
+Inputs come from hypothesis: arbitrary bytes, and real files or packets (``seeds``)
+mutated by a few byte-level edits (flips, cuts, repeats, splices of tokens that parsers
+care about). ``tests/test_fuzz.py`` runs a bounded number per target in ``make test``;
+``faceclean fuzz`` runs many more. hypothesis is a dev dependency, imported when used.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+
+READERS = {"livelink": ".csv", "csv": ".csv", "json": ".json", "npz": ".npz", "glb": ".glb"}
+READERS["gltf"] = ".gltf"
+DECODERS = ("vmc", "livelink-udp", "ifacialmocap")
+TARGETS: tuple[str, ...] = (*READERS, *DECODERS)
+MAX_BYTES = 4096  # arbitrary inputs up to this size
+# Byte strings parsers treat specially, spliced into real inputs.
+TOKENS = (
+    b",", b"\n", b"\r\n", b"\r", b"\x00", b"nan", b"inf", b"-1e309", b"1e308", b"-0", b"",
+    b"null", b"[", b"]", b"{", b'"', b"\xff\xfe", b"\xef\xbb\xbf", b":", b"|", b"-", b"&",
+    b"#bundle\x00", b"/VMC/Ext/Blend/Val\x00\x00", b",sf\x00", b"\x7f\xff\xff\xff",
+    b"\xff\xff\xff\xff", b"\x80\x00\x00\x00", b"PK\x03\x04", b"glTF", b"99999999999",
+)  # fmt: skip
+
+
+@dataclass
+class Report:
+    """One fuzz run: how many inputs each outcome had; a failure, if one was found."""
+
+    target: str
+    tried: int = 0
+    accepted: int = 0  # readable files / decoded frames
+    refused: int = 0  # FacecleanError / Malformed
+    seconds: float = 0.0
+    failure: str | None = None  # one line: the exception and the input that raised it
+    failing_input: bytes | None = None
+    outcomes: dict[str, int] = field(default_factory=dict)
+
+
+class Checker:
+    """Runs one target on one input; raises AssertionError (or anything) on a bug."""
+
+    def __init__(self, target: str, folder: str | os.PathLike) -> None:
+        if target not in TARGETS:
+            raise FacecleanError(f"unknown fuzz target {target!r} (known: {', '.join(TARGETS)})")
+        self.target = target
+        self.folder = Path(folder)
+        self._check: Callable[[bytes], bool] = (
+            self._reader if target in READERS else _DECODERS[target]
+        )
+
+    def __call__(self, data: bytes) -> bool:
+        """True: accepted; False: refused as the policy says. Raises on a bug."""
+        return self._check(data)
+
+    def _reader(self, data: bytes) -> bool:
+        from faceclean import io
+
+        fmt = "gltf" if self.target in ("glb", "gltf") else self.target
+        src = self.folder / f"in{READERS[self.target]}"
+        src.write_bytes(data)
+        try:
+            anim = io.load(src, fmt)
+        except FacecleanError as e:
+            assert "\n" not in str(e), f"multi-line message {str(e)!r}"
+            return False
+        check_animation(anim)
+        assert src.read_bytes() == data, "the reader modified its input"
+        out = self.folder / f"out{READERS[self.target]}"
+        try:
+            io.save(anim, out, fmt)
+        except FacecleanError:
+            return True  # a readable file that cannot go back (e.g. inf in JSON): refused
+        if fmt == "livelink":
+            assert out.read_bytes() == data, "Live Link write-back changed bytes"
+        return True
+
+
+def check_animation(anim: Any) -> None:
+    """The invariants every reader promises (raises AssertionError)."""
+    assert isinstance(anim, Animation)
+    n, m = anim.n_frames, anim.n_channels
+    assert n >= 1 and m >= 1
+    assert anim.times.dtype == np.float64 and anim.times.shape == (n,)
+    assert np.isfinite(anim.times).all()
+    assert anim.values.dtype == np.float64 and anim.values.shape == (n, m)
+    assert all(isinstance(name, str) for name in anim.names)
+    assert isinstance(anim.meta.get("format"), str)
+
+
+def _check_frame(frame: Any) -> bool:
+    from faceclean.relay.frame import Frame
+
+    if frame is None:
+        return True
+    assert isinstance(frame, Frame)
+    assert all(isinstance(n, str) for n in frame.names)
+    assert isinstance(frame.values, np.ndarray) and frame.values.shape == (len(frame.names),)
+    assert frame.values.dtype == np.float64
+    assert frame.t is None or (isinstance(frame.t, float) and np.isfinite(frame.t))
+    assert frame.pose is None or frame.pose.shape == (9,)
+    assert all(isinstance(p, bytes) for p in frame.passthrough)
+    return True
+
+
+def _decode_with(decode: Callable[[bytes], Any]) -> Callable[[bytes], bool]:
+    def check(data: bytes) -> bool:
+        from faceclean.relay.frame import Malformed
+
+        try:
+            frame = decode(data)
+        except Malformed as e:
+            assert "\n" not in str(e)
+            return False
+        return _check_frame(frame)
+
+    return check
+
+
+def _vmc(data: bytes) -> bool:
+    """A fresh decoder fed the input as three datagrams (loose messages across them)."""
+    from faceclean.relay import vmc
+    from faceclean.relay.frame import Malformed
+
+    decoder = vmc.Decoder()
+    cut1, cut2 = len(data) // 3, 2 * len(data) // 3
+    ok = False
+    for part in (data[:cut1], data[cut1:cut2], data[cut2:], data):
+        try:
+            ok = _check_frame(decoder.feed(part)) or ok
+        except Malformed as e:
+            assert "\n" not in str(e)
+    return ok
+
+
+def _livelink_udp(data: bytes) -> bool:
+    from faceclean.relay import livelink
+
+    return _decode_with(livelink.decode)(data)
+
+
+def _ifacialmocap(data: bytes) -> bool:
+    from faceclean.relay import ifacialmocap
+
+    return _decode_with(ifacialmocap.decode)(data)
+
+
+_DECODERS: dict[str, Callable[[bytes], bool]] = {
+    "vmc": _vmc,
+    "livelink-udp": _livelink_udp,
+    "ifacialmocap": _ifacialmocap,
+}
+
+
+# -- seeds: real inputs to mutate ----------------------------------------------------------
+
+
+@cache
+def seeds(target: str) -> tuple[bytes, ...]:
+    """Well-formed inputs of a target: real data where the shared folder has it."""
+    if target in ("livelink", "csv", "json", "npz"):
+        return tuple(_file_seeds(target))
+    if target in ("glb", "gltf"):
+        return (_gltf_seed(target == "glb"),)
+    return tuple(_packet_seeds(target))
+
+
+def _sample_animation() -> Animation:
+    """A short real take (30 rows, tracking loss included) or a synthetic one."""
+    from faceclean import io
+    from faceclean.settings import takes_dir
+
+    take = takes_dir() / "alexdjulin" / "apfel.csv" if takes_dir() else None
+    if take is not None and take.is_file():
+        with open(take, "rb") as f:
+            head = b"".join(f.readline() for _ in range(31))
+        with tempfile.TemporaryDirectory() as d:
+            p = Path(d) / "take.csv"
+            p.write_bytes(head)
+            return io.load(p)
+    t = np.arange(30) / 60.0
+    v = 0.5 + 0.4 * np.sin(t[:, None] * np.arange(1, 53))
+    v[10] = np.nan
+    return Animation.from_arkit(t, v)
+
+
+def _file_seeds(fmt: str) -> list[bytes]:
+    from faceclean import io
+
+    anim = _sample_animation()
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        for i, a in enumerate(
+            (anim, Animation(anim.times[:3], anim.values[:3, :4], anim.names[:4]))
+        ):
+            p = Path(d) / f"s{i}{READERS[fmt]}"
+            io.save(a, p, fmt)
+            out.append(p.read_bytes())
+    return out
+
+
+def _gltf_seed(glb: bool) -> bytes:
+    """A tiny glTF: a triangle with two morph targets, five weight keyframes."""
+    import base64
+
+    import pygltflib as g
+
+    pos = np.eye(3, dtype="<f4")
+    times = np.arange(5, dtype="<f4") / 30
+    weights = np.linspace(0, 1, 10, dtype="<f4")
+    parts = [pos.tobytes(), (pos * 0.1).tobytes(), (pos * 0.2).tobytes()]
+    parts += [times.tobytes(), weights.tobytes()]
+    views, blob = [], b""
+    for data in parts:
+        views.append(g.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
+        blob += data
+    vec = {"componentType": g.FLOAT, "count": 3, "type": "VEC3", "min": [0.0] * 3}
+    vec["max"] = [1.0] * 3
+    accessors = [g.Accessor(bufferView=i, **vec) for i in range(3)]
+    accessors.append(g.Accessor(bufferView=3, componentType=g.FLOAT, count=5, type="SCALAR"))
+    accessors.append(g.Accessor(bufferView=4, componentType=g.FLOAT, count=10, type="SCALAR"))
+    prim = g.Primitive(
+        attributes=g.Attributes(POSITION=0), targets=[{"POSITION": 1}, {"POSITION": 2}]
+    )
+    gltf = g.GLTF2(
+        scene=0,
+        scenes=[g.Scene(nodes=[0])],
+        nodes=[g.Node(mesh=0)],
+        meshes=[g.Mesh(primitives=[prim], extras={"targetNames": ["jawOpen", "eyeBlinkLeft"]})],
+        accessors=accessors,
+        bufferViews=views,
+        buffers=[g.Buffer(byteLength=len(blob))],
+        animations=[
+            g.Animation(
+                samplers=[g.AnimationSampler(input=3, output=4)],
+                channels=[
+                    g.AnimationChannel(
+                        sampler=0, target=g.AnimationChannelTarget(node=0, path="weights")
+                    )
+                ],
+            )
+        ],
+    )
+    if glb:
+        gltf.set_binary_blob(blob)
+        return b"".join(gltf.save_to_bytes())
+    gltf.buffers[0].uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode()
+    return gltf.gltf_to_json().encode()
+
+
+def _packet_seeds(target: str) -> list[bytes]:
+    from faceclean.relay import livelink, vmc
+    from faceclean.relay.frame import Frame
+    from faceclean.settings import data_dir
+
+    rng = np.random.default_rng(0)
+    frame = Frame(ARKIT52, rng.random(52), 12.5, np.zeros(9))
+    if target == "livelink-udp":
+        rec = data_dir() / "raw_streams" / "llv_dao.gesichter" if data_dir() else None
+        if rec is not None and rec.is_file():
+            return livelink.read_recording(rec)[:8]
+        return [livelink.Encoder().encode(frame)]
+    if target == "vmc":
+        return [vmc.Encoder(stamp=True).encode(frame), vmc.Encoder(names="lr").encode(frame)]
+    text = "|".join(f"{n}-{int(v * 100)}" for n, v in zip(ARKIT52, frame.values, strict=True))
+    return [(text + "|=head#1.0,2.0,3.0,0.1,0.2,0.3|").encode(), text.replace("-", "&").encode()]
+
+
+# -- hypothesis strategies and the long run ------------------------------------------------
+
+
+def strategy(target: str):
+    """Inputs for ``target``: arbitrary bytes, or a seed with a few byte-level edits."""
+    from hypothesis import strategies as st
+
+    pool = seeds(target)
+
+    @st.composite
+    def mutated(draw) -> bytes:
+        data = bytearray(draw(st.sampled_from(pool)))
+        for _ in range(draw(st.integers(1, 6))):
+            at = draw(st.integers(0, len(data)))
+            kind = draw(st.integers(0, 5))
+            if kind == 0 and data and at < len(data):  # flip a byte
+                data[at] = draw(st.integers(0, 255))
+            elif kind == 1:  # cut the tail
+                del data[at:]
+            elif kind == 2:  # delete a span
+                del data[at : at + draw(st.integers(1, 64))]
+            elif kind == 3:  # splice a token
+                data[at:at] = draw(st.sampled_from(TOKENS))
+            elif kind == 4:  # repeat a span
+                data[at:at] = data[at : at + draw(st.integers(1, 256))]
+            else:  # random bytes
+                data[at:at] = draw(st.binary(min_size=1, max_size=16))
+        return bytes(data)
+
+    return st.one_of(st.binary(max_size=MAX_BYTES), mutated(), st.sampled_from(pool))
+
+
+def run(
+    target: str,
+    examples: int | None = None,
+    seconds: float | None = None,
+    batch: int = 2000,
+    on_batch: Callable[[Report], None] | None = None,
+) -> Report:
+    """Fuzz one target for ``examples`` inputs or ``seconds`` seconds (batches of
+    ``batch``, each with fresh randomness). Stops at the first failure (shrunk)."""
+    from hypothesis import HealthCheck, Phase, given, settings
+
+    if (examples is None) == (seconds is None):
+        raise FacecleanError("give a number of examples or a number of seconds")
+    report = Report(target)
+    start = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="faceclean-fuzz-") as folder:
+        check = Checker(target, folder)
+
+        def one(data: bytes) -> None:
+            report.tried += 1
+            try:
+                ok = check(data)
+            except Exception as e:  # keep the smallest failing input and where it failed
+                if report.failing_input is None or len(data) < len(report.failing_input):
+                    report.failing_input, report.failure = data, _one_line(e)
+                raise
+            if ok:
+                report.accepted += 1
+            else:
+                report.refused += 1
+
+        while report.failure is None:
+            n = batch if examples is None else min(batch, examples - report.tried)
+            if n <= 0 or (seconds is not None and time.monotonic() - start >= seconds):
+                break
+            cfg = settings(
+                max_examples=n,
+                deadline=None,
+                database=None,
+                phases=[Phase.generate, Phase.shrink],
+                suppress_health_check=list(HealthCheck),
+            )
+            try:
+                cfg(given(strategy(target))(one))()
+            except Exception as e:  # the property failed: ``one`` kept the input
+                report.failure = report.failure or _one_line(e)
+            report.seconds = time.monotonic() - start
+            if on_batch is not None:
+                on_batch(report)
+    report.seconds = time.monotonic() - start
+    return report
+
+
+def _one_line(e: BaseException) -> str:
+    """``Type: message (file:line)`` of the innermost frame, on one line."""
+    import traceback
+
+    text = " ".join(str(e).split())[:300]
+    where = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
+    at = f" ({Path(where.filename).name}:{where.lineno})" if where else ""
+    return (f"{type(e).__name__}: {text}" if text else type(e).__name__) + at
+
+
+def failing_example(report: Report) -> str:
+    """The failing input as a short Python literal (for a bug report or a test)."""
+    data = report.failing_input or b""
+    return repr(data[:200]) + (f" ... ({len(data)} bytes)" if len(data) > 200 else "")
+
+
+__all__ = ["DECODERS", "READERS", "TARGETS", "Checker", "Report", "check_animation", "run"]
