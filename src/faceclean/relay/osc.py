@@ -2,7 +2,7 @@
 
 Packets are a message (``/address\\0..`` padded to 4 bytes, ``,tags\\0..``, arguments) or a
 bundle (``#bundle\\0``, 8-byte time tag, then ``i32 size`` + element, repeated).
-Measured about 6x faster than python-osc's parser on a 52-value VMC frame
+Measured about 4-6x faster than python-osc's parser on a 52-value VMC frame
 (benchmarks/relay_latency.py); python-osc is the peer in the tests.
 """
 
