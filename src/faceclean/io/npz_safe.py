@@ -43,9 +43,7 @@ def load_arrays(
         raise FacecleanError(f"no such {what}: {p}")
     size = p.stat().st_size
     if max_bytes is not None and size > max_bytes:
-        raise FacecleanError(
-            f"{p.name}: {size / MiB:.1f} MiB, over the {max_bytes / MiB:g} MiB limit"
-        )
+        raise FacecleanError(f"{p.name}: {_size(size)}, over the {_size(max_bytes)} limit")
     try:
         with zipfile.ZipFile(p) as z:
             members = z.infolist()
