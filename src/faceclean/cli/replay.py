@@ -20,10 +20,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import threading
 
+    from faceclean.errors import FacecleanError
     from faceclean.relay import parse
     from faceclean.relay.replay import load_frames, replay
 
     send = parse(args.send, "send")
+    if not args.speed > 0:
+        raise FacecleanError(f"--speed must be > 0 (got {args.speed})")
     frames = load_frames(args.file)
     stop = threading.Event()
 
@@ -41,5 +44,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for s, handler in old.items():
             signal.signal(s, handler)
-    print(f"sent {sent} packets", flush=True)
+    refused = (
+        ""
+        if args.loop or sent == len(frames)
+        else f" ({len(frames) - sent} refused: is anything listening at {send}?)"
+    )
+    print(f"sent {sent} packets{refused}", flush=True)
     return 0
