@@ -415,3 +415,101 @@ def test_real_take_is_never_modified(tmp_path, capsys):
     assert hashlib.sha256(take.read_bytes()).hexdigest() == digest
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
     assert json.loads((tmp_path / "c.json").read_text())["format"] == "faceclean-animation/1"
+
+
+# -- model and preset files: no pickle, size- and shape-checked ----------------------------
+
+
+def _model_arrays() -> dict[str, np.ndarray]:
+    from faceclean.filters.lstm_weights import LSTMWeights
+
+    return LSTMWeights.random(("jawOpen", "eyeBlinkLeft"), hidden=8, layers=2).to_arrays()
+
+
+def _bad_models(folder: Path) -> dict[str, tuple[Path, str]]:
+    """name -> (model file, words of the refusal)."""
+    out: dict[str, tuple[Path, str]] = {}
+
+    def put(name: str, message: str, data: bytes | None = None, **arrays) -> None:
+        p = folder / f"{name}.npz"
+        if data is not None:
+            p.write_bytes(data)
+        else:
+            np.savez(p, **arrays)
+        out[name] = (p, message)
+
+    good = _model_arrays()
+    put("good", "", **good)
+    put("wrong_shape", "lstm.0.w_hh has shape", **{**good, "lstm.0.w_hh": np.zeros((32, 7))})
+    missing = {k: v for k, v in good.items() if k != "head.b"}
+    put("missing_key", "missing array 'head.b'", **missing)
+    put("no_config", "no readable 'config'", **{k: v for k, v in good.items() if k != "config"})
+    foreign = {**good, "config": np.array(json.dumps({"format": "someone-else/3"}))}
+    put("foreign_config", "not a faceclean-lstm/1 checkpoint", **foreign)
+    obj = {**good, "feat_mean": np.array([object()], dtype=object)}
+    put("object_array", "Object arrays cannot be loaded", **obj)
+    put("pickle", "not a zip archive", data=pickle.dumps(good))
+    put("truncated", "not a readable model .npz", data=_npz_bytes(**good)[:500])
+    with zipfile.ZipFile(folder / "zip.npz", "w") as z:
+        z.writestr("weights.bin", b"\0" * 64)
+    out["zip"] = (folder / "zip.npz", "not an npz archive")
+    big = folder / "big.npz"
+    with open(big, "wb") as f:  # sparse: 65 MiB on paper, nothing on disk
+        f.write(b"PK\x03\x04")
+        f.truncate(65 << 20)
+    out["too_big"] = (big, "65.0 MiB, over the 64.0 MiB limit")
+    return out
+
+
+def test_model_files_are_checked_before_use(tmp_path):
+    from faceclean.filters.lstm_weights import LSTMWeights
+
+    for name, (path, message) in _bad_models(tmp_path).items():
+        before = hashlib.sha256(path.read_bytes()).hexdigest()
+        if name == "good":
+            assert LSTMWeights.load(path).hidden == 8
+            continue
+        with pytest.raises(FacecleanError, match=message) as e:
+            LSTMWeights.load(path)
+        assert "\n" not in str(e.value), name
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == before
+
+
+def test_bad_model_through_the_cli_is_one_line(tmp_path, capsys):
+    work, store = tmp_path / "work", tmp_path / "models"
+    work.mkdir(), store.mkdir()
+    src = work / "a.csv"
+    src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.6\n")
+    models = _bad_models(store)
+    for method, key in (("lstm", "path"), ("fc", "model"), ("gbt", "model")):
+        for name in ("pickle", "object_array", "truncated", "too_big"):
+            model = models[name][0]
+            argv = ["clean", str(src), "-o", str(work / "o.csv"), "--method", method]
+            _refused(capsys, [*argv, "--set", f"{key}={model}"], work, model.name)
+
+
+@pytest.mark.parametrize(
+    ("doc", "message"),
+    [
+        ({"format": "faceclean-preset/1", "method": "ema", "params": {"tau": "fast"}}, "finite"),
+        ({"format": "faceclean-preset/1", "method": "ema", "params": [1, 2]}, "an object"),
+        ({"format": "faceclean-preset/1", "method": "ema", "params": {"tau": True}}, "finite"),
+        ({"format": "faceclean-preset/1", "method": 3}, "unknown method"),
+        ({"format": "faceclean-preset/1", "method": "ema", "groups": {"ears": {}}}, "group"),
+        ({"format": "faceclean-preset/1", "method": "ema", "extra": 1}, "unknown key"),
+        ({"format": "other/1", "method": "ema"}, "format must be"),
+        ([1, 2, 3], "a JSON object"),
+        ("[" * 50_000, "not valid JSON"),
+        (b"\x80\x04\x95 pickle", "not valid JSON"),
+    ],
+)
+def test_malformed_presets_are_one_line(tmp_path, capsys, doc, message):
+    p = tmp_path / "p.json"
+    if isinstance(doc, bytes):
+        p.write_bytes(doc)
+    else:
+        p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    src = tmp_path / "a.csv"
+    src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.6\n")
+    argv = ["clean", str(src), "-o", str(tmp_path / "o.csv"), "--preset", str(p)]
+    _refused(capsys, argv, tmp_path, message)

@@ -47,6 +47,8 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, GROUPS, canonical
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.lstm_weights import MAX_MODEL_BYTES
+from faceclean.io.npz_safe import load_arrays
 
 GROUP_NAMES = tuple(GROUPS)
 ALPHA_RATE = 60.0  # Hz; α_r is the paper's per-frame value at its 60 fps test rate
@@ -55,9 +57,8 @@ BIG = 1e30  # derivatives are clipped to +-BIG (a dt of 1e-9 s must not overflow
 
 def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], dict]:
     """(config, arrays) of a baseline checkpoint; FacecleanError if it is not one."""
+    arrays = load_arrays(path, MAX_MODEL_BYTES, "model file")  # no pickle, size-checked
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
         config = json.loads(str(arrays.pop("config")))
     except (OSError, ValueError, KeyError, json.JSONDecodeError) as e:
         raise FacecleanError(f"{path}: not a readable model file ({e})") from None

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,8 +22,10 @@ from typing import Any
 import numpy as np
 
 from faceclean.errors import FacecleanError
+from faceclean.io.npz_safe import MiB, load_arrays
 
 FORMAT = "faceclean-lstm/1"
+MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
 
 
 @dataclass(frozen=True)
@@ -88,11 +89,7 @@ class LSTMWeights:
         with open(p, "rb") as f:
             if f.read(4) != b"PK\x03\x04":  # an .npz is a zip archive
                 raise FacecleanError(f"{p.name}: not a model .npz (not a zip archive)")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-            raise FacecleanError(f"{p.name}: not a model .npz ({e})") from None
+        arrays = load_arrays(p, MAX_MODEL_BYTES, "model .npz")  # no pickle, size-checked
         return cls.from_arrays(arrays, p.name)
 
     @classmethod

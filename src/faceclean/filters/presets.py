@@ -97,7 +97,7 @@ def read(preset: str | os.PathLike) -> dict[str, Any]:
     p = locate(preset)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
         raise FacecleanError(f"{p.name}: not valid JSON ({e})") from None
     return validate(doc, p.name)
 
