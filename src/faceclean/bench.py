@@ -5,7 +5,7 @@ Per cleaner, in one process (the CLI pins it to one core with one BLAS thread):
 - throughput: stream-frames per second with S streams stepped together (S = 1, 64, 1024),
   the best of many ~2 ms blocks (the machine may be shared);
 - hour: seconds to clean one hour of 60 fps animation offline (``clean``), measured on a
-  shorter clip (best of 3) and scaled linearly (the cost per frame is constant), said so;
+  20 s clip (best of 5) and scaled linearly (the cost per frame is constant), said so;
 - state: bytes of per-stream state the cleaner holds (all per-stream arrays).
 The reference is faceclean.neural.reference (the same weights, eager PyTorch); every
 figure also appears as a cost ratio to it: our time / its time (< 1 is faster).
@@ -38,8 +38,8 @@ class Sizes:
     streams: tuple[int, ...] = (1, 64, 1024)
     latency_steps: int = 3000
     target_s: float = 0.5  # s of measuring per throughput figure
-    clip_s: float = 120.0  # s of 60 fps animation cleaned, then scaled to an hour
-    repeats: int = 5  # at least this many timed blocks / runs; the best counts
+    clip_s: float = 20.0  # s of 60 fps animation cleaned, then scaled to an hour
+    repeats: int = 5  # at least this many timed blocks, and cleans of the clip; best counts
 
     @classmethod
     def quick(cls, streams: tuple[int, ...] = (1, 4)) -> Sizes:
@@ -109,42 +109,52 @@ def _latency(st: _Stepper, n: int) -> tuple[float, float]:
     return float(np.percentile(dts, 50) / 1e3), float(np.percentile(dts, 99) / 1e3)
 
 
-def _throughput(st: _Stepper, S: int, target_s: float, repeats: int) -> float:
-    """Stream-frames per second: the best block of steps, blocks of about BLOCK_S.
+def _throughputs(steppers: dict[str, _Stepper], S: int, sizes: Sizes) -> dict[str, float]:
+    """Stream-frames per second of every stepper with S streams: the best block.
 
-    Short blocks, best of many (as timeit's min): on a shared machine a block that the
-    scheduler did not interrupt measures the code, a long one measures the neighbours.
+    Blocks of about BLOCK_S, taken round-robin across the cleaners, best of many (as
+    timeit's min): on a shared machine a block the scheduler did not interrupt measures
+    the code, and neighbours weigh on every cleaner alike.
     """
-    probe = _walk(4, S, 2)
-    t = _times(4, S)
-    st.begin(probe[0], t[0])
-    t0 = time.perf_counter()
-    for i in range(1, 4):
-        st.step(probe[i], t[i])
-    per_step = max((time.perf_counter() - t0) / 3, 1e-7)
-    n = int(min(max(BLOCK_S / per_step, 1), 5000))  # steps per block
-    blocks = int(min(max(target_s / (n * per_step), repeats), 200))
-    x, t = _walk(n * blocks, S, 3), _times(n * blocks, S, start=4)
-    best = 0.0
-    for r in range(blocks):
+    plan = {}
+    for name, st in steppers.items():
+        probe, t = _walk(4, S, 2), _times(4, S)
+        st.begin(probe[0], t[0])
         t0 = time.perf_counter()
-        for i in range(r * n, (r + 1) * n):
-            st.step(x[i], t[i])
-        best = max(best, S * n / (time.perf_counter() - t0))
+        for i in range(1, 4):
+            st.step(probe[i], t[i])
+        per_step = max((time.perf_counter() - t0) / 3, 1e-7)
+        plan[name] = (int(min(max(BLOCK_S / per_step, 1), 5000)), per_step)  # steps/block
+    round_s = sum(n * p for n, p in plan.values())
+    blocks = int(min(max(sizes.target_s * len(plan) / round_s, sizes.repeats), 200))
+    data = {
+        name: (_walk(n * blocks, S, 3), _times(n * blocks, S, 4)) for name, (n, _) in plan.items()
+    }
+    best = dict.fromkeys(steppers, 0.0)
+    for r in range(blocks):
+        for name, st in steppers.items():
+            n, (x, t) = plan[name][0], data[name]
+            t0 = time.perf_counter()
+            for i in range(r * n, (r + 1) * n):
+                st.step(x[i], t[i])
+            best[name] = max(best[name], S * n / (time.perf_counter() - t0))
     return best
 
 
-def _hour(clean: Callable[[Animation], Any], clip_s: float, repeats: int) -> float:
-    """Seconds for one hour of 60 fps: the best of ``repeats`` cleans of clip_s, scaled."""
-    n = int(clip_s * FPS)
+def _hours(cleans: dict[str, Callable[[Animation], Any]], sizes: Sizes) -> dict[str, float]:
+    """Seconds to clean one hour of 60 fps, per cleaner: the best of several cleans of a
+    clip_s clip (round-robin across the cleaners), scaled to an hour."""
+    n = int(sizes.clip_s * FPS)
     anim = Animation.from_arkit(np.arange(n) / FPS, _walk(n, 1, 4)[:, 0])
-    clean(Animation.from_arkit(anim.times[:30], anim.values[:30]))  # warm
-    best = np.inf
-    for _ in range(max(1, min(repeats, 3))):
-        t0 = time.perf_counter()
-        clean(anim)
-        best = min(best, time.perf_counter() - t0)
-    return float(best * HOUR / clip_s)
+    best = dict.fromkeys(cleans, np.inf)
+    for r in range(sizes.repeats):
+        for name, clean in cleans.items():
+            if r == 0:
+                clean(Animation.from_arkit(anim.times[:30], anim.values[:30]))  # warm
+            t0 = time.perf_counter()
+            clean(anim)
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return {name: float(b * HOUR / sizes.clip_s) for name, b in best.items()}
 
 
 def _state_bytes(cleaner: Any, S: int) -> int:
@@ -209,27 +219,17 @@ def run(
     model = LSTMWeights.load(path) if path else LSTMWeights.random(ARKIT52, seed=0)
     model_note = path or "random init (no shipped model yet): same architecture, same cost"
 
-    rows: list[Row] = []
+    rows: dict[str, Row] = {}
+    steppers: dict[str, _Stepper] = {}
+    cleans: dict[str, Callable[[Animation], Any]] = {}
     for name, (factory, note) in cleaners(model).items():
-        row = Row(name, note=note)
-        rows.append(row)
-        if factory is None:
-            continue
-        say(f"{name}: latency")
-        st = _Stepper(factory)
-        row.p50_us, row.p99_us = _latency(st, sizes.latency_steps)
-        for n in sizes.streams:
-            say(f"{name}: {n} streams")
-            row.throughput[n] = _throughput(st, n, sizes.target_s, sizes.repeats)
-            if n == max(sizes.streams):
-                row.state_bytes = _state_bytes(st.cleaner, n)
-        say(f"{name}: one hour")
-        row.hour_s = _hour(lambda a, f=factory: f().clean(a), sizes.clip_s, sizes.repeats)
+        rows[name] = Row(name, note=note)
+        if factory is not None:
+            steppers[name] = _Stepper(factory)
+            cleans[name] = lambda a, f=factory: f().clean(a)
     for name in ("gaussian", "savgol"):
-        say(f"{name}: one hour")
-        hour = _hour(make(name).clean, sizes.clip_s, sizes.repeats)
-        rows.append(Row(name, hour_s=hour, note="offline, default parameters"))
-
+        rows[name] = Row(name, note="offline, default parameters")
+        cleans[name] = make(name).clean
     reference = None
     try:
         import torch
@@ -237,24 +237,32 @@ def run(
         from faceclean.neural.reference import NaiveReference
 
         torch.set_num_threads(1)
-        ref = Row(NaiveReference.name, note=f"torch {torch.__version__}, 1 thread")
-        st = _Stepper(lambda: NaiveReference(model), reference=True)
-        say("reference: latency")
-        ref.p50_us, ref.p99_us = _latency(st, sizes.latency_steps)
-        for n in sizes.streams:
-            say(f"reference: {n} streams")
-            ref.throughput[n] = _throughput(st, n, sizes.target_s, sizes.repeats)
-        ref.state_bytes = st.cleaner.state_bytes
-        clean = _reference_clean(lambda: NaiveReference(model))
-        ref.hour_s = _hour(clean, sizes.clip_s, sizes.repeats)
-        reference = ref
+        reference = Row(NaiveReference.name, note=f"torch {torch.__version__}, 1 thread")
+        steppers["reference"] = _Stepper(lambda: NaiveReference(model), reference=True)
+        cleans["reference"] = _reference_clean(lambda: NaiveReference(model))
     except ImportError:
         pass
+    row_of = dict(rows, reference=reference)
+
+    for name, st in steppers.items():
+        say(f"latency: {name}")
+        row_of[name].p50_us, row_of[name].p99_us = _latency(st, sizes.latency_steps)
+    for n in sizes.streams:
+        say(f"throughput: {n} streams")
+        for name, value in _throughputs(steppers, n, sizes).items():
+            row_of[name].throughput[n] = value
+    last = sizes.streams[-1]  # the cleaners now hold this many streams
+    for name, st in steppers.items():
+        ref_bytes = getattr(st.cleaner, "state_bytes", None) if st.reference else None
+        row_of[name].state_bytes = ref_bytes or _state_bytes(st.cleaner, last)
+    say("one hour")
+    for name, value in _hours(cleans, sizes).items():
+        row_of[name].hour_s = value
     return {
         "machine": machine(),
         "model": {"source": model_note, "layers": model.layers, "hidden": model.hidden},
         "sizes": asdict(sizes),
-        "rows": [asdict(r) for r in rows],
+        "rows": [asdict(r) for r in rows.values()],
         "reference": asdict(reference) if reference else None,
         "hour_extrapolated_from_s": sizes.clip_s,
     }
