@@ -8,7 +8,8 @@ Data: every training take is augmented (dataset.augment: gains, offsets, time-wa
 mirroring), its simulator parameters drawn from the "mixed" preset, and it is corrupted
 three times, at the drawn rate f and resampled at 2f and f/2 (the paper's ×2 / ×½
 augmentation; rates kept in 12-240 Hz). Frames whose derivatives reach back past a
-(re)start are left out.
+(re)start are left out. 10 % "still face" samples are added (random pose, zero
+derivatives in and out; see :func:`with_still_faces`).
 
 Loss, L_der: Σ_k mean((x̂^(k) − x_gt^(k)) / σ_k)², each order scaled by its training std
 σ_k (an unscaled 4th derivative is ~fps⁴ larger and would be all the loss sees).
@@ -46,6 +47,7 @@ K = 4
 ALPHA = {"fc": 0.9, "gbt": 0.97}
 FACTORS = (1.0, 2.0, 0.5)  # rate multipliers of the ×2 / ×½ augmentation
 FEAT_CLIP = 5.0  # FC: standardised features kept within ±5
+STILL = 0.1  # share of "still face" samples added to the training frames
 
 
 def training_data(
@@ -78,6 +80,19 @@ def training_data(
     if not feats:
         raise FacecleanError("no training frames")
     return np.concatenate(feats), np.concatenate(targets)
+
+
+def with_still_faces(
+    feats: np.ndarray, targets: np.ndarray, fraction: float, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Append ``fraction`` × n "still face" samples: random poses (each channel uniform in
+    [0, 1]), zero input derivatives, zero target derivatives. A face held still stays
+    still, whatever the pose (without them a whole-face net drifts on unusual poses)."""
+    n = int(round(fraction * len(feats)))
+    rng = np.random.default_rng([seed, 1])
+    still = np.zeros((n, *feats.shape[1:]), feats.dtype)
+    still[..., 0] = rng.uniform(0.0, 1.0, (n, feats.shape[1]))
+    return np.concatenate([feats, still]), np.concatenate([targets, np.zeros_like(targets[:n])])
 
 
 class FCNet(nn.Module):
@@ -300,6 +315,7 @@ def train(
     train_takes, _ = dataset.split(takes, val_sources=val_sources)
     start = time.perf_counter()
     feats, targets = training_data(train_takes, seed, repeats)
+    feats, targets = with_still_faces(feats, targets, STILL, seed)
     if progress:
         progress(f"{len(feats)} training frames from {len(train_takes)} takes")
     facts: dict[str, Any] = {
@@ -311,6 +327,7 @@ def train(
         "frames": int(len(feats)),
         "augmentation": "dataset.augment + simulator 'mixed' at f, 2f, f/2",
         "loss": "L_der, orders scaled by their training std",
+        "still_fraction": STILL,
     }
     if arch == "fc":
         model = fit_fc(feats, targets, seed=seed, epochs=epochs, progress=progress)
