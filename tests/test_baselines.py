@@ -132,16 +132,18 @@ def test_features_are_backward_derivatives_in_seconds():
 
 def test_tiny_training_run_writes_a_working_model(tmp_path):
     from faceclean import io, performer
+    from faceclean.cli import main
 
     for source in ("one", "two"):
         (tmp_path / source).mkdir()
         anim = performer.perform(4.0, seed=len(source), fps=60.0)
         io.save(anim, tmp_path / source / "take.csv")
     out = tmp_path / "gbt.npz"
-    facts = baselines.train("gbt", out, data=tmp_path, val_sources=["two"], iterations=(3, 2, 2, 2))
-    assert facts["val_sources"] == ["two"] and facts["train_sources"] == ["one"]
+    argv = ["train", "--arch", "gbt", "--data", str(tmp_path), "--val-sources", "two"]
+    assert main([*argv, "--out", str(out)]) == 0
     gbt = BoostedTrees(model=out)
-    assert gbt.config["val_sources"] == ["two"]
+    assert gbt.config["val_sources"] == ["two"] and gbt.config["train_sources"] == ["one"]
     clip = io.load(tmp_path / "two" / "take.csv")
     y = gbt.clean(clip).values
     assert y.shape == clip.values.shape and np.isfinite(y).all()
+    assert main([*argv, "--out", str(tmp_path / "x.txt")]) == 2  # bad --out: exit 2

@@ -58,6 +58,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="no training: evaluate MODEL on the validation takes at 30/60/120 "
         "fps and webcam timing, print a markdown table",
     )
+    p.add_argument(
+        "--arch",
+        choices=("lstm", "fc", "gbt"),
+        default="lstm",
+        help="lstm (default), or the paper's non-recurrent baselines fc / gbt "
+        "(SPEC section 3; they use --data, --val-sources, --seed, --out only)",
+    )
     p.add_argument("--out", metavar="MODEL", help="best model (.npz)")
     # fmt: skip
 
@@ -76,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
+    if args.arch != "lstm":
+        return _baseline(args)
     if args.epochs < 1 or args.batch < 1:
         raise FacecleanError("--epochs and --batch must be at least 1")
     weights = Weights()
@@ -127,6 +136,18 @@ def _report(args: argparse.Namespace) -> str:
     results = evaluate(model, corrupted(val, list(CONDITIONS)), lag=True)
     names = sorted({t.source for t in val})
     return f"{args.report} on {', '.join(names)} ({len(val)} takes)\n\n{table(results)}"
+
+
+def _baseline(args: argparse.Namespace) -> int:
+    """``--arch fc|gbt``: train a baseline (faceclean.neural.baselines)."""
+    from faceclean.neural import baselines
+
+    facts = baselines.train(
+        args.arch, args.out, data=args.data, val_sources=args.val_sources, seed=args.seed,
+        progress=lambda msg: print(msg, file=sys.stderr),
+    )  # fmt: skip
+    print(f"{args.arch}: {facts['frames']} frames, {facts['seconds']} s: {args.out}")
+    return 0
 
 
 def _epoch_line(e: dict) -> str:
