@@ -1,15 +1,15 @@
 """Optional numba kernel for the learned runtime's step (used when numba is installed).
 
-Why: for one stream the numpy step spends more time in ~30 small ufunc calls than in
-its two matrix-vector products (about 30 us against 12 us for 2 layers of 128 on one
-core), so a single compiled function that does the products and the gate arithmetic
-in one pass halves the step (docs/BENCHMARKS.md). Many streams stay with numpy, whose
-BLAS matrix-matrix products are faster than these per-row loops.
+Why: for one stream the numpy step (28 us on an idle core) spends about as long in ~30
+small ufunc calls as in its two matrix-vector products, so one compiled function that
+does the products and the gate arithmetic in one pass takes about 0.6x of it
+(docs/BENCHMARKS.md). Up to ``Learned.jit_max_streams`` streams share each weight row;
+beyond, numpy's BLAS matrix-matrix products are faster than these per-row loops.
 
 The gate nonlinearity uses a rational tanh (Eigen's float approximation: max absolute
-error 3.3e-7 against float64 tanh, tested), which vectorises; libm's
-scalar tanh would cost more than the products. Without numba, ``available()`` is False
-and the runtime uses its numpy kernel only.
+error 3.3e-7 against float64 tanh, tested), which vectorises; libm's scalar tanh would
+cost more than the products. Without numba, ``available()`` is False and the runtime
+uses its numpy kernel only.
 """
 
 from __future__ import annotations
