@@ -37,7 +37,7 @@ bench: $(STAMP)
 	$(BIN)/faceclean bench --json docs/benchmarks.json
 
 eval: $(STAMP)
-	$(BIN)/faceclean eval --json docs/results.json
+	$(BIN)/faceclean eval --models benchmarks/models --json docs/results.json --markdown docs/RESULTS.md
 
 clean-venv:
 	rm -rf $(VENV)

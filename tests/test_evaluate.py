@@ -88,3 +88,15 @@ def test_cli_quick_writes_markdown_and_json(data, tmp_path, capsys):
     assert md.read_text().startswith("# Results")
     assert "Raw input" in json.loads(js.read_text())["rows"]
     assert "| method | MSE |" in capsys.readouterr().out
+
+
+def test_a_model_that_trained_on_a_source_is_not_evaluated_on_it(tmp_path, fc_model):
+    torch = pytest.importorskip("torch")
+    from faceclean.neural import baselines
+
+    torch.manual_seed(1)
+    seen = tmp_path / "take-split.npz"  # a take-level split: every source in both lists
+    facts = {"val_sources": ["one", "two"], "train_sources": ["one", "two"]}
+    baselines.save_fc(baselines.FCNet(52, hidden=(4,)), seen, facts)
+    picked = evaluate.pick_models([seen, fc_model], ["one", "two"])
+    assert picked["fc"] == {"two": fc_model} and picked["gbt"] == {} and picked["lstm"] == {}
