@@ -100,6 +100,7 @@ def test_fast_path_equals_generic_rules(weights, kernel):
     S, n = 3, 40
     t, x = _events(S, n)
     fast, slow = (Learned(weights=weights, kernel=kernel) for _ in range(2))
+    fast.jit_max_streams = slow.jit_max_streams = 64  # the compiled kernel for 3 streams too
     for i in range(n):
         a = fast.step(x[i], t[i])
         b = slow._generic_step(x[i], t[i])  # the base class's rules, no fast path
@@ -139,15 +140,17 @@ def test_time_rules(weights):
     np.testing.assert_allclose(c.step(x0, 5.0), x0, atol=1e-7)  # long gap restarts
 
 
-def test_streams_together_equal_streams_alone(weights):
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_streams_together_equal_streams_alone(weights, kernel):
     S, n = 5, 40
     t, x = _events(S, n)
     x = np.nan_to_num(x, nan=0.5, posinf=0.5)
     t = np.cumsum(np.full((n, S), 0.015), axis=0) + np.arange(S) * 0.003
-    together = Learned(weights=weights, kernel="numpy")
+    together = Learned(weights=weights, kernel=kernel)
+    together.jit_max_streams = 64
     got = np.array([together.step(x[i], t[i]) for i in range(n)])
     for s in range(S):
-        alone = Learned(weights=weights, kernel="numpy")
+        alone = Learned(weights=weights, kernel=kernel)
         one = np.array([alone.step(x[i, s], t[i, s]) for i in range(n)])
         np.testing.assert_allclose(got[:, s], one, atol=1e-6)
 
@@ -178,6 +181,7 @@ def test_channels_map_by_name(weights, clip):
 def test_fast_step_allocates_only_its_output(weights, kernel):
     for S in (1, 16):
         c = Learned(weights=weights, kernel=kernel)
+        c.jit_max_streams = 64  # the chosen kernel at every stream count
         x = np.full((S, 52), 0.3) if S > 1 else np.full(52, 0.3)
         c.step(x, np.zeros(S) if S > 1 else 0.0)
         c.step(x, np.full(S, 0.01) if S > 1 else 0.01)  # warm (compiles, allocates)

@@ -190,7 +190,10 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
         else:
             out[name] = (lambda n=name: make(n), "default parameters")
     if learned_jit.available():
-        out["lstm"] = (lambda: Learned(weights=model), "numba kernel <= 8 streams, numpy above")
+        out["lstm"] = (
+            lambda: Learned(weights=model),
+            f"numba kernel <= {Learned.jit_max_streams} streams, numpy above",
+        )
     out["lstm-numpy"] = (lambda: Learned(weights=model, kernel="numpy"), "numpy + BLAS only")
     try:
         from faceclean.filters.onnx_backend import OnnxLearned

@@ -52,7 +52,7 @@ class Learned(StreamCleaner):
     """
 
     name = "lstm"
-    jit_max_streams: int = 8  # above this, numpy's BLAS products beat the per-row loops
+    jit_max_streams: int = 2  # above, numpy's BLAS products win (docs/BENCHMARKS.md)
 
     def __init__(
         self,

@@ -3,8 +3,8 @@
 Why: for one stream the numpy step (28 us on an idle core) spends about as long in ~30
 small ufunc calls as in its two matrix-vector products, so one compiled function that
 does the products and the gate arithmetic in one pass takes about 0.6x of it
-(docs/BENCHMARKS.md). Up to ``Learned.jit_max_streams`` streams share each weight row;
-beyond, numpy's BLAS matrix-matrix products are faster than these per-row loops.
+(docs/BENCHMARKS.md). Its cost per stream hardly falls with more streams, while numpy's
+BLAS matrix-matrix products do: beyond ``Learned.jit_max_streams`` numpy runs.
 
 The gate nonlinearity uses a rational tanh (Eigen's float approximation: max absolute
 error 3.3e-7 against float64 tanh, tested), which vectorises; libm's scalar tanh would
