@@ -121,10 +121,10 @@ def _resolve(
     path: str | os.PathLike | None, backend: str | None
 ) -> tuple[Factory, str, str | None]:
     """(factory of filters.Cleaner for given names, description, note)."""
-    from faceclean.filters.learned import default_model_path
+    from faceclean.settings import MODELS
 
     if path is None or path == "lstm":
-        default = default_model_path()
+        default = MODELS / "default.npz"  # = filters.learned.default_model_path()
         if default.is_file():
             return _learned(default, backend)
         if path == "lstm":
