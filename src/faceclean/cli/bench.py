@@ -9,6 +9,7 @@ itself with ``os.sched_setaffinity``.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 HELP = "benchmark every cleaner's speed against the eager-torch reference"
 CHILD = "FACECLEAN_BENCH_CHILD"
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         sizes = bench.Sizes(streams=streams) if streams else bench.Sizes()
     result = bench.run(sizes, args.model, progress=lambda s: print(f"  {s}", file=sys.stderr))
-    table = bench.markdown(result)
+    table = markdown(result)
     print(table)
     if args.json:
         atomic_write(args.json, json.dumps(result, indent=2) + "\n")
@@ -113,3 +114,52 @@ def _openblas_env(env: dict[str, str], choice: str) -> None:
         env.pop("OPENBLAS_CORETYPE", None)
     elif choice != "env":
         env["OPENBLAS_CORETYPE"] = choice
+
+
+def _ratio(ours: float | None, ref: float | None) -> str:
+    return f" ({ours / ref:.2f}x)" if ours and ref else ""
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The results table (GitHub markdown) with the machine, ratios to the reference."""
+    rows = [*result["rows"]] + ([result["reference"]] if result["reference"] else [])
+    ref = result["reference"] or {}
+    streams = [int(s) for s in result["sizes"]["streams"]]
+    head = ["cleaner", "step p50 us", "p99 us"]
+    head += [f"{s} stream{'s' * (s > 1)}: us/stream-frame" for s in streams]
+    head += ["1 h of 60 fps: s", "state B/stream", "note"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["name"]]
+        if r["p50_us"] is None:
+            cells += ["", ""]
+        else:
+            cells += [f"{r['p50_us']:.1f}{_ratio(r['p50_us'], ref.get('p50_us'))}"]
+            cells += [f"{r['p99_us']:.1f}"]
+        for s in streams:
+            thr = r["throughput"].get(s) or r["throughput"].get(str(s))
+            ref_thr = (ref.get("throughput") or {}).get(s) or (ref.get("throughput") or {}).get(
+                str(s)
+            )
+            cost = 1e6 / thr if thr else None  # us per stream-frame
+            ref_cost = 1e6 / ref_thr if ref_thr else None
+            cells.append(f"{cost:.2f}{_ratio(cost, ref_cost)}" if cost else "")
+        hour = r["hour_s"]
+        cells.append(f"{hour:.2f}{_ratio(hour, ref.get('hour_s'))}" if hour else "")
+        cells.append(str(r["state_bytes"]) if r["state_bytes"] else "")
+        cells.append(r["note"])
+        lines.append("| " + " | ".join(cells) + " |")
+    m = result["machine"]
+    lines += [
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, pinned to core(s) {m['pinned_to']}, "
+        f"load average {', '.join(f'{v:.2f}' for v in m['load_average'] or ())} at the end; "
+        f"Python {m['python']}, numpy {m['numpy']} ({m['blas']}), numba {m['numba']}, "
+        f"onnxruntime {m['onnxruntime']}, torch {m['torch']}; "
+        f"environment {m['env']}.",
+        f"Model: {result['model']['layers']} x {result['model']['hidden']} LSTM, "
+        f"{result['model']['source']}. (x) = our time / the reference's (< 1 is faster). "
+        f"Hour: {result['hour_extrapolated_from_s']:g} s of 60 fps cleaned, scaled x"
+        f"{3600 / result['hour_extrapolated_from_s']:g}.",
+    ]
+    return "\n".join(lines) + "\n"
