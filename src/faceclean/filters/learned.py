@@ -52,7 +52,7 @@ class Learned(StreamCleaner):
     """
 
     name = "lstm"
-    jit_max_streams: int = 2  # above, numpy's BLAS products win (docs/BENCHMARKS.md)
+    jit_max_streams: int = 4  # above, numpy's BLAS products win (docs/BENCHMARKS.md)
 
     def __init__(
         self,
