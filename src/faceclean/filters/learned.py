@@ -35,6 +35,8 @@ from faceclean.filters.channel_map import ChannelMap
 from faceclean.filters.lstm_kernel import Workspace, step_numpy
 from faceclean.filters.lstm_weights import LSTMWeights
 
+_SCALAR = (float, int, np.floating)
+
 
 def default_model_path():
     """The shipped model file (it may not exist yet)."""
@@ -104,10 +106,7 @@ class Learned(StreamCleaner):
         x̂[n+1] to ``out`` (S, M); False, with nothing changed, if x is not all finite.
         Compiled for a few streams, numpy (BLAS matrix products) for many."""
         if self.kernel == "numba" and ws.streams <= self.jit_max_streams:
-            return learned_jit.step(
-                x, ws.dt, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp,
-                self._wts, self._head_t, self.lo, self.hi, out,
-            )  # fmt: skip
+            return learned_jit.step(*ws.jit_args, x, out)
         flat = x.reshape(-1)
         if not math.isfinite(float(np.dot(flat, flat))):  # NaN/inf (or overflow)
             return False
@@ -138,7 +137,9 @@ class Learned(StreamCleaner):
         S = 1 if x.ndim == 1 else x.shape[0]
         if self._ws is None or self._ws.streams != S:
             M = len(self.weights.channels)
-            self._ws = Workspace(S, M, self.weights.hidden, self.weights.layers)
+            ws = self._ws = Workspace(S, M, self.weights.hidden, self.weights.layers)
+            ws.jit_args = (ws.dt, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp)
+            ws.jit_args += (self._wts, self._head_t, self.lo, self.hi)
         if self._state is not None:
             self._state = self._ws.state()
         y = super().step(frame, t)
@@ -161,7 +162,7 @@ class Learned(StreamCleaner):
         ):
             return self._generic_step(frame, t)
         if single:
-            if not isinstance(t, float | int | np.floating):
+            if not isinstance(t, _SCALAR):
                 return self._generic_step(frame, t)
             tf = float(t)
             dt = tf - float(self._t[0])
@@ -222,10 +223,7 @@ class Learned(StreamCleaner):
         """One stream advanced over frames xs (N, M) by dts (N,) s: outputs (N, M)."""
         ws, out = self._ws, np.empty_like(xs)
         if self.kernel == "numba":
-            learned_jit.run(
-                xs, dts, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp,
-                self._wts, self._head_t, self.lo, self.hi, ws.dt, out,
-            )  # fmt: skip
+            learned_jit.run(*ws.jit_args, xs, dts, out)
             return out
         for n in range(len(xs)):
             ws.dt[0, 0] = dts[n]

@@ -46,14 +46,15 @@ def _tanh(x):
     return x * p / q
 
 
-def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out):
+def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
     """One step for every stream, in place (lstm_kernel's layout: one column per stream);
     False, with nothing changed, if ``x`` holds a non-finite value.
 
-    x (S, M) new frames (any float dtype); dt (1, S) s; zs, cs, top: the workspace's
-    buffers; g (4H, S), cols (S, rows of zs[0]), hv (H, S): scratch; wts[l]
-    (4H, rows of zs[l]) fused weights, gates (i, f, o, g), the (i, f, o) rows pre-scaled
-    by 1/2; head_t (M, H + 1); out (S, M) receives x̂[n+1]. Each weight row is read once
+    dt (1, S) s; zs, cs, top: the workspace's buffers; g (4H, S), cols (S, rows of
+    zs[0]), hv (H, S): scratch; wts[l] (4H, rows of zs[l]) fused weights, gates
+    (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t (M, H + 1); x (S, M) the
+    new frames (any float dtype); out (S, M) receives x̂[n+1]. The arguments before x
+    do not change between steps (the caller keeps them in one tuple). Each weight row is read once
     for all S streams.
     """
     S, M = x.shape
@@ -113,12 +114,12 @@ def _step(x, dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out):
     return True
 
 
-def _run(xs, dts, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, dt, out):
+def _run(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, xs, dts, out):
     """``_step`` over frames xs (N, M) with dts (N,) s, one stream; out (N, M) gets
     x̂ after each. The frames must be finite (the caller checked); dt (1, 1) scratch."""
     for n in range(xs.shape[0]):
         dt[0, 0] = dts[n]
-        step(xs[n : n + 1], dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, out[n : n + 1])
+        step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, xs[n : n + 1], out[n : n + 1])
 
 
 if njit is not None:

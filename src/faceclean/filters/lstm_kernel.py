@@ -44,6 +44,7 @@ class Workspace:
         self.dtm = np.zeros((M, S), f32)  # s, dt broadcast (contiguous)
         self.dt64 = np.zeros(S)  # s, scratch for the time checks
         self.cols = np.zeros((S, 3 * M + H + 1), f32)  # compiled kernel: z[l] per stream
+        self.jit_args: tuple = ()  # compiled kernel: its fixed arguments (set by Learned)
         self.y, self.d, self.xc = z0[:M], z0[M : 2 * M], z0[2 * M : 3 * M]
         self.h = [z0[3 * M : 3 * M + H]] + [z[H : 2 * H] for z in self.z[1:]]
 
