@@ -117,6 +117,7 @@ def test_glb_with_morph_targets(tmp_path):
     assert d[1, 1] > d[0, 1] + 0.5
 
 
+@pytest.mark.filterwarnings("ignore::UserWarning")  # pygltflib warns on the bad header
 def test_bad_mesh_files(tmp_path):
     junk = tmp_path / "junk.npz"
     junk.write_bytes(b"nope")

@@ -122,3 +122,12 @@ def test_train_on_real_takes_writes_and_resumes(tmp_path):
     events.clear()
     train(cfg, events.append)
     assert [e["epoch"] for e in events if e["event"] == "epoch"] == [1]
+
+
+def test_train_command_refuses_bad_arguments(tmp_path, capsys):
+    from faceclean.cli import main
+
+    assert main(["train", "--epochs", "1"]) == 2  # no --out
+    assert main(["train", "--out", str(tmp_path / "m.pt")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("faceclean: ") == 2 and ".npz" in err and "Traceback" not in err
