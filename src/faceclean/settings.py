@@ -15,7 +15,7 @@ def data_dir() -> Path | None:
     env = os.environ.get("FACECLEAN_DATA")
     if env:
         return Path(env)
-    for base in (PACKAGE.parents[2], Path.cwd()):
+    for base in (PACKAGE.parents[1], Path.cwd()):  # the repository root (src layout), cwd
         candidate = base.parent / "shared" / "data"
         if candidate.is_dir():
             return candidate

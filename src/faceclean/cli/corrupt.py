@@ -8,12 +8,12 @@ HELP = "add realistic tracker artefacts to a clean take (seeded, for training an
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from faceclean.simulate import PRESETS
-
     p.add_argument("input", metavar="IN", help="clean animation file")
     p.add_argument("-o", "--output", metavar="OUT", required=True, help="noisy take to write")
     p.add_argument("--seed", type=int, required=True, help="same seed, byte-identical output")
-    p.add_argument("--preset", default="iphone", choices=sorted(PRESETS), help="tracker type")
+    p.add_argument(
+        "--preset", default="iphone", help="tracker type: iphone, webcam, mixed or clean"
+    )
     p.add_argument("--strength", type=float, default=1.0, help="artefact scale (default 1)")
     p.add_argument("--truth-out", metavar="FILE", help="also write the truth at OUT's times")
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
