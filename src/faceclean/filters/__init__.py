@@ -45,9 +45,25 @@ def cleaner_class(method: str) -> type[Cleaner]:
 
 
 def make(
-    method: str, params: dict[str, Any] | None = None, *, names: Sequence[str] = ARKIT52
+    method: str,
+    params: dict[str, Any] | None = None,
+    *,
+    names: Sequence[str] = ARKIT52,
+    tuned: bool = True,
 ) -> Cleaner:
-    """Build a cleaner; a bad parameter name or value is a one-line FacecleanError."""
+    """Build a cleaner; a bad parameter name or value is a one-line FacecleanError.
+
+    A method named without parameters gets its shipped tuned preset
+    (``presets/<method>.json``) when one exists, so users and comparisons meet the
+    tuned filter, never the constructor's defaults; ``tuned=False`` gives the defaults.
+    """
+    if tuned and not params:
+        from faceclean.settings import PRESETS
+
+        if (PRESETS / f"{method}.json").is_file():
+            from faceclean.filters import presets
+
+            return presets.build(method, names)
     cls = cleaner_class(method)
     try:
         return cls(**(params or {}), names=tuple(names))
