@@ -129,7 +129,7 @@ def _head(anim: Animation, seconds: float) -> Animation:
 
 def run_streams(cleaner: Cleaner, inputs: Sequence[Animation]) -> list[np.ndarray]:
     """Clean every take; causal cleaners step all takes at once as streams (S, M)."""
-    if cleaner.offline or getattr(cleaner, "batched", False):
+    if cleaner.offline:
         return [cleaner.clean(a).values for a in inputs]
     n, s, m = max(a.n_frames for a in inputs), len(inputs), inputs[0].n_channels
     t = np.full((n, s), np.nan)  # past a take's end: missing frames (held, ignored)
@@ -258,8 +258,9 @@ NOTES = [
     "calibrated iPhone takes); compare the × raw column.",
     "- FC and GBT follow SPEC section 3: K = 4 derivatives predicted from the input alone "
     "(current value, backward differences ending at the newest and the previous frame), "
-    "integrated by the complementary blend with the paper's per-frame α_r (0.9 FC, 0.97 "
-    "GBT), so their smoothing depends on the frame rate, as in the paper. FC: one "
+    "integrated by the complementary blend with the paper's α_r (0.9 FC, 0.97 GBT) per "
+    "frame at 60 fps, applied as α_r^(60 Hz · dt) so the blend's time constant (0.16 s "
+    "FC, 0.55 s GBT) is the same at every rate. FC: one "
     "whole-face MLP (2 × 128, ReLU). GBT: scikit-learn histogram GBT per order, shared by "
     "all channels (samples are channels; features plus the channel's group), depth ≤ 5, "
     "30 trees for the first order and 10 for each higher one, run by a numpy tree "

@@ -152,8 +152,8 @@ class _DerivativeNet(StreamCleaner):
         d_old, r_old, age = state[: K + 1], state[K + 1 : 2 * K + 1], state[2 * K + 1]
         d_new = [self._model_frame(x)]
         for k in range(1, K + 1):  # backward differences ending at the new frame
-            d = (d_new[k - 1] - d_old[k - 1]) / dt
-            d_new.append(np.clip(np.nan_to_num(d), -BIG, BIG))  # finite for any dt
+            d = (d_new[k - 1] - d_old[k - 1]) / dt  # finite inputs: at worst +-inf
+            d_new.append(np.clip(d, -BIG, BIG, out=d))  # finite for any dt
         feats = np.stack([d_new[0], *d_new[1:], *d_old[1:]], axis=-1)  # (S, M, 1 + 2K)
         if self._record is not None:
             self._record.append(feats)
