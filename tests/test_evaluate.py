@@ -87,6 +87,7 @@ def test_cli_quick_writes_markdown_and_json(data, tmp_path, capsys):
     assert main(argv) == 0
     assert md.read_text().startswith("# Results")
     assert "Raw input" in json.loads(js.read_text())["rows"]
+    assert "NaN" not in js.read_text() and "Infinity" not in js.read_text()  # strict JSON
     assert "| method | MSE |" in capsys.readouterr().out
 
 

@@ -28,8 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
     from faceclean import evaluate
     from faceclean.io.atomic import atomic_write
 
@@ -42,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     )
     text = evaluate.markdown(results)
     if args.json:
-        atomic_write(args.json, json.dumps(results, indent=1, allow_nan=True) + "\n")
+        atomic_write(args.json, evaluate.dumps(results))
     if args.markdown:
         atomic_write(args.markdown, text)
     section = text.split("## 60 fps", 1)[-1].split("\n## ", 1)[0]
