@@ -315,6 +315,22 @@ def targets(results: dict[str, Any], label: str = "LSTM") -> list[tuple[str, dic
     return out
 
 
+def _findings(rows: dict[str, dict[str, dict]]) -> list[str]:
+    """One line per condition: the best causal filter, and each learned row, × raw."""
+    out = []
+    for cond in CONDITIONS:
+        have = [f for f in CAUSAL_FILTERS if f in rows and cond in rows[f]]
+        if not have:
+            continue
+        best = min(have, key=lambda f: rows[f][cond]["all"]["mse"])
+        parts = [f"best causal filter {best} {_fmt(rows[best][cond]['all']['rel_mse'])}× raw"]
+        for label, _ in LEARNED_ROWS:
+            if label in rows and cond in rows[label]:
+                parts.append(f"{label} {_fmt(rows[label][cond]['all']['rel_mse'])}×")
+        out.append(f"- {cond}: " + "; ".join(parts) + ".")
+    return out
+
+
 def markdown(results: dict[str, Any]) -> str:
     """docs/RESULTS.md: header, targets, one table per condition, per-source MSE × raw."""
     rows, folds = results["rows"], results["folds"]
@@ -371,6 +387,7 @@ def markdown(results: dict[str, Any]) -> str:
             lines.append(f"| {name} | " + " | ".join(cells[c] for c in CONDITIONS) + " |")
     else:
         lines.append("No LSTM model that held out a source was found: no LSTM figures yet.")
+    lines += ["", *_findings(rows)]
     for cond in CONDITIONS:
         lines += ["", f"## {cond}", ""]
         lines.append("| method | MSE | × raw | jitter | lag ms | blink |")
