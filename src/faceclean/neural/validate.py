@@ -35,8 +35,9 @@ def corrupted(
 ) -> list[tuple[str, str, Animation, Animation]]:
     """(condition, take name, noisy, truth) for every take and condition, fixed seeds."""
     out = []
-    for ci, cond in enumerate(conditions):
+    for cond in conditions:
         preset, fps = CONDITIONS[cond]
+        ci = list(CONDITIONS).index(cond)  # a condition's streams never depend on the others
         for ti, take in enumerate(takes):
             rng = np.random.default_rng([seed, ci, ti])
             params = simulate.sample_params(rng, preset)
