@@ -20,7 +20,6 @@ equal on the common case.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Sequence
 
@@ -30,7 +29,7 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters import learned_jit
-from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.base import MAX_ABS, State, StreamCleaner
 from faceclean.filters.channel_map import ChannelMap
 from faceclean.filters.lstm_kernel import Workspace, step_numpy
 from faceclean.filters.lstm_weights import LSTMWeights
@@ -108,7 +107,7 @@ class Learned(StreamCleaner):
         if self.kernel == "numba" and ws.streams <= self.jit_max_streams:
             return learned_jit.step(*ws.jit_args, x, out)
         flat = x.reshape(-1)
-        if not math.isfinite(float(np.dot(flat, flat))):  # NaN/inf (or overflow)
+        if not float(np.dot(flat, flat)) <= MAX_ABS * MAX_ABS:  # NaN/inf/absurd: base rules
             return False
         np.copyto(ws.x, x.T, casting="unsafe")
         step_numpy(ws, self._wts, self._head_t, self.lo, self.hi)
@@ -182,7 +181,7 @@ class Learned(StreamCleaner):
                 return self._generic_step(frame, t)  # rule 2: the generic path
         else:
             flat = x.reshape(-1)
-            if not math.isfinite(float(np.dot(flat, flat))):
+            if not float(np.dot(flat, flat)) <= MAX_ABS * MAX_ABS:
                 return self._generic_step(frame, t)
             self.map.gather(x2, ws.y.T, ws.xs)
             self._run(ws, ws.xs, ws.out)
