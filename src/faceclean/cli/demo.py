@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import filters, io, metrics, performer, simulate
+    from faceclean import comparison, filters, io, metrics, performer, plot, simulate
     from faceclean.errors import FacecleanError
 
     out = Path(args.out)
@@ -38,11 +38,18 @@ def run(args: argparse.Namespace) -> int:
     cleaned = filters.make(method, names=take.names).clean(take)
     io.save(cleaned, cleaned_path)
 
-    raw = metrics.summary(take, truth)
-    got = metrics.summary(cleaned, truth)
+    # The same clip through the tuned One Euro filter, the usual tool, for comparison.
+    comp = comparison.compare(take, truth, [method, "one-euro"])
+    figure_path = out / "curves.png"
+    plot.save_figure(comp, figure_path, ["eyeBlinkLeft", "jawOpen", "mouthSmileLeft"], 0.0, 10.0)
+
+    rows = {"raw input": take, method: cleaned, "one-euro (tuned)": comp.outputs["one-euro"]}
     print(f"example clip: {noisy.n_frames} frames, {noisy.duration:.1f} s -> {noisy_path}")
     print(f"cleaned with {method!r} -> {cleaned_path}  (truth: {truth_path})")
-    print(f"{'':14}{'raw':>10}{'cleaned':>10}")
-    for key in ("mse", "jitter_ratio", "lag_ms", "blink_closure"):
-        print(f"{key:14}{raw[key]:10.4g}{got[key]:10.4g}")
+    print(f"curves (first 10 s) -> {figure_path}")
+    keys = ("mse", "jitter_ratio", "lag_ms", "blink_closure")
+    print(f"{'':18}" + "".join(f"{k:>14}" for k in keys))
+    for label, anim in rows.items():
+        m = metrics.summary(anim, truth)
+        print(f"{label:18}" + "".join(f"{m[k]:14.4g}" for k in keys))
     return 0
