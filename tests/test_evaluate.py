@@ -101,3 +101,15 @@ def test_a_model_that_trained_on_a_source_is_not_evaluated_on_it(tmp_path, fc_mo
     baselines.save_fc(baselines.FCNet(52, hidden=(4,)), seen, facts)
     picked = evaluate.pick_models([seen, fc_model], ["one", "two"])
     assert picked["fc"] == {"two": fc_model} and picked["gbt"] == {} and picked["lstm"] == {}
+
+
+def test_targets_compare_with_the_best_filter_on_the_same_takes(results):
+    checks = dict(evaluate.targets(results, "FC"))
+    assert len(checks) == 5 and set(checks["lag < 10 ms"]) == set(evaluate.CONDITIONS)
+    rows = results["rows"]
+    fc = rows["FC"]["60 fps"]["all"]["mse"]
+    best = min(rows[f]["60 fps"]["two"]["mse"] for f in evaluate.CAUSAL_FILTERS)  # FC: "two" only
+    cell = checks["MSE ≤ 0.8× best tuned causal filter"]["60 fps"]
+    assert cell.split()[0] == evaluate._fmt(fc / best)
+    assert ("missed" in cell) == (fc / best > 0.8) and cell.endswith(("met", "**missed**"))
+    assert evaluate.targets(results, "LSTM") == []  # no LSTM model here

@@ -247,7 +247,7 @@ def _aggregate(per_take: dict[str, dict[str, list]]) -> dict[str, dict[str, dict
 
 # -- the markdown report -------------------------------------------------------------------
 
-CAUSAL_FILTERS = ("EMA τ (tuned)", "One Euro (tuned)", "Kalman (tuned)", "EMA γ 0.3", "EMA γ 0.5")
+CAUSAL_FILTERS = tuple(label for label, _ in TUNED_ROWS)  # "best tuned causal filter"
 TARGET_RELAX = 0.15  # the other conditions: within 15 % of the 60 fps targets
 
 
@@ -298,9 +298,17 @@ def targets(results: dict[str, Any], label: str = "LSTM") -> list[tuple[str, dic
             if fig is None:
                 cells[cond] = "–"
                 continue
-            if key == "vs_filter":
+            if key == "vs_filter":  # the best filter on the same takes as ``label``
+                takes = {(s, n) for s, n, _ in results["per_take"][label][cond]}
                 best = min(
-                    (rows[f][cond]["all"]["mse"] for f in CAUSAL_FILTERS if f in rows),
+                    (
+                        _mean(
+                            [sc for s, n, sc in results["per_take"][f][cond] if (s, n) in takes],
+                            "mse",
+                        )
+                        for f in CAUSAL_FILTERS
+                        if f in rows
+                    ),
                     default=float("nan"),
                 )
                 value = fig["mse"] / best
