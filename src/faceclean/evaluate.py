@@ -206,11 +206,22 @@ def evaluate(
         "folds": {
             s: {"val_takes": [t.name for t in v], "train_takes": len(tr)} for s, tr, v in folds
         },
-        "models": {m: {s: str(p) for s, p in v.items()} for m, v in picked.items()},
+        "models": {m: {s: _shown(p) for s, p in v.items()} for m, v in picked.items()},
+        "early_stopped": sorted(
+            _shown(p) for v in picked.values() for p in v.values() if "best" in model_config(p)
+        ),
         "tuned": tuned_params,
         "rows": _aggregate(per_take),
         "per_take": per_take,
     }
+
+
+def _shown(path: Path) -> str:
+    """A model path as shown in the results: relative to the working folder when inside."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _learned(method: str, path: Path, names: Sequence[str]) -> Cleaner:
@@ -373,6 +384,13 @@ def markdown(results: dict[str, Any]) -> str:
     for method, per in results["models"].items():
         used = ", ".join(f"`{s}`: {Path(p).name}" for s, p in per.items()) or "none found"
         lines.append(f"  - {method}: {used}")
+    if results.get("early_stopped"):
+        shown = ", ".join(Path(p).name for p in results["early_stopped"])
+        lines.append(
+            f"  - {shown}: the checkpoint of the epoch with the best validation loss on the "
+            "held-out source (early stopping, other simulator seeds than here): its figures "
+            "are a little optimistic."
+        )
     lines += [
         "- **Columns**: MSE over all channels and frames (the paper's measure); × raw = MSE "
         "over the raw input's MSE on the same takes; jitter = mean squared 2nd "
