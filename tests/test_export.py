@@ -22,10 +22,10 @@ ort = pytest.importorskip("onnxruntime")
 TOL = 1e-5
 
 
-@pytest.fixture(scope="module")
-def files(tmp_path_factory):
+@pytest.fixture(scope="module", params=["additive", "gated"])  # the output heads
+def files(tmp_path_factory, request):
     d = tmp_path_factory.mktemp("export")
-    w = LSTMWeights.random(ARKIT52, seed=4, layers=3)  # 3 layers: two residual ones
+    w = LSTMWeights.random(ARKIT52, seed=4, layers=3, output=request.param)  # 2 residual layers
     w = LSTMWeights.from_arrays({**w.to_arrays(), "out_scale": np.full(52, 3.0, np.float32)})
     w.save(d / "m.npz")
     assert main(["export", str(d / "m.npz"), "-o", str(d / "m.onnx")]) == 0
@@ -44,6 +44,7 @@ def test_graph_has_explicit_state_and_metadata(files):
     meta = {p.key: p.value for p in model.metadata_props}
     assert json.loads(meta["channels"]) == list(ARKIT52)
     assert json.loads(meta["config"])["layers"] == 3
+    assert json.loads(meta["config"])["output"] == ("gated" if w.gated else "additive")
     np.testing.assert_allclose(json.loads(meta["feat_std"]), w.feat_std, rtol=1e-6)
     assert json.loads(meta["state"]) == state
     assert meta["faceclean.format"] == "faceclean-lstm-step/1"

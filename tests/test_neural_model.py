@@ -35,10 +35,14 @@ def _curve(fps: float, seconds: float = 1.0, B: int = 2):
     return torch.tensor(x, dtype=torch.float32), torch.tensor(np.tile(t, (B, 1)))
 
 
+@pytest.mark.parametrize("output", ["additive", "gated"])  # gated: gain 1, correction 0
 @pytest.mark.parametrize("K", [1, 2])
-def test_zero_network_follows_the_input(K):
-    assert not LSTMCleaner(NAMES, K=K).head.weight.any()  # a new model starts there
-    m = _model(K)
+def test_zero_network_follows_the_input(K, output):
+    assert not LSTMCleaner(NAMES, K=K, output=output).head.weight.any()  # a new model starts there
+    m = _model(K, output=output)
+    x, t = _curve(60.0)
+    with torch.no_grad():
+        assert not torch.allclose(m(x, t.float()), x, atol=1e-3)  # the head matters
     with torch.no_grad():
         m.head.weight.zero_()
         m.head.bias.zero_()
@@ -116,8 +120,9 @@ def test_missing_frames_hold_the_output():
     assert torch.isfinite(y).all()
 
 
-def test_checkpoint_round_trip(tmp_path):
-    m = _model(K=2)
+@pytest.mark.parametrize("output", ["additive", "gated"])
+def test_checkpoint_round_trip(tmp_path, output):
+    m = _model(K=2, output=output)
     path = tmp_path / "m.npz"
     checkpoint.save(m, path, extra={"epochs": 3})
     back = checkpoint.load(path)
@@ -126,7 +131,9 @@ def test_checkpoint_round_trip(tmp_path):
         assert torch.equal(m(x, t.float()), back(x, t.float()))
     config, data = checkpoint.read(path)
     assert config["format"] == "faceclean-lstm/1" and config["epochs"] == 3
-    assert data["lstm.1.w_hh"].shape == (64, 16) and data["head.w"].shape == (6, 16)
+    assert config["output"] == output and back.output == output
+    rows = 12 if output == "gated" else 6  # gated: gain logits a, then corrections b
+    assert data["lstm.1.w_hh"].shape == (64, 16) and data["head.w"].shape == (rows, 16)
     assert data["feat_mean"].shape == (15,) and data["out_scale"].shape == (6,)
     assert all(v.dtype == np.float32 for v in data.values())
 

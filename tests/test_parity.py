@@ -1,11 +1,14 @@
 """Parity on a real take: torch whole-sequence = torch stepped = numpy stepped = ONNX stepped.
 
-The model is a seeded random LSTMCleaner (feature scales and output scale perturbed so
-every folded term matters), saved as a checkpoint and read back by each runtime. The
+The model is a seeded random LSTMCleaner, once with the paper's additive output head and
+once with the gated one (head weights at PyTorch's default init rather than the training
+start of zero, feature scales and output scale perturbed, so every folded term matters),
+saved as a checkpoint and read back by each runtime. The
 take is alexdjulin/apfel (30 Hz, 35 tracking-loss frames), 1926 frames, closed loop.
-Stated tolerance: 1e-5 absolute on blendshape weights (measured: 6e-8 here, 2e-6 with
-other seeds; float32 throughout, the feature scaling folded into the weights in the
-torch-free paths).
+Stated tolerance: 2e-5 absolute on blendshape weights, both heads (measured: 1.45e-5 at
+worst, on 3-7 of 98332 values; float32 throughout, the feature scaling folded into the
+weights in the torch-free paths). The earlier 6e-8 was measured with the head at zero,
+where the LSTM does not reach the output at all.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from faceclean.filters.learned import Learned
 from faceclean.settings import takes_dir
 
 torch = pytest.importorskip("torch")
-TOL = 1e-5
+TOL = 2e-5
 TAKE = "alexdjulin/apfel.csv"
 
 
@@ -37,18 +40,21 @@ def take() -> Animation:
     return Animation.from_arkit(anim.times, values)
 
 
-@pytest.fixture(scope="module")
-def model_path(tmp_path_factory):
+@pytest.fixture(scope="module", params=["additive", "gated"])
+def model_path(tmp_path_factory, request):
     from faceclean.neural import checkpoint
     from faceclean.neural.model import LSTMCleaner
 
     torch.manual_seed(11)
-    m = LSTMCleaner(ARKIT52, K=1, hidden=128, layers=2)
+    m = LSTMCleaner(ARKIT52, K=1, hidden=128, layers=2, output=request.param)
+    bound = 128**-0.5  # nn.Linear's default init (training starts the head at zero)
     with torch.no_grad():
         m.feat_mean.uniform_(-0.5, 0.5)
         m.feat_std.uniform_(0.05, 2.0)
         m.out_scale.uniform_(0.5, 4.0)
-    path = tmp_path_factory.mktemp("parity") / "random.npz"
+        m.head.weight.uniform_(-bound, bound)
+        m.head.bias.uniform_(-bound, bound)
+    path = tmp_path_factory.mktemp("parity") / f"random_{request.param}.npz"
     checkpoint.save(m, path, extra={"note": "parity test, random init"})
     return path
 
@@ -115,6 +121,8 @@ def test_bench_reference_computes_the_same_function(model_path, take):
     from faceclean.neural.reference import NaiveReference
 
     w = LSTMWeights.load(model_path)
+    if w.gated:
+        pytest.skip("the bench reference is the paper's architecture (additive head)")
     ref, ours = NaiveReference(w), Learned(weights=w, kernel="numpy")
     x, t = take.values[:220], take.times[:220]  # 220 frames, all valid, 30 Hz
     ref.start(x[:1])

@@ -7,6 +7,8 @@ the base class's generic time rules.
 
 from __future__ import annotations
 
+import functools
+import json
 import tracemalloc
 
 import numpy as np
@@ -20,13 +22,19 @@ from faceclean.filters.lstm_weights import LSTMWeights
 
 KERNELS = ["numpy"] + (["numba"] if learned_jit.available() else [])
 TOL = 1e-5  # float32 runtime vs float64 reference, over a few hundred closed-loop steps
+OUTPUTS = ["additive", "gated"]  # output heads: x_c + b, or (1 + tanh a) x_c + b
+
+
+@functools.cache
+def _weights(output: str) -> LSTMWeights:
+    w = LSTMWeights.random(ARKIT52, seed=3, output=output)
+    # A livelier head than the init, so that the network's correction is visible.
+    return LSTMWeights.from_arrays({**w.to_arrays(), "out_scale": np.full(52, 4.0, np.float32)})
 
 
 @pytest.fixture(scope="module")
 def weights() -> LSTMWeights:
-    w = LSTMWeights.random(ARKIT52, seed=3)
-    # A livelier head than the init, so that the network's correction is visible.
-    return LSTMWeights.from_arrays({**w.to_arrays(), "out_scale": np.full(52, 4.0, np.float32)})
+    return _weights("additive")
 
 
 @pytest.fixture(scope="module")
@@ -56,15 +64,21 @@ def spec_reference(w: LSTMWeights, t: np.ndarray, x: np.ndarray) -> np.ndarray:
             c[i] = sig(gf) * c[i] + sig(gi) * np.tanh(gg)
             h[i] = sig(go) * np.tanh(c[i])
             u = h[i] if i == 0 else h[i] + u
-        d = xc + w.out_scale * (w.head_w @ u + w.head_b)
+        head = w.head_w @ u + w.head_b
+        if w.gated:  # rows: gain logits a, then corrections b
+            d = (1 + np.tanh(head[:M])) * xc + w.out_scale * head[M:]
+        else:
+            d = xc + w.out_scale * head
         y = np.clip(y + dt * d, 0.0, 1.0)
         out.append(y.copy())
     return np.array(out)
 
 
+@pytest.mark.parametrize("output", OUTPUTS)
 @pytest.mark.parametrize("kernel", KERNELS)
-def test_step_matches_the_spec(weights, clip, kernel):
+def test_step_matches_the_spec(clip, kernel, output):
     t, x = clip
+    weights = _weights(output)
     ref = spec_reference(weights, t, x)
     c = Learned(weights=weights, kernel=kernel)
     got = np.array([c.step(x[n], t[n]) for n in range(len(t))])
@@ -73,10 +87,12 @@ def test_step_matches_the_spec(weights, clip, kernel):
     np.testing.assert_allclose(got, ref, atol=TOL)
 
 
-def test_zero_network_follows_its_input(clip):
+@pytest.mark.parametrize("output", OUTPUTS)
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_zero_network_follows_its_input(clip, kernel, output):
     t, x = clip
-    w = LSTMWeights.random(ARKIT52, seed=1, gain=0.0)
-    got = Learned(weights=w).clean(Animation.from_arkit(t, x * 1.2 - 0.1)).values
+    w = LSTMWeights.random(ARKIT52, seed=1, gain=0.0, output=output)  # gated: gain 1
+    got = Learned(weights=w, kernel=kernel).clean(Animation.from_arkit(t, x * 1.2 - 0.1)).values
     np.testing.assert_allclose(got, np.clip(x * 1.2 - 0.1, 0, 1), atol=1e-6)
 
 
@@ -177,8 +193,10 @@ def test_channels_map_by_name(weights, clip):
     np.testing.assert_allclose(got.values[:, :-2], np.array(want), atol=1e-7)
 
 
+@pytest.mark.parametrize("output", OUTPUTS)
 @pytest.mark.parametrize("kernel", KERNELS)
-def test_fast_step_allocates_only_its_output(weights, kernel):
+def test_fast_step_allocates_only_its_output(kernel, output):
+    weights = _weights(output)
     for S in (1, 16):
         c = Learned(weights=weights, kernel=kernel)
         c.jit_max_streams = 64  # the chosen kernel at every stream count
@@ -206,6 +224,11 @@ def test_bad_checkpoints(tmp_path, weights):
         "shape.npz": {**arrays, "feat_std": np.ones(3, np.float32)},
         "format.npz": {**arrays, "config": np.array('{"format": "other"}')},
         "std.npz": {**arrays, "feat_std": np.zeros(156, np.float32)},
+        "head.npz": {**_weights("gated").to_arrays(), "head.w": arrays["head.w"]},  # 52 rows
+        "output.npz": {
+            **arrays,
+            "config": np.array(json.dumps({**weights.config, "output": "multiplicative"})),
+        },
     }
     for name, content in cases.items():
         p = tmp_path / name

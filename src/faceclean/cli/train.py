@@ -33,6 +33,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hidden", type=int, default=128)
     p.add_argument("--layers", type=int, default=2)
     p.add_argument("--K", type=int, default=1, help="derivative orders (paper: 1)")
+    p.add_argument(
+        "--output",
+        choices=("additive", "gated"),
+        default="additive",
+        help="output head: the paper's additive residual, or gated (a learned gain "
+        "on the corrective derivative plus the residual)",
+    )
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument(
         "--patience",
@@ -96,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         out=args.out, data=args.data, val_sources=tuple(args.val_sources),
         synthetic_minutes=args.synthetic_minutes, epochs=args.epochs, batch=args.batch,
         seed=args.seed, K=args.K, hidden=args.hidden, layers=args.layers, lr=args.lr,
+        output=args.output,
         patience=args.patience, weights=weights, mesh=args.mesh, resume=args.resume,
         max_batches=args.max_batches, threads=args.threads,
     )  # fmt: skip

@@ -6,6 +6,7 @@ One step, when frame n+1 arrives dt[n] seconds after frame n (K = 1):
     f     = [x̂[n], x̂'[n-1], x_c]                        # (S, 3M), scaled inside layer 0
     h_0   = LSTM_0(f);  o_l = h_l + o_{l-1} for l >= 1   # residual where sizes match
     x̂'[n] = x_c + out_scale * dense(o_{L-1})             # output residual
+          = (1 + tanh a) x_c + out_scale * b, [a | b] = dense(o_{L-1})   # "gated" head
     x̂[n+1] = clamp(x̂[n] + dt x̂'[n], value_range)        # integrate
 
 Speed: the weights are fused (lstm_weights.Fused): one matrix product per layer with the
@@ -83,7 +84,7 @@ class Learned(StreamCleaner):
         self.weights = weights
         fused = weights.fused(half_sigmoid=True)
         self._wts = tuple(np.ascontiguousarray(w.T) for w in fused.layers)  # (4H, in + H + 1)
-        self._head_t = np.ascontiguousarray(fused.head.T)  # (M, H + 1)
+        self._head_t = np.ascontiguousarray(fused.head.T)  # (M or 2M gated, H + 1)
         self.max_gap = float(max_gap)
         self.names = tuple(names)
         self.lo, self.hi = (np.float32(v) for v in weights.value_range)

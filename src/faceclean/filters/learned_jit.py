@@ -52,7 +52,8 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
 
     dt (1, S) s; zs, cs, top: the workspace's buffers; g (4H, S), cols (S, rows of
     zs[0]), hv (H, S): scratch; wts[l] (4H, rows of zs[l]) fused weights, gates
-    (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t (M, H + 1); x (S, M) the
+    (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t (M, H + 1), or (2M, H + 1)
+    for a gated head (x̂' = (1 + tanh a) x_c + b, rows a then b); x (S, M) the
     new frames (any float dtype); out (S, M) receives x̂[n+1]. The arguments before x
     do not change between steps (the caller keeps them in one tuple). Each weight row is read once
     for all S streams.
@@ -64,6 +65,7 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
                 return False
     H = cs[0].shape[0]
     L = len(zs)
+    gated = head_t.shape[0] > M
     half = np.float32(0.5)
     z0 = zs[0]
     for s in range(S):
@@ -106,7 +108,13 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
             acc = np.float32(0.0)
             for k in range(H + 1):
                 acc += head_t[m, k] * cols[s, k]
-            dm = z0[2 * M + m, s] + acc  # x̂'[n] = x_c + correction
+            if gated:  # acc is the gain logit a; x̂'[n] = (1 + tanh a) x_c + b
+                b = np.float32(0.0)
+                for k in range(H + 1):
+                    b += head_t[M + m, k] * cols[s, k]
+                dm = (np.float32(1.0) + _tanh(acc)) * z0[2 * M + m, s] + b
+            else:
+                dm = z0[2 * M + m, s] + acc  # x̂'[n] = x_c + correction
             z0[M + m, s] = dm
             ym = min(max(z0[m, s] + dt[0, s] * dm, lo), hi)  # integrate, clamp
             z0[m, s] = ym

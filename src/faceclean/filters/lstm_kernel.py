@@ -11,7 +11,8 @@ contiguous memory (numpy copies strided operands, which would allocate per step)
     gates  (4H, S)          (i, f, o, g)
 
 With the fused weights W_l^T (4H, rows of z[l]) one matrix product per layer gives every
-gate of every stream: gates = W_l^T z[l]; the head is head^T (M, H + 1) top.
+gate of every stream: gates = W_l^T z[l]; the head is head^T (M, H + 1) top, or
+(2M, H + 1) top = [a | b] for a gated output head: x̂' = (1 + tanh a) x_c + b.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ class Workspace:
             z[-1] = 1.0  # the bias row
         self.gates = np.zeros((4 * H, S), f32)
         self.tmp = np.zeros((H, S), f32)
-        self.head = np.zeros((M, S), f32)
+        self.head = np.zeros((2 * M, S), f32)  # head output [correction] or [a | b]
         self.x = np.zeros((M, S), f32)  # the new frames, model channel order
         self.xs = np.zeros((S, M), f32)  # the same, one row per stream (gathered)
         self.out = np.zeros((S, M))  # x̂[n+1], float64, one row per stream
@@ -70,9 +71,10 @@ def step_numpy(
     """Advance every stream by ws.dt with frames ws.x, in place, allocating nothing.
 
     wts[l]: (4H, rows of z[l]) fused weights, the (i, f, o) rows pre-scaled by 1/2;
-    head_t: (M, H + 1) with out_scale folded in; [lo, hi]: the value range.
+    head_t: (M, H + 1) with out_scale folded in, or (2M, H + 1) for a gated output
+    head (gain logits a, then out_scale b); [lo, hi]: the value range.
     """
-    H = ws.H
+    H, M = ws.H, ws.M
     half = np.float32(0.5)
     np.copyto(ws.dtm, ws.dt)  # (M, S)
     np.subtract(ws.x, ws.y, out=ws.xc)
@@ -97,9 +99,18 @@ def step_numpy(
             np.copyto(nxt, h)
         else:
             np.add(h, z[:H], out=nxt)  # residual around layers l >= 1
-    np.matmul(head_t, ws.top, out=ws.head)  # out_scale * dense(o), (M, S)
-    np.add(ws.xc, ws.head, out=ws.d)  # x̂'[n] = x_c + correction
-    np.multiply(ws.d, ws.dtm, out=ws.head)
-    np.add(ws.y, ws.head, out=ws.y)  # x̂[n+1] = x̂[n] + dt x̂'[n]
+    out = ws.head[: head_t.shape[0]]  # (M, S) or (2M, S), contiguous rows
+    np.matmul(head_t, ws.top, out=out)  # out_scale * dense(o), or [a | out_scale b]
+    if out.shape[0] == M:
+        np.add(ws.xc, out, out=ws.d)  # x̂'[n] = x_c + correction
+    else:
+        a, b = out[:M], out[M:]
+        np.tanh(a, out=a)
+        np.add(a, np.float32(1.0), out=a)
+        np.multiply(a, ws.xc, out=a)
+        np.add(a, b, out=ws.d)  # x̂'[n] = (1 + tanh a) x_c + out_scale b
+    tmp = ws.head[:M]
+    np.multiply(ws.d, ws.dtm, out=tmp)
+    np.add(ws.y, tmp, out=ws.y)  # x̂[n+1] = x̂[n] + dt x̂'[n]
     np.maximum(ws.y, lo, out=ws.y)
     np.minimum(ws.y, hi, out=ws.y)

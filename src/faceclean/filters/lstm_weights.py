@@ -8,7 +8,8 @@ the few float32 matrices one step needs (used by the numpy runtime and the ONNX 
   (the input buffer carries a constant 1 column for the bias);
 - gate rows reordered from PyTorch's (i, f, g, o) to (i, f, o, g): the three sigmoid
   gates are one contiguous block;
-- ``out_scale`` folded into the head.
+- ``out_scale`` folded into the head (into its correction rows b only, for a "gated"
+  output head, whose first K·M rows are the gain logits a: x̂' = (1 + tanh a) x_c + b).
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ class Fused:
 
     layers[0]: (F + H + 1, 4H) for [features | h_0 | 1];
     layers[l]: (2H + 1, 4H) for [input_l | h_l | 1], l >= 1;
-    head:      (H + 1, K*M) for [top output | 1]; gates in (i, f, o, g) order.
+    head:      (H + 1, K*M) for [top output | 1], or (H + 1, 2*K*M) = [a | out_scale b]
+               for a gated output head; gates in (i, f, o, g) order.
     ``half_sigmoid``: the (i, f, o) columns are pre-scaled by 1/2, so that one tanh over
     all 4H gates gives sigmoid(a) = (1 + tanh(a / 2)) / 2 for them (numpy's tanh is SIMD).
     """
@@ -56,8 +58,8 @@ class LSTMWeights:
     w_hh: tuple[np.ndarray, ...]  # (4H, H)
     b_ih: tuple[np.ndarray, ...]  # (4H,)
     b_hh: tuple[np.ndarray, ...]  # (4H,)
-    head_w: np.ndarray  # (K*M, H)
-    head_b: np.ndarray  # (K*M,)
+    head_w: np.ndarray  # (K*M, H); gated: (2*K*M, H), gain logits a then corrections b
+    head_b: np.ndarray  # (K*M,); gated: (2*K*M,)
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -74,6 +76,11 @@ class LSTMWeights:
     @property
     def layers(self) -> int:
         return len(self.w_ih)
+
+    @property
+    def gated(self) -> bool:
+        """Whether the output head is "gated": x̂' = (1 + tanh a) x_c + out_scale b."""
+        return self.config.get("output", "additive") == "gated"
 
     @property
     def value_range(self) -> tuple[float, float]:
@@ -112,7 +119,11 @@ class LSTMWeights:
             M, K, H = len(config["channels"]), int(config["K"]), int(config["hidden"])
         except (KeyError, TypeError, ValueError) as e:
             raise FacecleanError(f"{label}: bad config ({e})") from None
+        output = config.get("output", "additive")
+        if output not in ("additive", "gated"):
+            raise FacecleanError(f"{label}: unknown output head {output!r}")
         F = M * (1 + 2 * K)
+        R = K * M * (2 if output == "gated" else 1)  # head rows
         w = cls(
             config=config,
             feat_mean=get("feat_mean"),
@@ -129,8 +140,8 @@ class LSTMWeights:
             "feat_mean": (w.feat_mean.shape, (F,)),
             "feat_std": (w.feat_std.shape, (F,)),
             "out_scale": (w.out_scale.shape, (K * M,)),
-            "head.w": (w.head_w.shape, (K * M, H)),
-            "head.b": (w.head_b.shape, (K * M,)),
+            "head.w": (w.head_w.shape, (R, H)),
+            "head.b": (w.head_b.shape, (R,)),
         }
         for i in range(n_layers):
             shapes[f"lstm.{i}.w_ih"] = (w.w_ih[i].shape, (4 * H, F if i == 0 else H))
@@ -164,6 +175,8 @@ class LSTMWeights:
             stacked = stacked[order] * gate_scale
             layers.append(np.ascontiguousarray(stacked.T, dtype=np.float32))
         scale = self.out_scale.astype(np.float64)[:, None]
+        if self.gated:  # the gain logits a are not scaled
+            scale = np.concatenate([np.ones_like(scale), scale])
         head = np.concatenate([self.head_w * scale, self.head_b[:, None] * scale], axis=1)
         head = np.ascontiguousarray(head.T, dtype=np.float32)
         return Fused(tuple(layers), head, half_sigmoid)
@@ -199,14 +212,16 @@ class LSTMWeights:
         layers: int = 2,
         seed: int = 0,
         gain: float = 1.0,
+        output: str = "additive",
     ) -> LSTMWeights:
         """An untrained model with PyTorch's default init U(-1/sqrt(H), 1/sqrt(H)), seeded.
 
         For tests and benchmarks; ``gain`` scales the head (0 gives a model that follows
-        its input exactly).
+        its input exactly); ``output`` "gated" gives a gated head (2M rows).
         """
         rng = np.random.default_rng(seed)
         M, H = len(channels), hidden
+        R = 2 * M if output == "gated" else M  # head rows
         F, bound = 3 * M, 1.0 / np.sqrt(H)
 
         def u(*shape: int) -> np.ndarray:
@@ -220,6 +235,7 @@ class LSTMWeights:
             "layers": layers,
             "value_range": [0.0, 1.0],
             "dropout": 0.3,
+            "output": output,
             "note": f"random init, seed {seed}",
         }
         return cls(
@@ -231,6 +247,6 @@ class LSTMWeights:
             w_hh=tuple(u(4 * H, H) for i in range(layers)),
             b_ih=tuple(u(4 * H) for i in range(layers)),
             b_hh=tuple(u(4 * H) for i in range(layers)),
-            head_w=u(M, H) * np.float32(gain),
-            head_b=u(M) * np.float32(gain),
+            head_w=u(R, H) * np.float32(gain),
+            head_b=u(R) * np.float32(gain),
         )

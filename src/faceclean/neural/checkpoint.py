@@ -1,7 +1,8 @@
 """Self-describing, pickle-free checkpoints of :class:`LSTMCleaner` (docs/ARCHITECTURE.md).
 
 An ``.npz`` with ``config`` (0-d unicode JSON), ``feat_mean``, ``feat_std``, ``out_scale``,
-``lstm.{l}.w_ih|w_hh|b_ih|b_hh`` and ``head.w|b``, all float32. Training checkpoints
+``lstm.{l}.w_ih|w_hh|b_ih|b_hh`` and ``head.w|b``, all float32 (``head`` holds 2·K·M
+rows, gain logits then corrections, when ``config["output"]`` is "gated"). Training checkpoints
 add the optimizer's state under ``optim.*`` keys (ignored by the runtime).
 """
 
@@ -137,6 +138,7 @@ def _load(path: str | os.PathLike):
             layers=int(config["layers"]),
             dropout=float(config.get("dropout", 0.3)),
             value_range=tuple(float(v) for v in config.get("value_range", (0.0, 1.0))),
+            output=str(config.get("output", "additive")),
         )
     except (KeyError, TypeError, ValueError) as e:
         raise FacecleanError(f"{name}: bad model config ({e})") from None

@@ -89,7 +89,14 @@ def build(weights: LSTMWeights) -> Any:
         u = h_next if i == 0 else node("Add", [h_next, u], f"res{i}")  # residual, l >= 1
     head = node("MatMul", [u, const("head_w", fused.head[:-1])], "head_mm")
     corr = node("Add", [head, const("head_b", fused.head[-1])], "correction")
-    node("Add", ["xc", corr], "d_next")  # x̂'[n] = x_c + out_scale dense(h)
+    if weights.gated:  # correction = [a | out_scale b], (S, 2M)
+        halves = const("head_split", np.full(2, M, np.int64))
+        a, b = "gain_logit", "gated_correction"
+        node("Split", [corr, halves], [a, b], axis=1)
+        gain = node("Add", [node("Tanh", [a], "tanh_a"), const("one", np.array(1.0, f32))], "gain")
+        node("Add", [node("Mul", [gain, "xc"], "gain_xc"), b], "d_next")  # (1 + tanh a) x_c + b
+    else:
+        node("Add", ["xc", corr], "d_next")  # x̂'[n] = x_c + out_scale dense(h)
     step = node("Mul", ["dt", "d_next"], "dy")
     node("Clip", [node("Add", ["y", step], "y_raw"), const("lo", lo), const("hi", hi)], "y_next")
 

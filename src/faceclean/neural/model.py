@@ -6,6 +6,7 @@ One step runs when input frame n+1 arrives, with dt = t[n+1] - t[n] seconds:
     features    = [x̂[n], x̂^(1..K)[n-1], x_c^(1..K)[n]]           (B, F), F = M (1 + 2K)
     h           = LSTM layers((features - feat_mean) / feat_std)  residual for l > 0
     x̂^(k)[n]    = x_c^(k)[n] + out_scale · dense(h)              output residual
+                  (1 + tanh(a)) · x_c^(k)[n] + out_scale · b      output="gated", (a, b) = dense(h)
     x̂^(k-1)[n+1] = x̂^(k-1)[n] + dt x̂^(k)[n]                     k = K..1, x̂ clamped
 
 For K >= 2 the input's derivatives are causal backward differences,
@@ -13,6 +14,9 @@ x_i^(j)[n+1] = (x_i^(j-1)[n+1] - x_i^(j-1)[n]) / dt, and the estimate's intermed
 derivatives x̂^(j)[n] (1 <= j < K) in Eq. 2 are integrated from the previous step's
 predictions: x̂^(j)[n] = x̂^(j)[n-1] + dt[n-1] x̂^(j+1)[n-1].
 A zero network follows the input exactly (x̂[n+1] = x_i[n+1]); it learns corrections.
+The gated head (ours) also learns a per-channel, per-frame gain on x_c: for K = 1,
+x̂[n+1] = x̂[n] + g (x_i[n+1] - x̂[n]) + dt out_scale b with g = 1 + tanh(a), an adaptive
+low-pass where g < 1; a zero network still gives g = 1, b = 0 (follows the input).
 
 ``forward`` applies the runtime's time rules (filters/base.py) inside a batch: a missing
 frame (all NaN or t NaN) holds the output and the state, a NaN channel takes the last
@@ -29,6 +33,7 @@ import torch
 from torch import Tensor, nn
 
 MAX_GAP = 0.5  # s; as StreamCleaner.max_gap: longer pauses restart the state
+OUTPUTS = ("additive", "gated")  # output heads: the paper's residual, or gain + residual
 
 
 class State(NamedTuple):
@@ -57,10 +62,14 @@ class LSTMCleaner(nn.Module):
         layers: int = 2,
         dropout: float = 0.3,
         value_range: tuple[float, float] = (0.0, 1.0),
+        output: str = "additive",
     ) -> None:
         super().__init__()
         if K < 1 or layers < 1 or hidden < 1 or not channels:
             raise ValueError("need K >= 1, layers >= 1, hidden >= 1 and some channels")
+        if output not in OUTPUTS:
+            raise ValueError(f"output must be one of {', '.join(OUTPUTS)}, not {output!r}")
+        self.output = output
         self.channels = tuple(channels)
         self.M = len(self.channels)
         self.K = int(K)
@@ -72,7 +81,8 @@ class LSTMCleaner(nn.Module):
         self.lstm = nn.ModuleList(
             nn.LSTMCell(self.F if i == 0 else hidden, hidden) for i in range(layers)
         )
-        self.head = nn.Linear(hidden, self.K * self.M)
+        # additive: (K*M,) corrections; gated: (2*K*M,) = [a (gain logits), b (corrections)]
+        self.head = nn.Linear(hidden, self.K * self.M * (2 if output == "gated" else 1))
         nn.init.zeros_(self.head.weight)  # start as the identity: follow the input
         nn.init.zeros_(self.head.bias)
         self.drop = nn.Dropout(self.dropout)
@@ -89,6 +99,7 @@ class LSTMCleaner(nn.Module):
             "layers": self.layers,
             "dropout": self.dropout,
             "value_range": list(self.value_range),
+            "output": self.output,
         }
 
     def init_state(self, B: int, x0: Tensor | None = None) -> State:
@@ -127,7 +138,11 @@ class LSTMCleaner(nn.Module):
             cs.append(c)
             h = h + u if i > 0 else h  # residual where sizes match
             u = self.drop(h)
-        d = xc + self.out_scale * self.head(u)  # (B, K*M) x̂^(1..K)[n]
+        if self.output == "gated":
+            a, b = self.head(u).chunk(2, dim=1)  # (B, K*M) each
+            d = (1.0 + torch.tanh(a)) * xc + self.out_scale * b  # (B, K*M) x̂^(1..K)[n]
+        else:
+            d = xc + self.out_scale * self.head(u)  # (B, K*M) x̂^(1..K)[n]
         dtc = dt.reshape(-1, 1)
         M = self.M
         y = (state.y + dtc * d[:, :M]).clamp(*self.value_range)

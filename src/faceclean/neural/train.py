@@ -55,6 +55,7 @@ class Config:
     hidden: int = 128
     layers: int = 2
     dropout: float = 0.3
+    output: str = "additive"  # output head: the paper's "additive" residual or "gated"
     lr: float = 1e-3
     clip: float = 1.0  # gradient norm
     patience: int = 8  # epochs without validation improvement before stopping
@@ -159,7 +160,7 @@ def _train(cfg: Config, report: Report, rank: int, world: int, device) -> dict[s
             facts.get("bad", 0),
         )
     else:
-        model = LSTMCleaner(ARKIT52, cfg.K, cfg.hidden, cfg.layers, cfg.dropout)
+        model = LSTMCleaner(ARKIT52, cfg.K, cfg.hidden, cfg.layers, cfg.dropout, output=cfg.output)
         first = dataset.epoch_chunks(
             train_takes, cfg.seed, 0, synthetic_minutes=cfg.synthetic_minutes, preset=cfg.preset
         )
