@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from faceclean import evaluate, io, performer
+from faceclean import results as report
 from faceclean.cli import main
 
 
@@ -72,7 +73,7 @@ def test_tuned_filters_are_tuned_per_fold(results):
 
 
 def test_markdown_has_every_table(results):
-    text = evaluate.markdown(results)
+    text = report.markdown(results)
     for cond in evaluate.CONDITIONS:
         assert f"## {cond}" in text
     assert "| Raw input | " in text and "| One Euro (tuned) | " in text
@@ -104,12 +105,12 @@ def test_a_model_that_trained_on_a_source_is_not_evaluated_on_it(tmp_path, fc_mo
 
 
 def test_targets_compare_with_the_best_filter_on_the_same_takes(results):
-    checks = dict(evaluate.targets(results, "FC"))
+    checks = dict(report.targets(results, "FC"))
     assert len(checks) == 5 and set(checks["lag < 10 ms"]) == set(evaluate.CONDITIONS)
     rows = results["rows"]
     fc = rows["FC"]["60 fps"]["all"]["mse"]
-    best = min(rows[f]["60 fps"]["two"]["mse"] for f in evaluate.CAUSAL_FILTERS)  # FC: "two" only
+    best = min(rows[f]["60 fps"]["two"]["mse"] for f in report.CAUSAL_FILTERS)  # FC: "two" only
     cell = checks["MSE ≤ 0.8× best tuned causal filter"]["60 fps"]
-    assert cell.split()[0] == evaluate._fmt(fc / best)
+    assert cell.split()[0] == report._fmt(fc / best)
     assert ("missed" in cell) == (fc / best > 0.8) and cell.endswith(("met", "**missed**"))
-    assert evaluate.targets(results, "LSTM") == []  # no LSTM model here
+    assert report.targets(results, "LSTM") == []  # no LSTM model here

@@ -29,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from faceclean import evaluate
+    from faceclean import results as results_md
     from faceclean.io.atomic import atomic_write
 
     def progress(msg: str) -> None:
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     results = evaluate.evaluate(
         data=args.data, models=args.models, seed=seed, quick=args.quick, progress=progress
     )
-    text = evaluate.markdown(results)
+    text = results_md.markdown(results)
     if args.json:
         atomic_write(args.json, evaluate.dumps(results))
     if args.markdown:
