@@ -34,7 +34,7 @@ test: $(STAMP) $(NODE_STAMP) lint
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)
-	$(BIN)/faceclean bench --json docs/benchmarks.json
+	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md
 
 eval: $(STAMP)
 	$(BIN)/faceclean eval --models benchmarks/models --json docs/results.json --markdown docs/RESULTS.md
