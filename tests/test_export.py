@@ -22,7 +22,7 @@ ort = pytest.importorskip("onnxruntime")
 TOL = 1e-5
 
 
-@pytest.fixture(scope="module", params=["additive", "gated"])  # the output heads
+@pytest.fixture(scope="module", params=["additive", "gated", "rate"])  # the output heads
 def files(tmp_path_factory, request):
     d = tmp_path_factory.mktemp("export")
     w = LSTMWeights.random(ARKIT52, seed=4, layers=3, output=request.param)  # 2 residual layers
@@ -44,7 +44,7 @@ def test_graph_has_explicit_state_and_metadata(files):
     meta = {p.key: p.value for p in model.metadata_props}
     assert json.loads(meta["channels"]) == list(ARKIT52)
     assert json.loads(meta["config"])["layers"] == 3
-    assert json.loads(meta["config"])["output"] == ("gated" if w.gated else "additive")
+    assert json.loads(meta["config"])["output"] == w.output
     np.testing.assert_allclose(json.loads(meta["feat_std"]), w.feat_std, rtol=1e-6)
     assert json.loads(meta["state"]) == state
     assert meta["faceclean.format"] == "faceclean-lstm-step/1"

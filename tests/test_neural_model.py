@@ -120,7 +120,7 @@ def test_missing_frames_hold_the_output():
     assert torch.isfinite(y).all()
 
 
-@pytest.mark.parametrize("output", ["additive", "gated"])
+@pytest.mark.parametrize("output", ["additive", "gated", "rate"])
 def test_checkpoint_round_trip(tmp_path, output):
     m = _model(K=2, output=output)
     path = tmp_path / "m.npz"
@@ -132,7 +132,7 @@ def test_checkpoint_round_trip(tmp_path, output):
     config, data = checkpoint.read(path)
     assert config["format"] == "faceclean-lstm/1" and config["epochs"] == 3
     assert config["output"] == output and back.output == output
-    rows = 12 if output == "gated" else 6  # gated: gain logits a, then corrections b
+    rows = 6 if output == "additive" else 12  # gated, rate: gain logits a, then corrections b
     assert data["lstm.1.w_hh"].shape == (64, 16) and data["head.w"].shape == (rows, 16)
     assert data["feat_mean"].shape == (15,) and data["out_scale"].shape == (6,)
     assert all(v.dtype == np.float32 for v in data.values())

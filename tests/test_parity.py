@@ -1,7 +1,7 @@
 """Parity on a real take: torch whole-sequence = torch stepped = numpy stepped = ONNX stepped.
 
-The model is a seeded random LSTMCleaner, once with the paper's additive output head and
-once with the gated one (head weights at PyTorch's default init rather than the training
+The model is a seeded random LSTMCleaner, with the paper's additive output head and with
+the gated and rate ones (head weights at PyTorch's default init rather than the training
 start of zero, feature scales and output scale perturbed, so every folded term matters),
 saved as a checkpoint and read back by each runtime. The
 take is alexdjulin/apfel (30 Hz, 35 tracking-loss frames), 1926 frames, closed loop.
@@ -40,7 +40,7 @@ def take() -> Animation:
     return Animation.from_arkit(anim.times, values)
 
 
-@pytest.fixture(scope="module", params=["additive", "gated"])
+@pytest.fixture(scope="module", params=["additive", "gated", "rate"])
 def model_path(tmp_path_factory, request):
     from faceclean.neural import checkpoint
     from faceclean.neural.model import LSTMCleaner
@@ -121,7 +121,7 @@ def test_bench_reference_computes_the_same_function(model_path, take):
     from faceclean.neural.reference import NaiveReference
 
     w = LSTMWeights.load(model_path)
-    if w.gated:
+    if w.output != "additive":
         pytest.skip("the bench reference is the paper's architecture (additive head)")
     ref, ours = NaiveReference(w), Learned(weights=w, kernel="numpy")
     x, t = take.values[:220], take.times[:220]  # 220 frames, all valid, 30 Hz

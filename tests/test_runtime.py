@@ -22,7 +22,7 @@ from faceclean.filters.lstm_weights import LSTMWeights
 
 KERNELS = ["numpy"] + (["numba"] if learned_jit.available() else [])
 TOL = 1e-5  # float32 runtime vs float64 reference, over a few hundred closed-loop steps
-OUTPUTS = ["additive", "gated"]  # output heads: x_c + b, or (1 + tanh a) x_c + b
+OUTPUTS = ["additive", "gated", "rate"]  # output heads: x_c + b, or g x_c + b
 
 
 @functools.cache
@@ -67,6 +67,9 @@ def spec_reference(w: LSTMWeights, t: np.ndarray, x: np.ndarray) -> np.ndarray:
         head = w.head_w @ u + w.head_b
         if w.gated:  # rows: gain logits a, then corrections b
             d = (1 + np.tanh(head[:M])) * xc + w.out_scale * head[M:]
+        elif w.output == "rate":  # one-pole gain, time constant 2 ms e^a
+            gain = 1 - np.exp(-dt / (0.002 * np.exp(np.clip(head[:M], -15, 15))))
+            d = gain * xc + w.out_scale * head[M:]
         else:
             d = xc + w.out_scale * head
         y = np.clip(y + dt * d, 0.0, 1.0)
@@ -93,7 +96,9 @@ def test_zero_network_follows_its_input(clip, kernel, output):
     t, x = clip
     w = LSTMWeights.random(ARKIT52, seed=1, gain=0.0, output=output)  # gated: gain 1
     got = Learned(weights=w, kernel=kernel).clean(Animation.from_arkit(t, x * 1.2 - 0.1)).values
-    np.testing.assert_allclose(got, np.clip(x * 1.2 - 0.1, 0, 1), atol=1e-6)
+    # rate: a 2 ms one-pole low-pass, gain >= 1 - exp(-8 ms / 2 ms) here
+    tol = 5e-3 if output == "rate" else 1e-6
+    np.testing.assert_allclose(got, np.clip(x * 1.2 - 0.1, 0, 1), atol=tol)
 
 
 def _events(S: int, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -35,10 +35,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--K", type=int, default=1, help="derivative orders (paper: 1)")
     p.add_argument(
         "--output",
-        choices=("additive", "gated"),
+        choices=("additive", "gated", "rate"),
         default="additive",
-        help="output head: the paper's additive residual, or gated (a learned gain "
-        "on the corrective derivative plus the residual)",
+        help="output head: the paper's additive residual, gated (a learned gain "
+        "on the corrective derivative plus the residual), or rate (that gain as a "
+        "one-pole low-pass with a learned time constant, the same at any frame rate)",
     )
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument(

@@ -6,7 +6,8 @@ One step, when frame n+1 arrives dt[n] seconds after frame n (K = 1):
     f     = [x̂[n], x̂'[n-1], x_c]                        # (S, 3M), scaled inside layer 0
     h_0   = LSTM_0(f);  o_l = h_l + o_{l-1} for l >= 1   # residual where sizes match
     x̂'[n] = x_c + out_scale * dense(o_{L-1})             # output residual
-          = (1 + tanh a) x_c + out_scale * b, [a | b] = dense(o_{L-1})   # "gated" head
+          = g x_c + out_scale * b, [a | b] = dense(o_{L-1})   # "gated", "rate" heads
+            g = 1 + tanh a (gated) or 1 - exp(-dt / (RATE_TAU0 e^a)) (rate)
     x̂[n+1] = clamp(x̂[n] + dt x̂'[n], value_range)        # integrate
 
 Speed: the weights are fused (lstm_weights.Fused): one matrix product per layer with the
@@ -32,7 +33,7 @@ from faceclean.errors import FacecleanError
 from faceclean.filters import learned_jit
 from faceclean.filters.base import MAX_ABS, State, StreamCleaner
 from faceclean.filters.channel_map import ChannelMap
-from faceclean.filters.lstm_kernel import Workspace, step_numpy
+from faceclean.filters.lstm_kernel import HEADS, Workspace, step_numpy
 from faceclean.filters.lstm_weights import LSTMWeights
 
 _SCALAR = (float, int, np.floating)
@@ -84,7 +85,8 @@ class Learned(StreamCleaner):
         self.weights = weights
         fused = weights.fused(half_sigmoid=True)
         self._wts = tuple(np.ascontiguousarray(w.T) for w in fused.layers)  # (4H, in + H + 1)
-        self._head_t = np.ascontiguousarray(fused.head.T)  # (M or 2M gated, H + 1)
+        self._head_t = np.ascontiguousarray(fused.head.T)  # (M, or 2M gated/rate, H + 1)
+        self._mode = HEADS[weights.output]
         self.max_gap = float(max_gap)
         self.names = tuple(names)
         self.lo, self.hi = (np.float32(v) for v in weights.value_range)
@@ -111,7 +113,7 @@ class Learned(StreamCleaner):
         if not float(np.dot(flat, flat)) <= MAX_ABS * MAX_ABS:  # NaN/inf/absurd: base rules
             return False
         np.copyto(ws.x, x.T, casting="unsafe")
-        step_numpy(ws, self._wts, self._head_t, self.lo, self.hi)
+        step_numpy(ws, self._wts, self._head_t, self.lo, self.hi, self._mode)
         np.copyto(out, ws.y.T)
         return True
 
@@ -139,7 +141,7 @@ class Learned(StreamCleaner):
             M = len(self.weights.channels)
             ws = self._ws = Workspace(S, M, self.weights.hidden, self.weights.layers)
             ws.jit_args = (ws.dt, ws.z, ws.c, ws.top, ws.gates, ws.cols, ws.tmp)
-            ws.jit_args += (self._wts, self._head_t, self.lo, self.hi)
+            ws.jit_args += (self._wts, self._head_t, self.lo, self.hi, self._mode)
         if self._state is not None:
             self._state = self._ws.state()
         y = super().step(frame, t)
@@ -228,6 +230,6 @@ class Learned(StreamCleaner):
         for n in range(len(xs)):
             ws.dt[0, 0] = dts[n]
             np.copyto(ws.x[:, 0], xs[n], casting="unsafe")
-            step_numpy(ws, self._wts, self._head_t, self.lo, self.hi)
+            step_numpy(ws, self._wts, self._head_t, self.lo, self.hi, self._mode)
             out[n] = ws.y[:, 0]
         return out

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0
+
 try:  # the optional ``fast`` extra
     from numba import njit
 except ImportError:  # pragma: no cover - exercised where numba is absent
@@ -46,14 +48,15 @@ def _tanh(x):
     return x * p / q
 
 
-def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
+def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, x, out):
     """One step for every stream, in place (lstm_kernel's layout: one column per stream);
     False, with nothing changed, if ``x`` holds a non-finite value.
 
     dt (1, S) s; zs, cs, top: the workspace's buffers; g (4H, S), cols (S, rows of
     zs[0]), hv (H, S): scratch; wts[l] (4H, rows of zs[l]) fused weights, gates
     (i, f, o, g), the (i, f, o) rows pre-scaled by 1/2; head_t (M, H + 1), or (2M, H + 1)
-    for a gated head (x̂' = (1 + tanh a) x_c + b, rows a then b); x (S, M) the
+    for a gated (mode 1: x̂' = (1 + tanh a) x_c + b, rows a then b) or rate head (mode 2:
+    x̂' = (1 - exp(-dt / tau)) x_c + b, tau = RATE_TAU0 e^a); mode 0 additive; x (S, M) the
     new frames (any float dtype); out (S, M) receives x̂[n+1]. The arguments before x
     do not change between steps (the caller keeps them in one tuple). Each weight row is read once
     for all S streams.
@@ -65,7 +68,8 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
                 return False
     H = cs[0].shape[0]
     L = len(zs)
-    gated = head_t.shape[0] > M
+    a_max = np.float32(RATE_A_MAX)
+    inv_tau0 = np.float32(1.0 / RATE_TAU0)
     half = np.float32(0.5)
     z0 = zs[0]
     for s in range(S):
@@ -108,11 +112,16 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
             acc = np.float32(0.0)
             for k in range(H + 1):
                 acc += head_t[m, k] * cols[s, k]
-            if gated:  # acc is the gain logit a; x̂'[n] = (1 + tanh a) x_c + b
+            if mode != 0:  # acc is the gain logit a; x̂'[n] = g x_c + b
                 b = np.float32(0.0)
                 for k in range(H + 1):
                     b += head_t[M + m, k] * cols[s, k]
-                dm = (np.float32(1.0) + _tanh(acc)) * z0[2 * M + m, s] + b
+                if mode == 1:
+                    gain = np.float32(1.0) + _tanh(acc)
+                else:  # one-pole gain, tau = RATE_TAU0 e^a
+                    a = min(max(acc, -a_max), a_max)
+                    gain = np.float32(1.0) - np.exp(-dt[0, s] * inv_tau0 * np.exp(-a))
+                dm = gain * z0[2 * M + m, s] + b
             else:
                 dm = z0[2 * M + m, s] + acc  # x̂'[n] = x_c + correction
             z0[M + m, s] = dm
@@ -122,12 +131,12 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, x, out):
     return True
 
 
-def _run(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, xs, dts, out):
+def _run(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, xs, dts, out):
     """``_step`` over frames xs (N, M) with dts (N,) s, one stream; out (N, M) gets
     x̂ after each. The frames must be finite (the caller checked); dt (1, 1) scratch."""
     for n in range(xs.shape[0]):
         dt[0, 0] = dts[n]
-        step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, xs[n : n + 1], out[n : n + 1])
+        step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, xs[n : n + 1], out[n : n + 1])
 
 
 if njit is not None:

@@ -12,7 +12,8 @@ contiguous memory (numpy copies strided operands, which would allocate per step)
 
 With the fused weights W_l^T (4H, rows of z[l]) one matrix product per layer gives every
 gate of every stream: gates = W_l^T z[l]; the head is head^T (M, H + 1) top, or
-(2M, H + 1) top = [a | b] for a gated output head: x̂' = (1 + tanh a) x_c + b.
+(2M, H + 1) top = [a | b] for a gated output head: x̂' = (1 + tanh a) x_c + b, or a
+rate one: x̂' = (1 - exp(-dt / tau)) x_c + b, tau = RATE_TAU0 e^a.
 """
 
 from __future__ import annotations
@@ -20,6 +21,11 @@ from __future__ import annotations
 import numpy as np
 
 from faceclean.filters.base import State
+from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0
+
+HEADS = {"additive": 0, "gated": 1, "rate": 2}  # output head -> the kernels' ``mode``
+_A_MAX = np.float32(RATE_A_MAX)
+_NEG_INV_TAU0 = np.float32(-1.0 / RATE_TAU0)  # 1/s
 
 
 class Workspace:
@@ -66,13 +72,19 @@ class Workspace:
 
 
 def step_numpy(
-    ws: Workspace, wts: tuple[np.ndarray, ...], head_t: np.ndarray, lo: float, hi: float
+    ws: Workspace,
+    wts: tuple[np.ndarray, ...],
+    head_t: np.ndarray,
+    lo: float,
+    hi: float,
+    mode: int = 0,
 ) -> None:
     """Advance every stream by ws.dt with frames ws.x, in place, allocating nothing.
 
     wts[l]: (4H, rows of z[l]) fused weights, the (i, f, o) rows pre-scaled by 1/2;
     head_t: (M, H + 1) with out_scale folded in, or (2M, H + 1) for a gated output
-    head (gain logits a, then out_scale b); [lo, hi]: the value range.
+    head (gain logits a, then out_scale b); [lo, hi]: the value range; ``mode``: the
+    output head (HEADS).
     """
     H, M = ws.H, ws.M
     half = np.float32(0.5)
@@ -101,14 +113,24 @@ def step_numpy(
             np.add(h, z[:H], out=nxt)  # residual around layers l >= 1
     out = ws.head[: head_t.shape[0]]  # (M, S) or (2M, S), contiguous rows
     np.matmul(head_t, ws.top, out=out)  # out_scale * dense(o), or [a | out_scale b]
-    if out.shape[0] == M:
+    if mode == 0:
         np.add(ws.xc, out, out=ws.d)  # x̂'[n] = x_c + correction
     else:
         a, b = out[:M], out[M:]
-        np.tanh(a, out=a)
-        np.add(a, np.float32(1.0), out=a)
+        if mode == 1:
+            np.tanh(a, out=a)
+            np.add(a, np.float32(1.0), out=a)  # g = 1 + tanh a
+        else:
+            np.minimum(a, _A_MAX, out=a)
+            np.maximum(a, -_A_MAX, out=a)
+            np.negative(a, out=a)
+            np.exp(a, out=a)
+            np.multiply(a, ws.dtm, out=a)
+            np.multiply(a, _NEG_INV_TAU0, out=a)  # -dt / tau
+            np.exp(a, out=a)
+            np.subtract(np.float32(1.0), a, out=a)  # g = 1 - exp(-dt / tau)
         np.multiply(a, ws.xc, out=a)
-        np.add(a, b, out=ws.d)  # x̂'[n] = (1 + tanh a) x_c + out_scale b
+        np.add(a, b, out=ws.d)  # x̂'[n] = g x_c + out_scale b
     tmp = ws.head[:M]
     np.multiply(ws.d, ws.dtm, out=tmp)
     np.add(ws.y, tmp, out=ws.y)  # x̂[n+1] = x̂[n] + dt x̂'[n]

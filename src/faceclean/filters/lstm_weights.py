@@ -9,7 +9,8 @@ the few float32 matrices one step needs (used by the numpy runtime and the ONNX 
 - gate rows reordered from PyTorch's (i, f, g, o) to (i, f, o, g): the three sigmoid
   gates are one contiguous block;
 - ``out_scale`` folded into the head (into its correction rows b only, for a "gated"
-  output head, whose first K·M rows are the gain logits a: x̂' = (1 + tanh a) x_c + b).
+  or "rate" output head, whose first K·M rows are the gain logits a: x̂' = g x_c + b with
+  g = 1 + tanh a, or g = 1 - exp(-dt / tau), tau = RATE_TAU0 e^a).
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ from faceclean.io.npz_safe import MiB, load_arrays
 
 FORMAT = "faceclean-lstm/1"
 MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
+OUTPUTS = ("additive", "gated", "rate")  # output heads (docs/ARCHITECTURE.md)
+RATE_TAU0 = 0.002  # s, "rate" head: time constant tau = RATE_TAU0 e^a of a zero network
+RATE_A_MAX = 15.0  # "rate" head: a is clamped to [-RATE_A_MAX, RATE_A_MAX]
 
 
 @dataclass(frozen=True)
@@ -36,7 +40,7 @@ class Fused:
     layers[0]: (F + H + 1, 4H) for [features | h_0 | 1];
     layers[l]: (2H + 1, 4H) for [input_l | h_l | 1], l >= 1;
     head:      (H + 1, K*M) for [top output | 1], or (H + 1, 2*K*M) = [a | out_scale b]
-               for a gated output head; gates in (i, f, o, g) order.
+               for a gated or rate output head; gates in (i, f, o, g) order.
     ``half_sigmoid``: the (i, f, o) columns are pre-scaled by 1/2, so that one tanh over
     all 4H gates gives sigmoid(a) = (1 + tanh(a / 2)) / 2 for them (numpy's tanh is SIMD).
     """
@@ -78,9 +82,14 @@ class LSTMWeights:
         return len(self.w_ih)
 
     @property
+    def output(self) -> str:
+        """The output head: "additive", "gated" or "rate" (module docstring)."""
+        return str(self.config.get("output", "additive"))
+
+    @property
     def gated(self) -> bool:
         """Whether the output head is "gated": x̂' = (1 + tanh a) x_c + out_scale b."""
-        return self.config.get("output", "additive") == "gated"
+        return self.output == "gated"
 
     @property
     def value_range(self) -> tuple[float, float]:
@@ -120,10 +129,10 @@ class LSTMWeights:
         except (KeyError, TypeError, ValueError) as e:
             raise FacecleanError(f"{label}: bad config ({e})") from None
         output = config.get("output", "additive")
-        if output not in ("additive", "gated"):
+        if output not in OUTPUTS:
             raise FacecleanError(f"{label}: unknown output head {output!r}")
         F = M * (1 + 2 * K)
-        R = K * M * (2 if output == "gated" else 1)  # head rows
+        R = K * M * (1 if output == "additive" else 2)  # head rows
         w = cls(
             config=config,
             feat_mean=get("feat_mean"),
@@ -175,7 +184,7 @@ class LSTMWeights:
             stacked = stacked[order] * gate_scale
             layers.append(np.ascontiguousarray(stacked.T, dtype=np.float32))
         scale = self.out_scale.astype(np.float64)[:, None]
-        if self.gated:  # the gain logits a are not scaled
+        if self.output != "additive":  # the gain logits a are not scaled
             scale = np.concatenate([np.ones_like(scale), scale])
         head = np.concatenate([self.head_w * scale, self.head_b[:, None] * scale], axis=1)
         head = np.ascontiguousarray(head.T, dtype=np.float32)
@@ -217,11 +226,11 @@ class LSTMWeights:
         """An untrained model with PyTorch's default init U(-1/sqrt(H), 1/sqrt(H)), seeded.
 
         For tests and benchmarks; ``gain`` scales the head (0 gives a model that follows
-        its input exactly); ``output`` "gated" gives a gated head (2M rows).
+        its input exactly); ``output`` "gated" or "rate" gives a head of 2M rows.
         """
         rng = np.random.default_rng(seed)
         M, H = len(channels), hidden
-        R = 2 * M if output == "gated" else M  # head rows
+        R = M if output == "additive" else 2 * M  # head rows
         F, bound = 3 * M, 1.0 / np.sqrt(H)
 
         def u(*shape: int) -> np.ndarray:

@@ -2,8 +2,9 @@
 
 An ``.npz`` with ``config`` (0-d unicode JSON), ``feat_mean``, ``feat_std``, ``out_scale``,
 ``lstm.{l}.w_ih|w_hh|b_ih|b_hh`` and ``head.w|b``, all float32 (``head`` holds 2·K·M
-rows, gain logits then corrections, when ``config["output"]`` is "gated"). Training checkpoints
-add the optimizer's state under ``optim.*`` keys (ignored by the runtime).
+rows, gain logits then corrections, when ``config["output"]`` is "gated" or "rate").
+Training checkpoints add the optimizer's state under ``optim.*`` keys (ignored by the
+runtime).
 """
 
 from __future__ import annotations

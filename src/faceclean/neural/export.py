@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from faceclean.errors import FacecleanError
-from faceclean.filters.lstm_weights import LSTMWeights
+from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0, LSTMWeights
 
 STEP_FORMAT = "faceclean-lstm-step/1"
 OPSET = 17
@@ -89,12 +89,21 @@ def build(weights: LSTMWeights) -> Any:
         u = h_next if i == 0 else node("Add", [h_next, u], f"res{i}")  # residual, l >= 1
     head = node("MatMul", [u, const("head_w", fused.head[:-1])], "head_mm")
     corr = node("Add", [head, const("head_b", fused.head[-1])], "correction")
-    if weights.gated:  # correction = [a | out_scale b], (S, 2M)
+    if weights.output != "additive":  # correction = [a | out_scale b], (S, 2M)
         halves = const("head_split", np.full(2, M, np.int64))
         a, b = "gain_logit", "gated_correction"
         node("Split", [corr, halves], [a, b], axis=1)
-        gain = node("Add", [node("Tanh", [a], "tanh_a"), const("one", np.array(1.0, f32))], "gain")
-        node("Add", [node("Mul", [gain, "xc"], "gain_xc"), b], "d_next")  # (1 + tanh a) x_c + b
+        one = const("one", np.array(1.0, f32))
+        if weights.gated:
+            gain = node("Add", [node("Tanh", [a], "tanh_a"), one], "gain")  # 1 + tanh a
+        else:  # 1 - exp(-dt / tau), tau = RATE_TAU0 e^a
+            a_max = np.array(RATE_A_MAX, f32)
+            ac = node("Clip", [a, const("a_min", -a_max), const("a_max", a_max)], "a_clip")
+            inv_tau = node("Exp", [node("Neg", [ac], "neg_a")], "inv_tau_rel")
+            k = const("neg_inv_tau0", np.array(-1.0 / RATE_TAU0, f32))
+            arg = node("Mul", [node("Mul", [inv_tau, "dt"], "dt_tau_rel"), k], "neg_dt_tau")
+            gain = node("Sub", [one, node("Exp", [arg], "retain")], "gain")
+        node("Add", [node("Mul", [gain, "xc"], "gain_xc"), b], "d_next")  # g x_c + b
     else:
         node("Add", ["xc", corr], "d_next")  # x̂'[n] = x_c + out_scale dense(h)
     step = node("Mul", ["dt", "d_next"], "dy")

@@ -7,6 +7,7 @@ One step runs when input frame n+1 arrives, with dt = t[n+1] - t[n] seconds:
     h           = LSTM layers((features - feat_mean) / feat_std)  residual for l > 0
     x̂^(k)[n]    = x_c^(k)[n] + out_scale · dense(h)              output residual
                   (1 + tanh(a)) · x_c^(k)[n] + out_scale · b      output="gated", (a, b) = dense(h)
+                  (1 - exp(-dt / (2 ms e^a))) · x_c^(k)[n] + out_scale · b  output="rate"
     x̂^(k-1)[n+1] = x̂^(k-1)[n] + dt x̂^(k)[n]                     k = K..1, x̂ clamped
 
 For K >= 2 the input's derivatives are causal backward differences,
@@ -17,6 +18,10 @@ A zero network follows the input exactly (x̂[n+1] = x_i[n+1]); it learns correc
 The gated head (ours) also learns a per-channel, per-frame gain on x_c: for K = 1,
 x̂[n+1] = x̂[n] + g (x_i[n+1] - x̂[n]) + dt out_scale b with g = 1 + tanh(a), an adaptive
 low-pass where g < 1; a zero network still gives g = 1, b = 0 (follows the input).
+That gain is per frame while the network does not see dt, so one output means another
+cutoff at every frame rate; the "rate" head instead outputs a time constant
+tau = RATE_TAU0 e^a and uses the one-pole gain g = 1 - exp(-dt / tau), the same filter
+in seconds at any rate (a zero network is a 2 ms low-pass: g = 0.98 at 120 fps).
 
 ``forward`` applies the runtime's time rules (filters/base.py) inside a batch: a missing
 frame (all NaN or t NaN) holds the output and the state, a NaN channel takes the last
@@ -32,8 +37,10 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0
+
 MAX_GAP = 0.5  # s; as StreamCleaner.max_gap: longer pauses restart the state
-OUTPUTS = ("additive", "gated")  # output heads: the paper's residual, or gain + residual
+OUTPUTS = ("additive", "gated", "rate")  # the paper's residual, or gain + residual
 
 
 class State(NamedTuple):
@@ -82,7 +89,7 @@ class LSTMCleaner(nn.Module):
             nn.LSTMCell(self.F if i == 0 else hidden, hidden) for i in range(layers)
         )
         # additive: (K*M,) corrections; gated: (2*K*M,) = [a (gain logits), b (corrections)]
-        self.head = nn.Linear(hidden, self.K * self.M * (2 if output == "gated" else 1))
+        self.head = nn.Linear(hidden, self.K * self.M * (1 if output == "additive" else 2))
         nn.init.zeros_(self.head.weight)  # start as the identity: follow the input
         nn.init.zeros_(self.head.bias)
         self.drop = nn.Dropout(self.dropout)
@@ -141,6 +148,11 @@ class LSTMCleaner(nn.Module):
         if self.output == "gated":
             a, b = self.head(u).chunk(2, dim=1)  # (B, K*M) each
             d = (1.0 + torch.tanh(a)) * xc + self.out_scale * b  # (B, K*M) x̂^(1..K)[n]
+        elif self.output == "rate":
+            a, b = self.head(u).chunk(2, dim=1)  # (B, K*M) each; tau = TAU0 e^a s
+            a = a.clamp(-RATE_A_MAX, RATE_A_MAX)
+            rate = torch.exp(-a) * (dt.reshape(-1, 1) / RATE_TAU0)  # dt / tau
+            d = (1.0 - torch.exp(-rate)) * xc + self.out_scale * b  # one-pole gain
         else:
             d = xc + self.out_scale * self.head(u)  # (B, K*M) x̂^(1..K)[n]
         dtc = dt.reshape(-1, 1)

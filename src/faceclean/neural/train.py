@@ -55,7 +55,7 @@ class Config:
     hidden: int = 128
     layers: int = 2
     dropout: float = 0.3
-    output: str = "additive"  # output head: the paper's "additive" residual or "gated"
+    output: str = "additive"  # output head: the paper's "additive", "gated" or "rate"
     lr: float = 1e-3
     clip: float = 1.0  # gradient norm
     patience: int = 8  # epochs without validation improvement before stopping
