@@ -55,6 +55,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="weight of the second-derivative loss, s^4 (0: the paper's loss)",
     )
     p.add_argument("--w-dis", type=float, default=None, help="weight of the distance loss")
+    p.add_argument(
+        "--w-der", type=float, default=None, help="weight of the derivative loss (paper: 0.01)"
+    )
     p.add_argument("--mesh", help="face mesh (.npz or .glb with ARKit morph targets)")
     p.add_argument("--max-batches", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads per process")
@@ -100,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
         weights = dataclasses.replace(weights, acc=args.w_acc)
     if args.w_dis is not None:
         weights = dataclasses.replace(weights, dis=args.w_dis)
+    if args.w_der is not None:
+        weights = dataclasses.replace(weights, der=args.w_der)
     cfg = Config(
         out=args.out, data=args.data, val_sources=tuple(args.val_sources),
         synthetic_minutes=args.synthetic_minutes, epochs=args.epochs, batch=args.batch,
