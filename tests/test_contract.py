@@ -31,12 +31,29 @@ RATE_TOL_DEFAULT = 0.03
 # Constant in gives constant out: exact for the classical filters.
 CONST_TOL = 1e-9
 # Learned cleaners (trained on faces) get face-shaped contracts; measured with the
-# shipped LSTM: constant-input correction 0.039; 30 vs 120 fps on a synthetic face,
-# mean 0.006 and max 0.10 (the max sits on blinks, whose 30 fps samples miss the peak).
+# shipped LSTM: held poses corrected by at most 0.054 (a raised brow; 0.018 on real
+# takes), settled to 1e-8 a frame; 30 vs 120 fps on a
+# synthetic face, mean 0.006 and max 0.10 (the max sits on blinks, whose 30 fps
+# samples miss the peak).
 LEARNED = {"lstm", "fc", "gbt"}
-LEARNED_CONST_OFFSET = 0.1
+LEARNED_CONST_OFFSET = 0.08
 LEARNED_RATE_MEAN = 0.015
 LEARNED_RATE_MAX = 0.2
+
+
+def _held_face_settles(cleaner: Cleaner) -> None:
+    """A learned cleaner may correct a held pose a little (it undoes tracker
+    under-shoot and crosstalk), but a face held still settles: no drift, and a small
+    correction. Poses are a face's (a synthetic performer's frames): 52 channels all
+    half-active at once is no face, and a model of faces owes it nothing."""
+    from faceclean import performer
+
+    face = performer.perform(20.0, seed=2, fps=60.0)
+    t = np.arange(600) / 60.0  # 10 s held
+    for pose in face.values[::300]:
+        y = cleaner.clean(Animation(t, np.tile(pose, (600, 1)), ARKIT52)).values
+        assert np.abs(np.diff(y[-60:], axis=0)).max() < 1e-4  # settled in the last second
+        assert np.abs(y[-1] - pose).max() < LEARNED_CONST_OFFSET
 
 
 def _same_face_at_30_60_120_fps_agrees(cleaner: Cleaner) -> None:
@@ -124,11 +141,7 @@ def test_constant_in_constant_out(method):
     level = np.linspace(0.1, 0.9, M)
     y = cleaner.clean(Animation(t, np.tile(level, (240, 1)), ARKIT52)).values
     if method in LEARNED:
-        # A learned cleaner may correct a held pose (it undoes tracker under-shoot and
-        # crosstalk), but the output settles: no drift, and a bounded correction.
-        assert np.abs(np.diff(y[120:], axis=0)).max() < 1e-4
-        assert np.abs(y - level).max() < LEARNED_CONST_OFFSET
-        return
+        return _held_face_settles(cleaner)
     np.testing.assert_allclose(y, np.tile(level, (240, 1)), atol=CONST_TOL, rtol=0)
 
 

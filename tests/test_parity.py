@@ -121,8 +121,6 @@ def test_bench_reference_computes_the_same_function(model_path, take):
     from faceclean.neural.reference import NaiveReference
 
     w = LSTMWeights.load(model_path)
-    if w.output != "additive":
-        pytest.skip("the bench reference is the paper's architecture (additive head)")
     ref, ours = NaiveReference(w), Learned(weights=w, kernel="numpy")
     x, t = take.values[:220], take.times[:220]  # 220 frames, all valid, 30 Hz
     ref.start(x[:1])

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from faceclean.filters.lstm_weights import LSTMWeights
+from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0, LSTMWeights
 
 
 class NaiveReference:
@@ -26,7 +26,8 @@ class NaiveReference:
         self.cells = [
             nn.LSTMCell(w.shape[1], H) for w in weights.w_ih
         ]  # layer l: input (F or H) -> H
-        self.head = nn.Linear(H, M)
+        self.head = nn.Linear(H, weights.head_w.shape[0])  # M, or 2M for a gain head
+        self.output = weights.output
         with torch.no_grad():
             for cell, w_ih, w_hh, b_ih, b_hh in zip(
                 self.cells, weights.w_ih, weights.w_hh, weights.b_ih, weights.b_hh, strict=True
@@ -72,7 +73,15 @@ class NaiveReference:
             h, c = cell(u, hc[i])
             new.append((h, c))
             u = h + u if i > 0 else h
-        d = xc + self.out_scale * self.head(u)
+        if self.output == "additive":
+            d = xc + self.out_scale * self.head(u)
+        else:  # gain logits a, then corrections b (docs/ARCHITECTURE.md)
+            a, b = self.head(u).chunk(2, dim=1)
+            if self.output == "gated":
+                g = 1.0 + torch.tanh(a)
+            else:  # "rate": one-pole gain of time constant RATE_TAU0 e^a
+                g = 1.0 - torch.exp(-torch.exp(-a.clamp(-RATE_A_MAX, RATE_A_MAX)) * dtt / RATE_TAU0)
+            d = g * xc + self.out_scale * b
         y = (y + dtt * d).clamp(self.lo, self.hi)
         self.state = (y, d, new)
         return y.numpy()
