@@ -235,12 +235,9 @@ def run(
         cleans[name] = make(name).clean
     reference = None
     try:
-        import torch
+        from faceclean.neural.reference import NaiveReference, single_thread
 
-        from faceclean.neural.reference import NaiveReference
-
-        torch.set_num_threads(1)
-        reference = Row(NaiveReference.name, note=f"torch {torch.__version__}, 1 thread")
+        reference = Row(NaiveReference.name, note=f"torch {single_thread()}, 1 thread")
         steppers["reference"] = _Stepper(lambda: NaiveReference(model), reference=True)
         cleans["reference"] = _reference_clean(lambda: NaiveReference(model))
     except ImportError:

@@ -16,6 +16,12 @@ from torch import nn
 from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0, LSTMWeights
 
 
+def single_thread() -> str:
+    """Run torch on one thread, as the reference is timed; returns torch's version."""
+    torch.set_num_threads(1)
+    return torch.__version__
+
+
 class NaiveReference:
     """``reset()``, then ``step(x (S, M), dt (S,)) -> (S, M)`` numpy in and out."""
 
