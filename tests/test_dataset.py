@@ -40,7 +40,8 @@ def test_load_takes_names_sources_by_subfolder(tmp_path):
 @pytest.mark.skipif(takes_dir() is None, reason="shared data folder absent")
 def test_real_takes_load_with_their_tracking_loss():
     got = {t.name: t for t in dataset.load_takes()}
-    assert {t.source for t in got.values()} == {"alexdjulin", "jmtechart", "neurosync"}
+    # a take or a source added to the shared folder must not break this
+    assert {"alexdjulin", "jmtechart", "neurosync"} <= {t.source for t in got.values()}
     assert (~got["apfel"].animation.valid).sum() == 35
     val = dataset.validation_chunks([got["apfel"]])
     lost = ~val.observed

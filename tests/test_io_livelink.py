@@ -26,7 +26,7 @@ def _bytes(anim) -> bytes:
 
 @needs_takes
 def test_all_takes_round_trip_byte_identical():
-    assert len(TAKES) == 13
+    assert len(TAKES) >= 13  # takes may be added to the shared folder
     for path in TAKES:
         anim = load(path)
         assert anim.meta["format"] == "livelink"
