@@ -1,0 +1,259 @@
+"""Per-channel level mapping, applied to the raw tracker values BEFORE the cleaner.
+
+One equation per channel (x the tracker value, y what the cleaner sees)::
+
+    u = gain * (x - offset)            # zero point and scale
+    u = sign(u) * |u| ** curve         # exponent: curve < 1 lifts small values, > 1 damps them
+    y = clip(u, lo, hi)                # clamp = (lo, hi); no clamp unless one is set
+    y = 0  where the channel is off    # muted (a missing frame, NaN, stays NaN)
+
+The identity (gain 1, offset 0, curve 1, no clamp, on) leaves a channel bit-for-bit
+unchanged: the arithmetic is skipped for it, not merely neutral.
+
+Rules are (pattern, key, value) with key in ``MAP_KEYS``. A pattern is a channel name in
+any spelling ``faceclean.channels`` accepts (``eyeBlinkLeft``, ``EyeBlink_L``), a glob on
+the canonical name (``eyeBlink*``, ``mouth*Left``), or a channel group (``eyes``,
+``mouth``, ...: ``channels.GROUPS``); matching is case-insensitive. Later rules win, so
+``a.merged(b)`` is a with b's rules on top.
+
+The file format (what ``faceclean calibrate`` writes and ``--calibration`` reads)::
+
+    {"format": "faceclean-adjust/1",
+     "channels": {"eyeBlink*": {"gain": 1.2},
+                  "jawOpen": {"offset": 0.04, "gain": 1.6, "curve": 1.0, "clamp": [0, 1]},
+                  "tongueOut": {"off": true}},
+     "calibration": {...facts, optional, shown by describe()}}
+
+"channels" maps a pattern to its keys, in order (later entries win).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from fnmatch import fnmatchcase
+from typing import Any
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, GROUPS, canonical
+from faceclean.errors import FacecleanError
+
+MAP_KEYS: tuple[str, ...] = ("gain", "offset", "curve", "clamp", "off")
+FORMAT = "faceclean-adjust/1"
+Rule = tuple[str, str, Any]  # (pattern, key, value), value already validated
+
+
+@dataclass(frozen=True)
+class Levels:
+    """The mapping resolved for M columns: arrays (M,), and which columns it touches."""
+
+    gain: np.ndarray
+    offset: np.ndarray
+    curve: np.ndarray
+    lo: np.ndarray  # -inf where unclamped
+    hi: np.ndarray  # +inf where unclamped
+    off: np.ndarray  # bool
+    active: np.ndarray  # (K,) int: columns whose mapping is not the identity
+
+
+@dataclass(frozen=True)
+class Adjust:
+    """A per-channel level mapping (see the module docstring). Immutable; build a new one."""
+
+    rules: tuple[Rule, ...] = ()
+    facts: dict[str, Any] = field(default_factory=dict)  # calibration facts, for describe()
+
+    # -- building ---------------------------------------------------------------------------
+    @classmethod
+    def from_overrides(
+        cls, items: Iterable[tuple[str, str, object]], names: Sequence[str] = ARKIT52
+    ) -> Adjust:
+        """Rules from (pattern, key, value) items, e.g. ``("eyeBlink*", "gain", 1.2)``.
+
+        A pattern must name at least one channel of ``names`` or of ARKit-52; ``off`` with
+        value None means on (``tongueOut.off`` given without a value).
+        """
+        known = tuple(names) + tuple(n for n in ARKIT52 if n not in names)
+        rules = []
+        for pattern, key, value in items:
+            where = f"{pattern}.{key}"
+            if key not in MAP_KEYS:
+                raise FacecleanError(
+                    f"{where}: unknown level key {key!r}; valid: {', '.join(MAP_KEYS)}"
+                )
+            if not any(matches(pattern, n) for n in known):
+                raise FacecleanError(
+                    f"{where}: {pattern!r} names no channel (a channel name, a glob such as "
+                    f"'eyeBlink*', or a group: {', '.join(GROUPS)})"
+                )
+            rules.append((str(pattern), key, _checked(key, value, where)))
+        return cls(tuple(rules))
+
+    @classmethod
+    def from_dict(cls, data: Any, label: str = "adjust") -> Adjust:
+        """From the JSON document of the module docstring."""
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise FacecleanError(f"{label}: not a faceclean level file (format {FORMAT!r})")
+        chans = data.get("channels", {})
+        if not isinstance(chans, dict) or not all(isinstance(v, dict) for v in chans.values()):
+            raise FacecleanError(f"{label}: 'channels' must map patterns to {{key: value}}")
+        items = [(p, k, v) for p, keys in chans.items() for k, v in keys.items()]
+        try:
+            rules = cls.from_overrides(items).rules
+        except FacecleanError as e:
+            raise FacecleanError(f"{label}: {e}") from None
+        facts = data.get("calibration", {})
+        return cls(rules, facts if isinstance(facts, dict) else {})
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Adjust:
+        try:
+            with open(path, encoding="utf-8") as f:
+                data = json.load(f)
+        except FileNotFoundError:
+            raise FacecleanError(f"{path}: no such file") from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise FacecleanError(f"{path}: not a readable level file ({e})") from None
+        return cls.from_dict(data, str(path))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document. Keys of one pattern are written together, in the order the
+        patterns first appear; a key set twice for one pattern keeps its last value."""
+        chans: dict[str, dict[str, Any]] = {}
+        for pattern, key, value in self.rules:
+            chans.setdefault(pattern, {})[key] = list(value) if key == "clamp" else value
+        out: dict[str, Any] = {"format": FORMAT, "channels": chans}
+        if self.facts:
+            out["calibration"] = self.facts
+        return out
+
+    def save(self, path: str | os.PathLike) -> None:
+        from faceclean.io.atomic import atomic_write
+
+        atomic_write(path, json.dumps(self.to_dict(), indent=1) + "\n")
+
+    def merged(self, other: Adjust) -> Adjust:
+        """This mapping with ``other``'s rules on top (other wins where both set a key)."""
+        return Adjust(self.rules + other.rules, {**self.facts, **other.facts})
+
+    # -- using ------------------------------------------------------------------------------
+    @property
+    def is_identity(self) -> bool:
+        return not self.rules
+
+    def levels(self, names: Sequence[str]) -> Levels:
+        """The mapping for columns ``names`` (M,)."""
+        m = len(names)
+        gain, offset, curve = np.ones(m), np.zeros(m), np.ones(m)
+        lo, hi, off = np.full(m, -np.inf), np.full(m, np.inf), np.zeros(m, bool)
+        for pattern, key, value in self.rules:
+            cols = [j for j, n in enumerate(names) if matches(pattern, n)]
+            if key == "gain":
+                gain[cols] = value
+            elif key == "offset":
+                offset[cols] = value
+            elif key == "curve":
+                curve[cols] = value
+            elif key == "clamp":
+                lo[cols], hi[cols] = value
+            else:
+                off[cols] = value
+        ident = (gain == 1.0) & (offset == 0.0) & (curve == 1.0) & np.isneginf(lo) & np.isposinf(hi)
+        active = np.flatnonzero(~ident | off)
+        return Levels(gain, offset, curve, lo, hi, off, active)
+
+    def apply(self, values: np.ndarray, names: Sequence[str]) -> np.ndarray:
+        """Mapped values, same shape as ``values`` ((N, M) or (M,)); NaN stays NaN."""
+        x = np.asarray(values, dtype=np.float64)
+        if not self.rules:
+            return x.copy()
+        return apply_levels(self.levels(names), x)
+
+    def describe(self, names: Sequence[str] | None = None) -> list[str]:
+        """Lines for ``info`` and the report: one per pattern, then calibration facts."""
+        lines = []
+        for pattern, keys in self.to_dict()["channels"].items():
+            shown = [] if names is None else [n for n in names if matches(pattern, n)]
+            plural = "s" if len(shown) != 1 else ""
+            where = f" ({len(shown)} channel{plural})" if names is not None else ""
+            lines.append(f"{pattern}{where}: " + ", ".join(_show(k, v) for k, v in keys.items()))
+        facts = self.facts
+        if facts:
+            src = facts.get("take", "a take")
+            lines.append(
+                f"calibrated from {src}: {facts.get('frames', '?')} frames, "
+                f"neutral {facts.get('neutral_s', '?')} s; "
+                f"{len(facts.get('moved', []))} channels moved, "
+                f"{len(facts.get('lifted', []))} lifted (weak tracker channels)"
+            )
+        return lines or ["identity (no level mapping)"]
+
+
+def apply_levels(lv: Levels, x: np.ndarray) -> np.ndarray:
+    """The module equation on (N, M) or (M,) values for resolved levels."""
+    out = x.copy()
+    a = lv.active
+    if not len(a):
+        return out
+    u = lv.gain[a] * (x[..., a] - lv.offset[a])
+    u = np.sign(u) * np.abs(u) ** lv.curve[a]
+    u = np.clip(u, lv.lo[a], lv.hi[a])
+    u = np.where(lv.off[a] & ~np.isnan(u), 0.0, u)
+    out[..., a] = u
+    return out
+
+
+def matches(pattern: str, name: str) -> bool:
+    """Does ``pattern`` (name, glob or group, case-insensitive) name channel ``name``?"""
+    c = canonical(name) or name.strip()
+    p = pattern.strip()
+    if p.lower() in GROUPS:
+        return c in GROUPS[p.lower()]
+    if any(ch in p for ch in "*?["):
+        return fnmatchcase(c.lower(), p.lower())
+    return (canonical(p) or p).lower() == c.lower()
+
+
+def _checked(key: str, value: object, where: str) -> Any:
+    """A validated value for ``key``: floats, a (lo, hi) pair, or a bool."""
+    if key == "off":
+        if value is None or value is True or value is False:
+            return value is not False
+        text = str(value).strip().lower()
+        if text in ("true", "1", "yes", "on"):
+            return True
+        if text in ("false", "0", "no"):
+            return False
+        raise FacecleanError(f"{where}: expected true or false, got {value!r}")
+    if key == "clamp":
+        pair = value
+        if isinstance(value, str):
+            pair = value.replace("[", "").replace("]", "").split(",")
+        try:
+            lo, hi = (float(v) for v in pair)  # type: ignore[union-attr]
+        except (TypeError, ValueError):
+            raise FacecleanError(f"{where}: expected two numbers LO,HI, got {value!r}") from None
+        if math.isnan(lo) or math.isnan(hi) or lo > hi:
+            raise FacecleanError(f"{where}: expected LO <= HI, got {value!r}")
+        return (lo, hi)
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise FacecleanError(f"{where}: expected a number, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(number):
+        raise FacecleanError(f"{where}: expected a finite number, got {value!r}")
+    if key == "curve" and number <= 0:
+        raise FacecleanError(f"{where}: the curve exponent must be > 0, got {value!r}")
+    return number
+
+
+def _show(key: str, value: Any) -> str:
+    if key == "off":
+        return "off" if value else "on"
+    if key == "clamp":
+        return f"clamp [{value[0]:g}, {value[1]:g}]"
+    return f"{key} {value:.4g}"

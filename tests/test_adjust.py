@@ -1,0 +1,113 @@
+"""Per-channel level mapping (faceclean.adjust): the equation, matching, the file format."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from faceclean.adjust import MAP_KEYS, Adjust, matches
+from faceclean.channels import ARKIT52, INDEX
+from faceclean.errors import FacecleanError
+
+
+def _values(n: int = 40, seed: int = 0) -> np.ndarray:
+    x = np.random.default_rng(seed).uniform(0.0, 1.0, (n, 52))
+    x[5] = np.nan  # a missing frame
+    x[7, 3] = np.nan  # one missing value
+    return x
+
+
+def test_identity_changes_nothing_bit_for_bit():
+    x = _values()
+    x[0, 0] = -0.0
+    y = Adjust().apply(x, ARKIT52)
+    assert y is not x and np.array_equal(y.view(np.uint64), x.view(np.uint64))
+    ident = Adjust.from_overrides([("jawOpen", "gain", 1.0), ("jawOpen", "offset", 0.0)])
+    assert np.array_equal(ident.apply(x, ARKIT52).view(np.uint64), x.view(np.uint64))
+
+
+def test_overrides_change_exactly_the_named_channels():
+    x = _values()
+    a = Adjust.from_overrides(
+        [("eyeBlink*", "gain", 1.2), ("TongueOut", "off", None), ("JawOpen", "offset", "0.1")]
+    )
+    y = a.apply(x, ARKIT52)
+    touched = {ARKIT52[j] for j in np.flatnonzero(np.any((x != y) & ~np.isnan(x), axis=0))}
+    assert touched == {"eyeBlinkLeft", "eyeBlinkRight", "tongueOut", "jawOpen"}
+    j = INDEX["eyeBlinkLeft"]
+    np.testing.assert_allclose(y[:, j], 1.2 * x[:, j])
+    assert np.all(y[~np.isnan(x[:, 51]), 51] == 0.0)
+    np.testing.assert_allclose(y[:, INDEX["jawOpen"]], x[:, INDEX["jawOpen"]] - 0.1)
+    assert np.array_equal(np.isnan(y), np.isnan(x))  # NaN stays NaN, off included
+
+
+def test_the_equation_offset_gain_curve_clamp():
+    names = ("jawOpen",)
+    a = Adjust.from_overrides(
+        [("jawOpen", "offset", 0.2), ("jawOpen", "gain", 2.0), ("jawOpen", "curve", 0.5)]
+    ).merged(Adjust.from_overrides([("jawOpen", "clamp", [0.0, 1.0])]))
+    x = np.array([[0.1], [0.2], [0.325], [0.7]])
+    # u = 2 (x - 0.2) = -0.2, 0, 0.25, 1.0; sign(u)|u|^0.5 = -0.447, 0, 0.5, 1; clip [0, 1]
+    np.testing.assert_allclose(a.apply(x, names)[:, 0], [0.0, 0.0, 0.5, 1.0])
+    assert a.apply(np.array([0.325]), names).shape == (1,)  # one frame (M,)
+
+
+def test_later_rules_win_and_groups_and_spellings_match():
+    a = Adjust.from_overrides([("eyes", "gain", 2.0), ("eyeBlinkLeft", "gain", 3.0)])
+    lv = a.levels(("EyeBlink_L", "eyeBlink_R", "jawOpen", "HeadYaw"))
+    assert list(lv.gain) == [3.0, 2.0, 1.0, 1.0]
+    assert matches("mouth*Left", "MouthSmileLeft") and not matches("mouth*Left", "jawLeft")
+    assert matches("headyaw", "HeadYaw")  # a channel that is not ARKit, by its own name
+
+
+@pytest.mark.parametrize(
+    ("item", "words"),
+    [
+        (("jawOpen", "speed", 1), "valid: gain, offset, curve, clamp, off"),
+        (("noSuchChannel*", "gain", 1), "names no channel"),
+        (("jawOpen", "gain", "fast"), "expected a number"),
+        (("jawOpen", "curve", 0), "must be > 0"),
+        (("jawOpen", "clamp", [1, 0]), "LO <= HI"),
+        (("jawOpen", "gain", float("inf")), "finite"),
+    ],
+)
+def test_bad_overrides_say_what_is_wrong(item, words):
+    with pytest.raises(FacecleanError, match=words):
+        Adjust.from_overrides([item])
+
+
+def test_file_round_trip_and_bad_files(tmp_path):
+    a = Adjust.from_overrides(
+        [("eyeBlink*", "gain", 1.2), ("jawOpen", "clamp", (0, 0.8)), ("tongueOut", "off", True)]
+    )
+    path = tmp_path / "levels.json"
+    a.save(path)
+    doc = json.loads(path.read_text())
+    assert doc["format"] == "faceclean-adjust/1" and set(doc["channels"]) == {
+        "eyeBlink*",
+        "jawOpen",
+        "tongueOut",
+    }
+    b = Adjust.load(path)
+    x = _values()
+    np.testing.assert_array_equal(a.apply(x, ARKIT52), b.apply(x, ARKIT52))
+    assert set(MAP_KEYS) == {"gain", "offset", "curve", "clamp", "off"}
+    path.write_text('{"format": "faceclean-adjust/1", "channels": {"jawOpen": {"gian": 2}}}')
+    with pytest.raises(FacecleanError, match="unknown level key 'gian'"):
+        Adjust.load(path)
+    path.write_text("[1, 2")
+    with pytest.raises(FacecleanError, match="not a readable level file"):
+        Adjust.load(path)
+    with pytest.raises(FacecleanError, match="no such file"):
+        Adjust.load(tmp_path / "absent.json")
+
+
+def test_describe_names_each_pattern():
+    a = Adjust.from_overrides([("eyeBlink*", "gain", 1.2), ("tongueOut", "off", None)])
+    assert a.describe(ARKIT52) == [
+        "eyeBlink* (2 channels): gain 1.2",
+        "tongueOut (1 channel): off",
+    ]
+    assert Adjust().describe() == ["identity (no level mapping)"]
