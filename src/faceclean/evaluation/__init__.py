@@ -1,0 +1,1 @@
+"""Evaluation: simulators, metrics, the protocol."""
