@@ -199,8 +199,8 @@ def test_refusals(tmp_path):
             tmp_path / "x.glb",
         )
     csv = tmp_path / "a.csv"
-    csv.write_text("time,jawOpen\n0,0.5\n")
-    with pytest.raises(FacecleanError, match="read from a glTF"):
+    csv.write_text("time,headYaw\n0,0.5\n")  # a take becomes a new GLB: it needs ARKit channels
+    with pytest.raises(FacecleanError, match="ARKit blendshape"):
         save(load(csv), tmp_path / "y.glb")
     bad = tmp_path / "bad.glb"
     bad.write_bytes(b"glTF\x02\0\0\0\x10\0\0\0")

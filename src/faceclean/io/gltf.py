@@ -15,8 +15,9 @@ output accessor are updated when it declares them (then the JSON is re-serialise
 keeps the original weight. GLB in, GLB out: byte for byte equal outside that accessor.
 Out to ``.gltf``, the changed buffer is embedded as a base64 data URI (other URIs kept as
 written, relative to the output); ``.gltf`` in, ``.glb`` out moves buffer 0 into the BIN
-chunk. Only an animation read from a glTF file can be written: its keyframe times must
-be unchanged.
+chunk. An animation read from a glTF file must keep its keyframe times; any other take
+(Live Link CSV, CSV, JSON, NPZ) becomes a new file, the stylised face animated by it
+(:mod:`faceclean.io.gltf_take`).
 """
 
 from __future__ import annotations
@@ -123,17 +124,18 @@ WRITE_NEEDS_PATH = True  # io.save passes the target path: its suffix picks GLB 
 
 
 def write(anim: Animation, f: BinaryIO, path: str | os.PathLike | None = None) -> None:
-    """Write the weights back into a copy of the source file.
+    """Write the weights back into a copy of the source file (a take read from another
+    format: a new file, see :mod:`faceclean.io.gltf_take`).
 
     The container is GLB when ``path`` ends in ``.glb``, JSON glTF for ``.gltf``, else the
     source's.
     """
     src = anim.meta.get("gltf")
-    if not isinstance(src, Source):
-        raise FacecleanError(
-            "glTF output needs an animation read from a glTF/GLB file "
-            "(weights are written back into that file's copy)"
-        )
+    if not isinstance(src, Source):  # a take from another format: a new animated face
+        from faceclean.io import gltf_take
+
+        gltf_take.write(anim, f, path)
+        return
     if anim.n_frames != len(src.times) or not np.array_equal(anim.times, src.times):
         raise FacecleanError("glTF output: the keyframe times changed; cannot write them back")
     keys = src.keys.copy()

@@ -1,0 +1,210 @@
+"""Any take as a new glTF 2.0 file: a face mesh, its 52 ARKit morph targets, and the take
+as the mesh's morph-weight animation (what Blender, Unity's glTFast and three.js import as
+shape keys / blend shapes / morph targets with one animation clip).
+
+Layout: one scene, one node ``face`` with one mesh; the first primitive carries 52 dense
+POSITION morph targets in canonical ARKit order (a channel the mesh lacks is an all-zero
+target), named in ``mesh.extras.targetNames``. One animation (named after the take) with
+one ``LINEAR`` sampler: input the keyframe times (K,) s, output the weights (K x 52).
+
+Keyframes, the rule chosen for what glTF cannot hold:
+- times start at 0 at the take's first frame (``t - t[0]``), so the clip lines up with
+  the take's video and sound;
+- a tracking-loss frame (all values missing) is dropped: importers interpolate linearly
+  from the last tracked pose to the next one across the gap (a gap at the start holds the
+  first tracked pose, one at the end the last; glTF holds the end keys outside the clip);
+- a frame whose time does not advance past every earlier kept frame (a repeated or
+  backwards timestamp) is dropped, as glTF needs strictly increasing times;
+- a single missing value in a tracked frame holds that channel's previous value (its
+  next one before the first); a channel the take lacks, or never gives, stays at 0.
+Weights are written as they are (no clamping); channels that are not ARKIT blendshapes
+(head and eye rotations of a Live Link take) are not animated.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+from faceclean.facemesh import FaceMesh
+
+_JSON, _BIN = 0x4E4F534A, 0x004E4942  # GLB chunk types
+_FLOAT, _UINT = 5126, 5125  # glTF componentType
+_ARRAY, _ELEMENTS = 34962, 34963  # bufferView targets
+
+
+def keyframes(anim: Animation) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """(times (K,) float32 s from 0, weights (K, 52) float32, counts) by the module's rule.
+
+    ``counts``: ``lost`` tracking-loss frames and ``unordered`` non-advancing frames
+    dropped, ``channels`` ARKit channels the take gives.
+    """
+    values, present = anim.arkit()  # (N, 52), NaN rows where tracking was lost
+    if not present.any():
+        raise FacecleanError(
+            "none of the take's channels is an ARKit blendshape (nothing to animate): "
+            f"{', '.join(anim.names[:5])}{', ...' if anim.n_channels > 5 else ''}"
+        )
+    valid = anim.valid
+    times = (anim.times - anim.times[0]).astype(np.float32)
+    tv = times[valid]
+    if len(tv) == 0:
+        raise FacecleanError("every frame of the take is a tracking loss: no keyframe to write")
+    before = np.maximum.accumulate(np.concatenate([[-np.inf], tv[:-1]]))
+    advance = tv > before  # strictly later than every earlier tracked frame
+    weights = _hold(values[valid][advance])
+    counts = {
+        "lost": int((~valid).sum()),
+        "unordered": int((~advance).sum()),
+        "channels": int(present.sum()),
+    }
+    return tv[advance], weights.astype(np.float32), counts
+
+
+def _hold(w: np.ndarray) -> np.ndarray:
+    """(K, 52) with each NaN replaced by its channel's previous value, else its next, else 0."""
+    w = _forward_fill(w)
+    w = _forward_fill(w[::-1])[::-1]
+    return np.nan_to_num(w, nan=0.0)
+
+
+def _forward_fill(w: np.ndarray) -> np.ndarray:
+    """(K, M): each NaN takes the last non-NaN value above it in its column (if any)."""
+    rows = np.where(np.isnan(w), 0, np.arange(len(w))[:, None])
+    return np.take_along_axis(w, np.maximum.accumulate(rows, axis=0), axis=0)
+
+
+class _Blob:
+    """The binary buffer and its views/accessors, built up in order."""
+
+    def __init__(self) -> None:
+        self.data = bytearray()
+        self.views: list[dict[str, Any]] = []
+        self.accessors: list[dict[str, Any]] = []
+
+    def add(self, a: np.ndarray, kind: str, ctype: int, target: int | None, minmax: bool) -> int:
+        self.data.extend(b"\0" * (-len(self.data) % 4))
+        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.data), "byteLength": a.nbytes}
+        if target is not None:
+            view["target"] = target
+        self.data.extend(a.tobytes())
+        self.views.append(view)
+        acc: dict[str, Any] = {
+            "bufferView": len(self.views) - 1,
+            "componentType": ctype,
+            "count": len(a),
+            "type": kind,
+        }
+        if minmax:
+            lo, hi = a.min(0), a.max(0)
+            acc["min"], acc["max"] = np.atleast_1d(lo).tolist(), np.atleast_1d(hi).tolist()
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+
+def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
+    """(glTF JSON dict, binary buffer bytes, keyframe counts or None) for ``mesh``, animated
+    by ``anim`` when given."""
+    from faceclean.facemesh import _normals
+
+    blob = _Blob()
+    v = np.ascontiguousarray(mesh.vertices, "<f4")
+    attrs = {
+        "POSITION": blob.add(v, "VEC3", _FLOAT, _ARRAY, True),
+        "NORMAL": blob.add(_normals(v, mesh.faces).astype("<f4"), "VEC3", _FLOAT, _ARRAY, False),
+    }
+    if mesh.colors is not None:
+        colors = np.ascontiguousarray(mesh.colors, "<f4")
+        attrs["COLOR_0"] = blob.add(colors, "VEC3", _FLOAT, _ARRAY, False)
+    indices = np.ascontiguousarray(mesh.faces.reshape(-1), "<u4")
+    index_acc = blob.add(indices, "SCALAR", _UINT, _ELEMENTS, False)
+    targets = [
+        {"POSITION": blob.add(np.ascontiguousarray(d, "<f4"), "VEC3", _FLOAT, _ARRAY, True)}
+        for d in mesh.deltas  # (52, V, 3) m
+    ]
+    doc: dict[str, Any] = {
+        "asset": {"version": "2.0", "generator": "faceclean"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": "face"}],
+        "meshes": [
+            {
+                "name": mesh.name,
+                "primitives": [
+                    {"attributes": attrs, "indices": index_acc, "material": 0, "targets": targets}
+                ],
+                "weights": [0.0] * len(ARKIT52),
+                "extras": {"targetNames": list(ARKIT52), "landmarks": mesh.landmarks},
+            }
+        ],
+        "materials": [
+            {
+                "name": "skin",
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [1, 1, 1, 1],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.75,
+                },
+                "doubleSided": True,
+            }
+        ],
+    }
+    counts = None
+    if anim is not None:
+        times, weights, counts = keyframes(anim)
+        t_acc = blob.add(times.astype("<f4"), "SCALAR", _FLOAT, None, True)
+        w_acc = blob.add(weights.reshape(-1).astype("<f4"), "SCALAR", _FLOAT, None, False)
+        doc["animations"] = [
+            {
+                "name": name,
+                "samplers": [{"input": t_acc, "output": w_acc, "interpolation": "LINEAR"}],
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+                "extras": {"droppedTrackingLoss": counts["lost"]},
+            }
+        ]
+    doc["accessors"], doc["bufferViews"] = blob.accessors, blob.views
+    doc["buffers"] = [{"byteLength": len(blob.data)}]
+    return doc, bytes(blob.data), counts
+
+
+def encode(doc: dict[str, Any], data: bytes, glb: bool) -> bytes:
+    """GLB bytes (JSON and BIN chunks), or .gltf JSON with the buffer as a data URI."""
+    doc = dict(doc, buffers=[dict(doc["buffers"][0])])
+    if not glb:
+        uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
+        doc["buffers"][0]["uri"] = uri
+        return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
+    text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
+    text += b" " * (-len(text) % 4)
+    data += b"\0" * (-len(data) % 4)
+    chunks = struct.pack("<II", len(text), _JSON) + text + struct.pack("<II", len(data), _BIN)
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks) + len(data)) + chunks + data
+
+
+def write(
+    anim: Animation,
+    f: BinaryIO,
+    path: str | os.PathLike | None = None,
+    mesh: FaceMesh | None = None,
+    name: str | None = None,
+) -> dict[str, int]:
+    """Write ``anim`` on ``mesh`` (the stylised face by default); GLB unless ``path`` ends
+    in ``.gltf``. Returns the keyframe counts (see :func:`keyframes`)."""
+    if mesh is None:
+        from faceclean.facemesh import stylised
+
+        mesh = stylised()
+    p = Path(path) if path is not None else None
+    label = name or (p.stem if p is not None else "take")
+    doc, data, counts = document(mesh, anim, label)
+    f.write(encode(doc, data, glb=p is None or p.suffix.lower() != ".gltf"))
+    return counts
