@@ -112,7 +112,7 @@ def main() -> None:
         model = args.model
         if args.random_lstm:  # the learned runtime before a trained model ships
             from faceclean.channels import ARKIT52
-            from faceclean.filters.lstm_weights import LSTMWeights
+            from faceclean.learned.checkpoint import LSTMWeights
 
             model = str(Path(folder) / "random.npz")
             LSTMWeights.random(ARKIT52, hidden=128, layers=2, seed=0).save(model)

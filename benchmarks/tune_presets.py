@@ -17,10 +17,10 @@ import argparse
 import time
 from pathlib import Path
 
-from faceclean.dataset import load_takes
+from faceclean.evaluation.dataset import load_takes
+from faceclean.evaluation.simulate import corrupt
 from faceclean.filters import tune
 from faceclean.settings import PRESETS
-from faceclean.simulate import corrupt
 
 SOURCES = ("neurosync", "alexdjulin")
 METHODS = ("ema", "one-euro", "kalman")

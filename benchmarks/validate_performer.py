@@ -16,8 +16,8 @@ import argparse
 
 import numpy as np
 
-from faceclean import dataset, performer
 from faceclean.channels import GROUPS, INDEX
+from faceclean.evaluation import dataset, performer
 
 
 def blinks(t: np.ndarray, b: np.ndarray) -> list[tuple[float, float, float]]:

@@ -8,7 +8,7 @@ import pytest
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.filters.derivative_net import (
+from faceclean.learned.derivative_net import (
     BoostedTrees,
     DerivativeFeatures,
     FullyConnected,
@@ -131,8 +131,9 @@ def test_features_are_backward_derivatives_in_seconds():
 
 
 def test_tiny_training_run_writes_a_working_model(tmp_path):
-    from faceclean import io, performer
+    from faceclean import io
     from faceclean.cli import main
+    from faceclean.evaluation import performer
 
     for source in ("one", "two"):
         (tmp_path / source).mkdir()

@@ -46,7 +46,7 @@ def _held_face_settles(cleaner: Cleaner) -> None:
     under-shoot and crosstalk), but a face held still settles: no drift, and a small
     correction. Poses are a face's (a synthetic performer's frames): 52 channels all
     half-active at once is no face, and a model of faces owes it nothing."""
-    from faceclean import performer
+    from faceclean.evaluation import performer
 
     face = performer.perform(20.0, seed=2, fps=60.0)
     t = np.arange(600) / 60.0  # 10 s held
@@ -59,7 +59,7 @@ def _held_face_settles(cleaner: Cleaner) -> None:
 def _same_face_at_30_60_120_fps_agrees(cleaner: Cleaner) -> None:
     """A learned cleaner sees faces, not 52 sines at once: the same synthetic
     performance sampled at 30, 60 and 120 fps must agree at shared instants."""
-    from faceclean import performer
+    from faceclean.evaluation import performer
 
     face = performer.perform(6.0, seed=1, fps=240.0)
     shared = {}
@@ -86,8 +86,8 @@ def _build(method: str, trained: bool = False) -> Cleaner:
         return make(method, names=ARKIT52, tuned=False)
     except FacecleanError as e:  # a learned cleaner whose shipped model is not there yet
         if method == "lstm" and not trained:
-            from faceclean.filters.learned import Learned
-            from faceclean.filters.lstm_weights import LSTMWeights
+            from faceclean.learned.checkpoint import LSTMWeights
+            from faceclean.learned.cleaner import Learned
 
             return Learned(names=ARKIT52, weights=LSTMWeights.random(ARKIT52, hidden=32))
         pytest.skip(f"{method} cannot be built yet: {e}")

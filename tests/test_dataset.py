@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceclean import dataset, io, performer
+from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
-from faceclean.dataset import Augmentation, Take
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import dataset, performer
+from faceclean.evaluation.dataset import Augmentation, Take
 from faceclean.settings import takes_dir
 
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceclean import io, metrics
+from faceclean import io
 from faceclean.cli import main
+from faceclean.evaluation import metrics
 
 
 def test_demo_cleans_the_example_clip(tmp_path, capsys):

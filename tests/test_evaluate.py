@@ -8,9 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from faceclean import evaluate, io, performer
-from faceclean import results as report
+from faceclean import io
 from faceclean.cli import main
+from faceclean.evaluation import evaluate, performer
+from faceclean.evaluation import results as report
 
 
 @pytest.fixture(scope="module")

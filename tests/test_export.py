@@ -14,8 +14,8 @@ import pytest
 from faceclean import Animation, Cleaner, FacecleanError
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
-from faceclean.filters.learned import Learned
-from faceclean.filters.lstm_weights import LSTMWeights
+from faceclean.learned.checkpoint import LSTMWeights
+from faceclean.learned.cleaner import Learned
 
 onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
@@ -99,7 +99,7 @@ def test_export_refuses_bad_input(tmp_path, files, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(e.startswith("faceclean: ") for e in err)
     assert not out.exists()
-    from faceclean.filters.onnx_backend import OnnxLearned
+    from faceclean.learned.onnx import OnnxLearned
 
     with pytest.raises(FacecleanError, match="not a loadable ONNX model"):
         OnnxLearned(b"garbage")

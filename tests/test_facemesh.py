@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceclean import facemesh
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.face import facemesh
 from faceclean.settings import data_dir
 
 MESHES = data_dir() / "meshes" if data_dir() is not None else None
@@ -111,7 +111,7 @@ def test_glb_round_trips_through_pygltflib(face, glb):
 
 
 def test_glb_is_usable_by_the_distance_loss_mesh_reader(glb):
-    from faceclean.mesh import PAIR_NAMES, load_face
+    from faceclean.face.mesh import PAIR_NAMES, load_face
 
     loss_face = load_face(glb)
     d0 = loss_face.distances(_w())

@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 from hypothesis import HealthCheck, given, settings
 
-from faceclean import fuzz
 from faceclean.cli import main
+from faceclean.evaluation import fuzz
 
 EXAMPLES = {t: 80 for t in fuzz.TARGETS}
 EXAMPLES.update({"vmc": 200, "livelink-udp": 200, "ifacialmocap": 200})  # cheap: no files

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceclean import facemesh
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
+from faceclean.face import facemesh
 from faceclean.io import gltf_take, load, save
 from faceclean.settings import data_dir
 

@@ -7,7 +7,7 @@ import pytest
 
 from faceclean.channels import INDEX
 from faceclean.errors import FacecleanError
-from faceclean.mesh import PAIR_NAMES, load_face
+from faceclean.face.mesh import PAIR_NAMES, load_face
 from faceclean.settings import data_dir
 
 DATA = data_dir()

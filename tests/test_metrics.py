@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceclean import metrics
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import metrics
 
 
 def _irregular(n: int, fps: float, seed: int = 0) -> np.ndarray:

@@ -8,7 +8,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from faceclean.channels import ARKIT52, INDEX  # noqa: E402
-from faceclean.mesh import Face  # noqa: E402
+from faceclean.face.mesh import Face  # noqa: E402
 from faceclean.neural import checkpoint  # noqa: E402
 from faceclean.neural.losses import Loss, Weights  # noqa: E402
 from faceclean.neural.model import LSTMCleaner  # noqa: E402

@@ -52,7 +52,7 @@ def test_learned_cleaner_steps_without_torch(tmp_path):
         import numpy as np
         from faceclean import Cleaner
         from faceclean.channels import ARKIT52
-        from faceclean.filters.lstm_weights import LSTMWeights
+        from faceclean.learned.checkpoint import LSTMWeights
 
         LSTMWeights.random(ARKIT52, seed=0).save({str(model)!r})
         c = Cleaner.load({str(model)!r}, streams=2)
@@ -79,7 +79,7 @@ def test_onnx_backend_without_torch(tmp_path):
         from faceclean import Cleaner
         from faceclean.channels import ARKIT52
         from faceclean.cli import main
-        from faceclean.filters.lstm_weights import LSTMWeights
+        from faceclean.learned.checkpoint import LSTMWeights
 
         LSTMWeights.random(ARKIT52, seed=0).save({str(model)!r})
         assert main(["export", {str(model)!r}, "-o", {str(model.with_suffix(".onnx"))!r}]) == 0

@@ -18,8 +18,8 @@ import pytest
 
 from faceclean import Animation
 from faceclean.channels import ARKIT52
-from faceclean.filters import learned_jit
-from faceclean.filters.learned import Learned
+from faceclean.learned import jit
+from faceclean.learned.cleaner import Learned
 from faceclean.settings import takes_dir
 
 torch = pytest.importorskip("torch")
@@ -95,7 +95,7 @@ def test_torch_stepped_equals_torch_sequence(model_path, take, torch_sequence):
     np.testing.assert_allclose(out[v], torch_sequence[v], atol=TOL)
 
 
-@pytest.mark.parametrize("kernel", ["numpy"] + (["numba"] if learned_jit.available() else []))
+@pytest.mark.parametrize("kernel", ["numpy"] + (["numba"] if jit.available() else []))
 def test_numpy_stepped_equals_torch(model_path, take, torch_sequence, kernel):
     got = Learned(model_path, kernel=kernel).clean(take).values
     v = take.valid
@@ -106,8 +106,8 @@ def test_numpy_stepped_equals_torch(model_path, take, torch_sequence, kernel):
 def test_onnx_stepped_equals_torch(model_path, take, torch_sequence, tmp_path):
     pytest.importorskip("onnx")
     pytest.importorskip("onnxruntime")
-    from faceclean.filters.onnx_backend import OnnxLearned
-    from faceclean.neural.export import export
+    from faceclean.learned.export import export
+    from faceclean.learned.onnx import OnnxLearned
 
     onnx_path = tmp_path / "random.onnx"
     export(model_path, onnx_path)
@@ -117,7 +117,7 @@ def test_onnx_stepped_equals_torch(model_path, take, torch_sequence, tmp_path):
 
 
 def test_bench_reference_computes_the_same_function(model_path, take):
-    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.learned.checkpoint import LSTMWeights
     from faceclean.neural.reference import NaiveReference
 
     w = LSTMWeights.load(model_path)

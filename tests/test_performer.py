@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceclean import io, performer
+from faceclean import io
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import performer
 
 
 @pytest.fixture(scope="module")

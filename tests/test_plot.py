@@ -7,12 +7,13 @@ import io as pyio
 import numpy as np
 import pytest
 
-from faceclean import comparison, plot
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import comparison
 from faceclean.io import save
+from faceclean.report import plot
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -14,11 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceclean import comparison, facemesh, report
+from faceclean import report
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import comparison
+from faceclean.face import facemesh
 from faceclean.io import save
 from faceclean.report import build, payload
 from faceclean.settings import data_dir

@@ -421,7 +421,7 @@ def test_real_take_is_never_modified(tmp_path, capsys):
 
 
 def _model_arrays() -> dict[str, np.ndarray]:
-    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.learned.checkpoint import LSTMWeights
 
     return LSTMWeights.random(("jawOpen", "eyeBlinkLeft"), hidden=8, layers=2).to_arrays()
 
@@ -462,7 +462,7 @@ def _bad_models(folder: Path) -> dict[str, tuple[Path, str]]:
 
 
 def test_model_files_are_checked_before_use(tmp_path):
-    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.learned.checkpoint import LSTMWeights
 
     for name, (path, message) in _bad_models(tmp_path).items():
         before = hashlib.sha256(path.read_bytes()).hexdigest()

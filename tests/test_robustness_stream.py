@@ -22,8 +22,8 @@ WAIT = 5.0  # s; the most one datagram may take on loopback before the test give
 
 
 def _lstm() -> StreamCleaner:
-    from faceclean.filters.learned import Learned
-    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.learned.checkpoint import LSTMWeights
+    from faceclean.learned.cleaner import Learned
 
     return Learned(weights=LSTMWeights.random(NAMES, hidden=16, layers=2, seed=1), names=NAMES)
 

@@ -1,4 +1,4 @@
-"""The torch-free learned runtime (filters/learned.py) and the Cleaner facade.
+"""The torch-free learned runtime (learned/cleaner.py) and the Cleaner facade.
 
 The numpy step is checked against a float64 transcription of SPEC section 2 written
 here from the spec alone; the compiled kernel against the same; the fast path against
@@ -16,11 +16,12 @@ import pytest
 
 from faceclean import Animation, Cleaner, FacecleanError
 from faceclean.channels import ARKIT52
-from faceclean.filters import learned_jit, make
-from faceclean.filters.learned import Learned
-from faceclean.filters.lstm_weights import LSTMWeights
+from faceclean.filters import make
+from faceclean.learned import jit
+from faceclean.learned.checkpoint import LSTMWeights
+from faceclean.learned.cleaner import Learned
 
-KERNELS = ["numpy"] + (["numba"] if learned_jit.available() else [])
+KERNELS = ["numpy"] + (["numba"] if jit.available() else [])
 TOL = 1e-5  # float32 runtime vs float64 reference, over a few hundred closed-loop steps
 OUTPUTS = ["additive", "gated", "rate"]  # output heads: x_c + b, or g x_c + b
 
@@ -257,11 +258,11 @@ def test_checkpoint_roundtrip_and_make(tmp_path, weights, clip):
     np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.skipif(not learned_jit.available(), reason="numba not installed")
+@pytest.mark.skipif(not jit.available(), reason="numba not installed")
 def test_compiled_tanh_accuracy():
     from numba import njit
 
-    tanh = learned_jit._tanh
+    tanh = jit._tanh
 
     @njit
     def apply(a):

@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceclean import io, performer, simulate
+from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import performer, simulate
+from faceclean.evaluation.simulate import Params
 from faceclean.settings import takes_dir
-from faceclean.simulate import Params
 from faceclean.timing import resample, runs
 
 

@@ -7,11 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from faceclean import io, metrics
+from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, GROUPS
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import metrics
 from faceclean.filters import make, presets, tune
 from faceclean.filters.kalman import Kalman
 from faceclean.filters.one_euro import OneEuro

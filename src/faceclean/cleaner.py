@@ -148,15 +148,15 @@ def _resolve(
 def _learned(path: Path, backend: str | None) -> tuple[Factory, str, None]:
     backend = backend or ("onnx" if path.suffix.lower() == ".onnx" else "numpy")
     if backend == "onnx":
-        from faceclean.filters.onnx_backend import OnnxLearned, model_bytes
+        from faceclean.learned.onnx import OnnxLearned, model_bytes
 
         graph = model_bytes(path)
         OnnxLearned(graph)  # fail now, with the file's reason, not at the first frame
         return (lambda names: OnnxLearned(graph, names=names)), f"lstm (onnx) {path}", None
     if path.suffix.lower() == ".onnx":
         raise FacecleanError(f"{path.name}: an ONNX graph runs on backend='onnx'")
-    from faceclean.filters.learned import Learned
-    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.learned.checkpoint import LSTMWeights
+    from faceclean.learned.cleaner import Learned
 
     weights = LSTMWeights.load(path)
     return (lambda names: Learned(weights=weights, names=names)), f"lstm (numpy) {path}", None

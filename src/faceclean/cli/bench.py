@@ -1,6 +1,6 @@
 """``faceclean bench [--json OUT] [--markdown FILE] [--quick]``: the runtime benchmark.
 
-Every cleaner side by side with the eager-torch reference (faceclean.bench). For the
+Every cleaner side by side with the eager-torch reference (faceclean.evaluation.bench). For the
 headline the process runs on one core with one BLAS/OpenMP thread: the command re-runs
 itself with OMP/OPENBLAS/MKL/NUMBA thread counts set to 1 before numpy loads, and pins
 itself with ``os.sched_setaffinity``.
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
     import json
 
-    from faceclean import bench
+    from faceclean.evaluation import bench
     from faceclean.io.atomic import atomic_write
 
     if not args.no_pin and hasattr(os, "sched_setaffinity"):

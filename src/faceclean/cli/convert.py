@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
 
-    from faceclean import facemesh
+    from faceclean.face import facemesh
     from faceclean.io import gltf_take
     from faceclean.io.atomic import atomic_open
 

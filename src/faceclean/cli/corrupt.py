@@ -20,7 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import io, simulate
+    from faceclean import io
+    from faceclean.evaluation import simulate
 
     clean = io.load(args.input)
     noisy, truth = simulate.corrupt(clean, args.seed, args.preset, args.strength)

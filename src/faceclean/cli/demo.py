@@ -1,7 +1,7 @@
 """``faceclean demo``: the main job end to end on an example clip the project makes itself.
 
-A synthetic performance (faceclean.performer) is degraded the way an iPhone tracker
-degrades it (faceclean.simulate), written as a Live Link Face CSV, cleaned with the
+A synthetic performance (faceclean.evaluation.performer) is degraded the way an iPhone tracker
+degrades it (faceclean.evaluation.simulate), written as a Live Link Face CSV, cleaned with the
 shipped default cleaner, and measured against the clean performance.
 """
 
@@ -20,8 +20,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import comparison, filters, io, metrics, performer, plot, simulate
+    from faceclean import filters, io
     from faceclean.errors import FacecleanError
+    from faceclean.evaluation import comparison, metrics, performer, simulate
+    from faceclean.report import plot
 
     out = Path(args.out)
     if args.seconds <= 0:

@@ -1,6 +1,6 @@
 """``faceclean eval [--data DIR] [--json OUT] [--markdown OUT] [--quick]``.
 
-Runs the evaluation protocol of faceclean.evaluate (leave one source out; 30, 60, 120 fps
+Runs the evaluation protocol of faceclean.evaluation.evaluate (leave one source out; 30, 60, 120 fps
 and webcam timing; every method) and prints the 60 fps table.
 """
 
@@ -28,8 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import evaluate
-    from faceclean import results as results_md
+    from faceclean.evaluation import evaluate
+    from faceclean.evaluation import results as results_md
     from faceclean.io.atomic import atomic_write
 
     def progress(msg: str) -> None:

@@ -1,7 +1,7 @@
 """``faceclean export MODEL -o model.onnx``: the learned cleaner as a one-step ONNX graph.
 
 Every piece of recurrent state is an explicit input and output (see
-faceclean.neural.export), so the engine that runs it owns the state. Needs the ``onnx``
+faceclean.learned.export), so the engine that runs it owns the state. Needs the ``onnx``
 package, not torch.
 """
 
@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean.errors import FacecleanError
-    from faceclean.neural.export import export
+    from faceclean.learned.export import export
 
     if Path(args.model).resolve() == Path(args.output).resolve():
         raise FacecleanError("OUT must not be the model file")
@@ -45,8 +45,8 @@ def _check(model: str, onnx_path: str) -> float:
     """Max |ONNX - numpy| over 200 steps of a seeded random walk, 2 streams."""
     import numpy as np
 
-    from faceclean.filters.learned import Learned
-    from faceclean.filters.onnx_backend import OnnxLearned
+    from faceclean.learned.cleaner import Learned
+    from faceclean.learned.onnx import OnnxLearned
 
     a, b = Learned(model), OnnxLearned(onnx_path)
     m = len(a.names)

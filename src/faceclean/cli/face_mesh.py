@@ -15,8 +15,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from faceclean import facemesh
     from faceclean.errors import FacecleanError
+    from faceclean.face import facemesh
 
     if Path(args.output).suffix.lower() != ".glb":
         raise FacecleanError(f"{args.output}: the face mesh is written as .glb")

@@ -1,7 +1,7 @@
 """``faceclean fuzz [--target NAME] [--examples N | --seconds S]``: the long fuzz run.
 
 Feeds every file reader and relay decoder (or one) arbitrary and mutated real inputs
-(faceclean.fuzz) and prints, per target, how many inputs were tried, accepted and
+(faceclean.evaluation.fuzz) and prints, per target, how many inputs were tried, accepted and
 refused. Exit 0 when nothing broke the policy, 1 with the failure and its input otherwise.
 """
 
@@ -14,7 +14,7 @@ HELP = "fuzz the readers and relay decoders (hypothesis), reporting inputs tried
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from faceclean.fuzz import TARGETS
+    from faceclean.evaluation.fuzz import TARGETS
 
     p.add_argument("--target", choices=TARGETS, action="append", help="repeatable (default: all)")
     budget = p.add_mutually_exclusive_group()
@@ -26,8 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from faceclean import fuzz
     from faceclean.errors import FacecleanError
+    from faceclean.evaluation import fuzz
     from faceclean.io.atomic import atomic_write
 
     if importlib.util.find_spec("hypothesis") is None:

@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def comparison_from(args: argparse.Namespace):
     """Load NOISY (and --truth) and clean with --method then --compare."""
-    from faceclean import comparison, filters, io
+    from faceclean import filters, io
+    from faceclean.evaluation import comparison
 
     noisy = io.load(args.input)
     truth = io.load(args.truth) if args.truth else None
@@ -51,7 +52,7 @@ def comparison_from(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import plot
+    from faceclean.report import plot
 
     comp = comparison_from(args)
     channels = [c for c in (args.channels or "").split(",") if c.strip()] or None

@@ -24,9 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from faceclean import facemesh, report
+    from faceclean import report
     from faceclean.cli.plot import comparison_from
     from faceclean.errors import FacecleanError
+    from faceclean.face import facemesh
 
     if Path(args.output).suffix.lower() not in (".html", ".htm"):
         raise FacecleanError(f"{args.output}: the report must be an .html file")

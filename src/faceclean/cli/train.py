@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> str:
-    from faceclean import dataset
+    from faceclean.evaluation import dataset
     from faceclean.neural import checkpoint
     from faceclean.neural.validate import CONDITIONS, corrupted, evaluate, table
 

@@ -20,9 +20,9 @@ METHODS: dict[str, str] = {
     "kalman": "faceclean.filters.kalman:Kalman",
     "gaussian": "faceclean.filters.gaussian:Gaussian",
     "savgol": "faceclean.filters.savgol:SavGol",
-    "lstm": "faceclean.filters.learned:Learned",
-    "fc": "faceclean.filters.derivative_net:FullyConnected",
-    "gbt": "faceclean.filters.derivative_net:BoostedTrees",
+    "lstm": "faceclean.learned.cleaner:Learned",
+    "fc": "faceclean.learned.derivative_net:FullyConnected",
+    "gbt": "faceclean.learned.derivative_net:BoostedTrees",
 }
 
 __all__ = [

@@ -30,9 +30,9 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import group_of
 from faceclean.errors import FacecleanError
+from faceclean.evaluation.metrics import _interp_rows, _paired
 from faceclean.filters import Cleaner, cleaner_class, make
 from faceclean.filters import presets as _presets
-from faceclean.metrics import _interp_rows, _paired
 
 # method -> parameter -> (low, high), searched log-uniformly.
 SPACES: dict[str, dict[str, tuple[float, float]]] = {

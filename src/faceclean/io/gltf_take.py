@@ -35,7 +35,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.facemesh import FaceMesh
+from faceclean.face.facemesh import FaceMesh
 
 _JSON, _BIN = 0x4E4F534A, 0x004E4942  # GLB chunk types
 _FLOAT, _UINT = 5126, 5125  # glTF componentType
@@ -114,7 +114,7 @@ class _Blob:
 def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
     """(glTF JSON dict, binary buffer bytes, keyframe counts or None) for ``mesh``, animated
     by ``anim`` when given."""
-    from faceclean.facemesh import _normals
+    from faceclean.face.facemesh import _normals
 
     blob = _Blob()
     v = np.ascontiguousarray(mesh.vertices, "<f4")
@@ -200,7 +200,7 @@ def write(
     """Write ``anim`` on ``mesh`` (the stylised face by default); GLB unless ``path`` ends
     in ``.gltf``. Returns the keyframe counts (see :func:`keyframes`)."""
     if mesh is None:
-        from faceclean.facemesh import stylised
+        from faceclean.face.facemesh import stylised
 
         mesh = stylised()
     p = Path(path) if path is not None else None

@@ -1,7 +1,7 @@
 """Training of the paper's non-recurrent baselines (SPEC section 3): FC (torch) and GBT.
 
 Both learn the truth's K = 4 backward time-derivatives at the newest frame from the
-input's features ``[x, d^(1..K)[n+1], d^(1..K)[n]]`` (see faceclean.filters.derivative_net,
+input's features ``[x, d^(1..K)[n+1], d^(1..K)[n]]`` (see faceclean.learned.derivative_net,
 whose feature pass is reused here, so training and runtime see the same numbers).
 
 Data: every training take is augmented (dataset.augment: gains, offsets, time-warp,
@@ -37,11 +37,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from faceclean import dataset, simulate
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.filters.derivative_net import GROUP_NAMES, DerivativeFeatures, group_index
+from faceclean.evaluation import dataset, simulate
 from faceclean.io.atomic import atomic_write
+from faceclean.learned.derivative_net import GROUP_NAMES, DerivativeFeatures, group_index
 
 K = 4
 ALPHA = {"fc": 0.9, "gbt": 0.97}

@@ -5,7 +5,7 @@
 - L_MSE = mean (x_gt - x̂)^2 over valid frames and channels;
 - L_der = sum_k mean (x_gt^(k) - x̂^(k))^2, forward derivatives (Eq. 1), 1/s^k;
 - L_dis = mean |D_gt - D̂| + α_dis |D_i - D̂| over the 6 lip/eyelid distances of a face
-  mesh deformed by the weights (faceclean.mesh; distances in mouth widths);
+  mesh deformed by the weights (faceclean.face.mesh; distances in mouth widths);
 - L_acc (ours) = mean (x_gt'' - x̂'')^2, second time-derivatives on the real,
   irregular times, 1/s^2: the paper's terms reward amplitude and leave most jitter in.
 
@@ -23,7 +23,7 @@ import torch
 from torch import Tensor
 
 from faceclean.channels import INDEX, canonical
-from faceclean.mesh import Face
+from faceclean.face.mesh import Face
 
 
 @dataclass(frozen=True)

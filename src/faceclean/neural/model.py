@@ -37,7 +37,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0
+from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0
 
 MAX_GAP = 0.5  # s; as StreamCleaner.max_gap: longer pauses restart the state
 OUTPUTS = ("additive", "gated", "rate")  # the paper's residual, or gain + residual

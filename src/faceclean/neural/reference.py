@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0, LSTMWeights
+from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0, LSTMWeights
 
 
 def single_thread() -> str:

@@ -3,7 +3,7 @@
     faceclean train --val-sources neurosync --epochs 40 --out model.npz
     torchrun --nproc_per_node 2 -m faceclean.neural.train --epochs 40 --out model.npz
 
-Every epoch draws fresh augmented, corrupted chunks (faceclean.dataset); the model
+Every epoch draws fresh augmented, corrupted chunks (faceclean.evaluation.dataset); the model
 unrolls closed loop over each chunk from x̂[0] = x[0] and gradients flow through it all.
 Adam (lr 1e-3), gradient clipping, seeded. After every epoch the model runs over whole
 validation takes (sources never trained on); the best by validation loss is written to
@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from faceclean import dataset
 from faceclean.channels import ARKIT52
-from faceclean.mesh import load_face
+from faceclean.evaluation import dataset
+from faceclean.face.mesh import load_face
 from faceclean.neural import checkpoint, distributed
 from faceclean.neural.data import EpochStream
 from faceclean.neural.losses import Loss, Weights

@@ -13,10 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from faceclean import metrics, simulate
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.dataset import Take
+from faceclean.evaluation import metrics, simulate
+from faceclean.evaluation.dataset import Take
 from faceclean.neural.losses import Loss
 from faceclean.neural.model import LSTMCleaner
 

@@ -1,6 +1,7 @@
 """The self-contained HTML report: measures, curves per channel group, a 3D face view.
 
-from faceclean import comparison, report
+from faceclean import report
+from faceclean.evaluation import comparison
 report.write(comparison.compare(noisy, truth, ["one-euro", "kalman"]), "report.html")
 """
 

@@ -17,9 +17,9 @@ import re
 from pathlib import Path
 
 import faceclean
-from faceclean.comparison import Comparison, untruthed
 from faceclean.errors import FacecleanError
-from faceclean.facemesh import FaceMesh
+from faceclean.evaluation.comparison import Comparison, untruthed
+from faceclean.face.facemesh import FaceMesh
 from faceclean.io.atomic import atomic_write
 from faceclean.report import payload
 
@@ -87,7 +87,7 @@ def measures_html(comp: Comparison) -> str:
     one, and always what needs no truth (jitter energy, spikes, gaps)."""
     parts = []
     if comp.truth is not None:
-        from faceclean import metrics
+        from faceclean.evaluation import metrics
 
         rows = []
         raw = metrics.summary(comp.input, comp.truth)
@@ -137,7 +137,7 @@ def _json_script(obj) -> str:
 
 def render(comp: Comparison, face: FaceMesh | None = None, source: str = "input") -> str:
     """The report as one HTML string."""
-    from faceclean import facemesh
+    from faceclean.face import facemesh
 
     face = face if face is not None else facemesh.stylised()
     imports, three_version = import_map()

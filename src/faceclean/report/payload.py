@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from faceclean.channels import GROUPS, INDEX, canonical
-from faceclean.comparison import Comparison, change
-from faceclean.facemesh import FaceMesh
+from faceclean.evaluation.comparison import Comparison, change
+from faceclean.face.facemesh import FaceMesh
 
 SCALE = 1000  # stored weight units per unit weight
 MAX_VALUES = 1_600_000  # numbers in all series together, past which frames are decimated

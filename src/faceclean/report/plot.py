@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from faceclean.channels import canonical
-from faceclean.comparison import Comparison, change
 from faceclean.errors import FacecleanError
+from faceclean.evaluation.comparison import Comparison, change
 from faceclean.io.atomic import atomic_write
 
 FORMATS = (".png", ".svg", ".pdf")

@@ -1,4 +1,4 @@
-"""The learned cleaner run by ONNX Runtime, from an exported step graph (neural/export.py).
+"""The learned cleaner run by ONNX Runtime, from an exported step graph (learned/export.py).
 
 The graph holds one step with its state as explicit inputs and outputs; this class keeps
 that state between calls and applies the time rules of filters/base.py around it, so it
@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
-from faceclean.filters.channel_map import ChannelMap
 
 STEP_FORMAT = "faceclean-lstm-step/1"  # = neural.export.STEP_FORMAT (kept torch-free)
 
@@ -46,8 +46,8 @@ def model_bytes(path: str | os.PathLike) -> bytes:
     if not p.is_file():
         raise FacecleanError(f"no such model file: {p}")
     if p.suffix.lower() == ".npz":
-        from faceclean.filters.lstm_weights import LSTMWeights
-        from faceclean.neural.export import build  # needs onnx, not torch
+        from faceclean.learned.checkpoint import LSTMWeights
+        from faceclean.learned.export import build  # needs onnx, not torch
 
         return build(LSTMWeights.load(p)).SerializeToString()
     return p.read_bytes()

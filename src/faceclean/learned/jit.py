@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0
+from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0
 
 try:  # the optional ``fast`` extra
     from numba import njit

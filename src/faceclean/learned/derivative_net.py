@@ -47,8 +47,8 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, GROUPS, canonical
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
-from faceclean.filters.lstm_weights import MAX_MODEL_BYTES
 from faceclean.io.npz_safe import load_arrays
+from faceclean.learned.checkpoint import MAX_MODEL_BYTES
 
 GROUP_NAMES = tuple(GROUPS)
 ALPHA_RATE = 60.0  # Hz; α_r is the paper's per-frame value at its 60 fps test rate

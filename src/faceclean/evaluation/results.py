@@ -1,4 +1,4 @@
-"""docs/RESULTS.md from :func:`faceclean.evaluate.evaluate`'s results: the header (seed,
+"""docs/RESULTS.md from :func:`faceclean.evaluation.evaluate.evaluate`'s results: the header (seed,
 takes, folds, models), the issue's targets met or missed, one table per condition in the
 layout of the paper's Tables 1 and 2, and MSE × raw per held-out source."""
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.evaluate import CONDITIONS, LEARNED_ROWS, TUNE_SECONDS, TUNED_ROWS, _mean
+from faceclean.evaluation.evaluate import CONDITIONS, LEARNED_ROWS, TUNE_SECONDS, TUNED_ROWS, _mean
 
 CAUSAL_FILTERS = tuple(label for label, _ in TUNED_ROWS)  # "best tuned causal filter"
 TARGET_RELAX = 0.15  # the other conditions: within 15 % of the 60 fps targets
@@ -116,7 +116,8 @@ def markdown(results: dict[str, Any]) -> str:
         + (" **Quick run (--quick).**" if results["quick"] else ""),
         "",
         f"- **Protocol**: leave one source out. Seed {results['seed']}: every validation take "
-        'corrupted by `faceclean.simulate` (preset "iphone" at 30, 60 and 120 fps, the same '
+        "corrupted by `faceclean.evaluation.simulate` "
+        '(preset "iphone" at 30, 60 and 120 fps, the same '
         'artefact draw at each rate; preset "webcam": 24–30 fps, irregular timestamps, '
         "dropped frames, heavier noise).",
     ]

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from faceclean.errors import FacecleanError
-from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0, LSTMWeights
+from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0, LSTMWeights
 
 STEP_FORMAT = "faceclean-lstm-step/1"
 OPSET = 17

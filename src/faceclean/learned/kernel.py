@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from faceclean.filters.base import State
-from faceclean.filters.lstm_weights import RATE_A_MAX, RATE_TAU0
+from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0
 
 HEADS = {"additive": 0, "gated": 1, "rate": 2}  # output head -> the kernels' ``mode``
 _A_MAX = np.float32(RATE_A_MAX)

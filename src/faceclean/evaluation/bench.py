@@ -180,8 +180,9 @@ def _reference_clean(make: Callable[[], Any]) -> Callable[[Animation], None]:
 
 def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
     """name -> (factory, note) for every streaming cleaner benchmarked."""
-    from faceclean.filters import learned_jit, make, presets
-    from faceclean.filters.learned import Learned
+    from faceclean.filters import make, presets
+    from faceclean.learned import jit
+    from faceclean.learned.cleaner import Learned
 
     out: dict[str, tuple[Callable[[], Any], str]] = {}
     for name in ("ema", "one-euro", "kalman"):
@@ -189,15 +190,15 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
             out[name] = (lambda n=name: presets.build(n), "shipped preset")
         else:
             out[name] = (lambda n=name: make(n), "default parameters")
-    if learned_jit.available():
+    if jit.available():
         out["lstm"] = (
             lambda: Learned(weights=model),
             f"numba kernel <= {Learned.jit_max_streams} streams, numpy above",
         )
     out["lstm-numpy"] = (lambda: Learned(weights=model, kernel="numpy"), "numpy + BLAS only")
     try:
-        from faceclean.filters.onnx_backend import OnnxLearned
-        from faceclean.neural.export import build
+        from faceclean.learned.export import build
+        from faceclean.learned.onnx import OnnxLearned
 
         graph = build(model).SerializeToString()
         out["lstm-onnx"] = (lambda: OnnxLearned(graph), "onnxruntime, 1 thread")
@@ -213,8 +214,8 @@ def run(
 ) -> dict[str, Any]:
     """Measure everything; returns a JSON-ready dict (machine, model, rows, reference)."""
     from faceclean.filters import make
-    from faceclean.filters.learned import default_model_path
-    from faceclean.filters.lstm_weights import LSTMWeights
+    from faceclean.learned.checkpoint import LSTMWeights
+    from faceclean.learned.cleaner import default_model_path
 
     sizes = sizes or Sizes()
     say = progress or (lambda s: None)

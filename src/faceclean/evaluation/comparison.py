@@ -3,7 +3,7 @@
 What ``faceclean plot`` and ``faceclean report`` show. Everything is on the input's
 timestamps: a truth recorded at other instants is interpolated onto them. Measures that
 need no truth (jitter energy, spikes, gaps) live here too; those that need one are in
-:mod:`faceclean.metrics`.
+:mod:`faceclean.evaluation.metrics`.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ One step, when frame n+1 arrives dt[n] seconds after frame n (K = 1):
 Speed: the weights are fused (lstm_weights.Fused): one matrix product per layer with the
 state laid out beside the input in one preallocated float32 buffer [x̂ | x̂' | x_c | h_0 | 1]
 (lstm_kernel.Workspace), S streams being S columns of the same products; a compiled
-kernel (learned_jit, when numba is installed) serves a few streams. When every
+kernel (learned/jit.py, when numba is installed) serves a few streams. When every
 stream advances normally (the common case) ``step`` runs that kernel in place with no
 array allocation but the returned frame; anything else (first frame, missing values,
 a gap, a repeated timestamp) takes the base class's generic rules, which a test proves
@@ -28,13 +28,13 @@ from collections.abc import Sequence
 import numpy as np
 
 from faceclean.animation import Animation
+from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.filters import learned_jit
 from faceclean.filters.base import MAX_ABS, State, StreamCleaner
-from faceclean.filters.channel_map import ChannelMap
-from faceclean.filters.lstm_kernel import HEADS, Workspace, step_numpy
-from faceclean.filters.lstm_weights import LSTMWeights
+from faceclean.learned import jit
+from faceclean.learned.checkpoint import LSTMWeights
+from faceclean.learned.kernel import HEADS, Workspace, step_numpy
 
 _SCALAR = (float, int, np.floating)
 
@@ -77,11 +77,9 @@ class Learned(StreamCleaner):
             raise FacecleanError(f"max_gap must be > 0 s (got {max_gap})")
         if kernel not in ("auto", "numpy", "numba"):
             raise FacecleanError(f"kernel must be auto, numpy or numba (got {kernel!r})")
-        if kernel == "numba" and not learned_jit.available():
+        if kernel == "numba" and not jit.available():
             raise FacecleanError("kernel='numba' needs numba (pip install 'faceclean[fast]')")
-        self.kernel = (
-            kernel if kernel != "auto" else "numba" if learned_jit.available() else "numpy"
-        )
+        self.kernel = kernel if kernel != "auto" else "numba" if jit.available() else "numpy"
         self.weights = weights
         fused = weights.fused(half_sigmoid=True)
         self._wts = tuple(np.ascontiguousarray(w.T) for w in fused.layers)  # (4H, in + H + 1)
@@ -108,7 +106,7 @@ class Learned(StreamCleaner):
         x̂[n+1] to ``out`` (S, M); False, with nothing changed, if x is not all finite.
         Compiled for a few streams, numpy (BLAS matrix products) for many."""
         if self.kernel == "numba" and ws.streams <= self.jit_max_streams:
-            return learned_jit.step(*ws.jit_args, x, out)
+            return jit.step(*ws.jit_args, x, out)
         flat = x.reshape(-1)
         if not _sane(flat):  # NaN/inf/absurd: base rules
             return False
@@ -225,7 +223,7 @@ class Learned(StreamCleaner):
         """One stream advanced over frames xs (N, M) by dts (N,) s: outputs (N, M)."""
         ws, out = self._ws, np.empty_like(xs)
         if self.kernel == "numba":
-            learned_jit.run(*ws.jit_args, xs, dts, out)
+            jit.run(*ws.jit_args, xs, dts, out)
             return out
         for n in range(len(xs)):
             ws.dt[0, 0] = dts[n]

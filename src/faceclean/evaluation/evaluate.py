@@ -14,7 +14,7 @@ Protocol (SPEC section 5, issue 4):
   takes; the learned FC, GBT and LSTM, each evaluated per fold with a model whose
   config["val_sources"] holds the fold's source (no model: no figure for that fold).
 - Columns: MSE (the paper's measure), MSE relative to the raw input on the same takes,
-  jitter ratio, lag in ms, blink closure (faceclean.metrics), each a frame-weighted mean
+  jitter ratio, lag in ms, blink closure (faceclean.evaluation.metrics), each a frame-weighted mean
   over takes, then over folds pooled.
 """
 
@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from faceclean import dataset, metrics, simulate
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import dataset, metrics, simulate
 from faceclean.filters import Cleaner, make
 
 SEED = 2020
@@ -158,7 +158,7 @@ def evaluate(
     quick: bool = False,
     progress: Progress | None = None,
 ) -> dict[str, Any]:
-    """Run the whole protocol; returns a JSON-ready dict (rendered by faceclean.results).
+    """Run the whole protocol; returns a JSON-ready dict (rendered by faceclean.evaluation.results).
 
     ``quick``: the first QUICK_SECONDS of each take, one tuning pass on as much.
     """

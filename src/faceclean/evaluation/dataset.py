@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from faceclean import simulate
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.errors import FacecleanError
+from faceclean.evaluation import simulate
 from faceclean.settings import takes_dir
 from faceclean.timing import hold_last
 
@@ -285,7 +285,7 @@ def validation_chunks(takes: Sequence[Take], preset: str = "mixed", seed: int = 
 
 def synthetic_takes(minutes: float, seed: int, take_seconds: float = 60.0) -> list[Take]:
     """``minutes`` of synthetic performer takes (source ``"synthetic"``), 60 fps."""
-    from faceclean import performer
+    from faceclean.evaluation import performer
 
     takes, left, i = [], minutes * 60.0, 0
     while left > 1.0:

@@ -50,10 +50,10 @@ class FaceMesh:
 
 
 def stylised() -> FaceMesh:
-    """faceclean's own stylised face, 52 targets, coloured (see faceclean.faceparts)."""
-    from faceclean import faceparts
+    """faceclean's own stylised face, 52 targets, coloured (see faceclean.face.parts)."""
+    from faceclean.face import parts
 
-    neutral, faces, colors, deltas = faceparts.build()
+    neutral, faces, colors, deltas = parts.build()
     linear = np.asarray(colors, np.float64) ** 2.2  # sRGB-looking palette -> linear (glTF)
     return FaceMesh(
         neutral.astype(np.float32),
@@ -61,7 +61,7 @@ def stylised() -> FaceMesh:
         deltas.astype(np.float32),
         linear.astype(np.float32),
         "faceclean stylised face",
-        faceparts.landmarks(),
+        parts.landmarks(),
     )
 
 

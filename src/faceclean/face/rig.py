@@ -4,7 +4,7 @@ Metres, +y up, +z out of the face, +x the face's own left (ARKit: ``...Left`` mo
 The face's front surface is an ellipsoid with relief (``skin_z``); the rig moves points
 of it through a jaw hinge, eyelid edge angles, eye rotations and smooth displacement
 fields around the lips, brows, cheeks and nose. The surfaces themselves are built in
-:mod:`faceclean.faceparts`.
+:mod:`faceclean.face.parts`.
 """
 
 from __future__ import annotations

@@ -1,0 +1,1 @@
+"""Face meshes: the loss's vertices, the viewer's GLB, our stylised face."""

@@ -1,0 +1,1 @@
+"""The learned cleaners' runtime (numpy, numba, ONNX); never torch."""
