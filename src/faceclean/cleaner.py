@@ -124,7 +124,7 @@ def _resolve(
     from faceclean.settings import MODELS
 
     if path is None or path == "lstm":
-        default = MODELS / "default.npz"  # = filters.learned.default_model_path()
+        default = MODELS / "default.npz"  # = learned.cleaner.default_model_path()
         if default.is_file():
             return _learned(default, backend)
         if path == "lstm":

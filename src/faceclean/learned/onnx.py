@@ -2,7 +2,7 @@
 
 The graph holds one step with its state as explicit inputs and outputs; this class keeps
 that state between calls and applies the time rules of filters/base.py around it, so it
-is interchangeable with the numpy runtime (``filters.learned.Learned``).
+is interchangeable with the numpy runtime (``learned.cleaner.Learned``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 
-STEP_FORMAT = "faceclean-lstm-step/1"  # = neural.export.STEP_FORMAT (kept torch-free)
+STEP_FORMAT = "faceclean-lstm-step/1"  # = learned.export.STEP_FORMAT (kept torch-free)
 
 
 def _session(model: bytes, threads: int) -> Any:

@@ -139,7 +139,7 @@ def _save(path: str | os.PathLike, config: dict[str, Any], arrays: dict[str, np.
 
 
 def save_fc(model: FCNet, path: str | os.PathLike, extra: dict[str, Any] | None = None) -> None:
-    """Write an FC checkpoint (``faceclean-fc/1``) readable by filters.derivative_net."""
+    """Write an FC checkpoint (``faceclean-fc/1``) readable by learned.derivative_net."""
     config = {
         "format": "faceclean-fc/1",
         "channels": list(ARKIT52[: model.M]),
