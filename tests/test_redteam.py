@@ -127,7 +127,8 @@ def _env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "FACECLEAN_DEBUG"}
     env["PYTHONPATH"] = os.pathsep.join([str(REPO / "src"), env.get("PYTHONPATH", "")])
     env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    env.update(NUMBA_NUM_THREADS="1", PYTHONWARNINGS="default", LC_ALL="C.UTF-8")
+    env.update(NUMBA_NUM_THREADS="1", LC_ALL="C.UTF-8")
+    env.pop("PYTHONWARNINGS", None)  # what a user sees: Python's default filters
     env.pop("PYTHONIOENCODING", None)
     return env
 
@@ -2015,3 +2016,150 @@ def test_tune_absurd_input_is_refused(tmp_path, case):
     truth = write_json(tmp_path / "truth.json", truth_doc)
     refused(fc("tune", noisy, *extra, "--truth", truth, "--method", method, "-o", out))
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------
+# J. Model checkpoints (clean --method lstm --set path=M, export, relay --model)
+
+SHIPPED = REPO / "src" / "faceclean" / "models" / "default.npz"
+
+
+def _model(tmp_path: Path, arrays=None, config=None, raw_config=None) -> Path:
+    """A copy of the shipped model with arrays replaced and config keys changed."""
+    with np.load(SHIPPED, allow_pickle=False) as z:
+        a = {k: z[k] for k in z.files}
+    cfg = json.loads(str(a["config"][()]))
+    cfg.update(config or {})
+    a["config"] = np.array(raw_config if raw_config is not None else json.dumps(cfg))
+    for k, v in (arrays or {}).items():
+        a[k] = v(a[k]) if callable(v) else v
+    return write_npz(tmp_path / "model.npz", a)
+
+
+def _nan_like(x):
+    return np.full_like(x, np.nan)
+
+
+MODEL_REFUSED = {
+    "value-range-words": dict(config={"value_range": ["a", "b"]}),
+    "value-range-number": dict(config={"value_range": 5}),
+    "value-range-three": dict(config={"value_range": [0, 1, 2]}),
+    "output-list": dict(config={"output": ["rate"]}),
+    "channels-numbers": dict(config={"channels": list(range(52))}),
+    "channels-string": dict(config={"channels": "jawOpen"}),
+    "hidden-negative": dict(config={"hidden": -1}),
+    "layers-zero": dict(config={"layers": 0}),
+    "K-two": dict(config={"K": 2}),
+    "format-wrong": dict(config={"format": "faceclean-lstm/9"}),
+    "config-not-json": dict(raw_config="{not json"),
+    "config-array": dict(raw_config="[1, 2]"),
+    "config-deep": dict(raw_config=DEEP),
+    "config-huge-int": dict(config={"layers": 10**400}),
+    "feat-std-zero": dict(arrays={"feat_std": np.zeros_like}),
+    "feat-std-nan": dict(arrays={"feat_std": _nan_like}),
+    "head-wrong-shape": dict(arrays={"head.w": np.zeros((3, 3), np.float32)}),
+    "weights-words": dict(arrays={"head.b": lambda x: np.array(["x"] * len(x))}),
+}
+MODEL_FAILS = {
+    "value-range-words": 'internal error: config value_range ["a", "b"] (ValueError)',
+    "value-range-three": "internal error: config value_range of 3 numbers (ValueError)",
+    "channels-numbers": "internal error: config channels are numbers (AttributeError)",
+    "config-deep": "internal error: a deeply nested model config (RecursionError)",
+    "weights-words": "internal error: string weights in a model (ValueError on float32)",
+}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(n, id=n, marks=[fail(MODEL_FAILS[n])] if n in MODEL_FAILS else [])
+        for n in MODEL_REFUSED
+    ],
+)
+def test_malformed_model_is_refused(tmp_path, take, name):
+    m = _model(tmp_path, **MODEL_REFUSED[name])
+    out = tmp_path / "out.csv"
+    refused(fc("clean", take, "-o", out, "--method", "lstm", "--set", f"path={m}"))
+    assert not out.exists()
+
+
+MODEL_NOT_FINITE = {
+    "out-scale-nan": dict(arrays={"out_scale": _nan_like}),
+    "head-bias-inf": dict(arrays={"head.b": lambda x: np.full_like(x, np.inf)}),
+    "feat-mean-inf": dict(arrays={"feat_mean": lambda x: np.full_like(x, np.inf)}),
+    "lstm-weight-nan": dict(arrays={"lstm.0.w_ih": _nan_like}),
+    "value-range-inverted": dict(config={"value_range": [1.0, 0.0]}),
+    "value-range-nan": dict(raw_config=None, config={"value_range": [float("nan")] * 2}),
+    "huge-weights": dict(arrays={"lstm.1.w_hh": lambda x: np.full_like(x, 3e38)}),
+}
+MODEL_NOT_FINITE_FAILS = {
+    "out-scale-nan": "silent loss: a model whose out_scale is NaN erases every cell, exit 0",
+    "head-bias-inf": "silent loss: a model with an infinite head bias erases every cell, exit 0",
+    "feat-mean-inf": "silent loss: a model with infinite feat_mean erases every cell, exit 0",
+    "lstm-weight-nan": "silent loss: a model with NaN LSTM weights erases every cell, exit 0",
+    "huge-weights": "silent loss: a model with float32-max weights erases 93% of the cells",
+}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(
+            n, id=n, marks=[fail(MODEL_NOT_FINITE_FAILS[n])] if n in MODEL_NOT_FINITE_FAILS else []
+        )
+        for n in MODEL_NOT_FINITE
+    ],
+)
+def test_broken_model_never_erases_data(tmp_path, plain, name):
+    m = _model(tmp_path, **MODEL_NOT_FINITE[name])
+    out = tmp_path / "out.csv"
+    if ok_or_refused(fc("clean", plain, "-o", out, "--method", "lstm", "--set", f"path={m}")):
+        finite_where_input_was(read_plain(plain)[1], read_plain(out)[1])
+
+
+def test_model_that_is_a_csv_is_refused(tmp_path, take):
+    m = tmp_path / "model.npz"
+    m.write_bytes(livelink_text(3))
+    refused(fc("clean", take, "-o", tmp_path / "o.csv", "--method", "lstm", "--set", f"path={m}"))
+
+
+def test_truncated_model_is_refused(tmp_path, take):
+    m = tmp_path / "model.npz"
+    m.write_bytes(SHIPPED.read_bytes()[:5000])
+    refused(fc("clean", take, "-o", tmp_path / "o.csv", "--method", "lstm", "--set", f"path={m}"))
+
+
+def test_model_zip_bomb_is_refused(tmp_path, take):
+    m = tmp_path / "model.npz"
+    _raw_zip(m, [_stored("config.npy", np.array("{}")), _zeros_deflated("feat_mean.npy", (10**8,))])
+    r = fc("clean", take, "-o", tmp_path / "o.csv", "--method", "lstm", "--set", f"path={m}")
+    refused(r)
+
+
+@fail('internal error: export of a model whose value_range is ["a", "b"]')
+def test_export_malformed_model_is_refused(tmp_path):
+    m = _model(tmp_path, config={"value_range": ["a", "b"]})
+    out = tmp_path / "m.onnx"
+    refused(fc("export", m, "-o", out))
+    assert not out.exists()
+
+
+def test_export_missing_model_is_refused(tmp_path):
+    refused(fc("export", tmp_path / "none.npz", "-o", tmp_path / "m.onnx"))
+
+
+@fail("damage: export -o naming a FIFO replaces it with a regular file")
+def test_export_to_a_fifo_is_refused(tmp_path):
+    out = _special(tmp_path, "fifo", "m.onnx")
+    refused(fc("export", SHIPPED, "-o", out, timeout=TIMEOUT))
+    _still(out, "fifo")
+
+
+def test_train_report_on_a_broken_model_is_refused(tmp_path):
+    m = tmp_path / "model.npz"
+    m.write_bytes(b"PK\x03\x04 not a model")
+    refused(fc("train", "--report", m, timeout=TIMEOUT))
+
+
+def test_eval_with_a_missing_data_folder_is_refused(tmp_path):
+    refused(fc("eval", "--quick", "--data", tmp_path / "none", timeout=TIMEOUT))
