@@ -155,9 +155,14 @@ def _learned(path: Path, backend: str | None) -> tuple[Factory, str, None]:
         return (lambda names: OnnxLearned(graph, names=names)), f"lstm (onnx) {path}", None
     if path.suffix.lower() == ".onnx":
         raise FacecleanError(f"{path.name}: an ONNX graph runs on backend='onnx'")
+    from faceclean.learned.adaptive import Adaptive, AdaptiveWeights, is_adaptive
     from faceclean.learned.checkpoint import LSTMWeights
     from faceclean.learned.cleaner import Learned
 
+    if is_adaptive(path):
+        adaptive = AdaptiveWeights.load(path)
+        factory = lambda names: Adaptive(weights=adaptive, names=names)  # noqa: E731
+        return factory, f"adaptive (numpy) {path}", None
     weights = LSTMWeights.load(path)
     return (lambda names: Learned(weights=weights, names=names)), f"lstm (numpy) {path}", None
 

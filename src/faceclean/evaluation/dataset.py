@@ -148,9 +148,12 @@ class Augmentation:
     speed: float = 0.2  # playback speed in [1/(1+speed), 1+speed], log-uniform
     warp: float = 0.15  # +- share of a slow (2-8 s) speed wobble; < 1 keeps time increasing
     mirror: float = 0.5  # probability of the left/right mirror image
+    curve: float = 0.0  # log-std of a per-channel exponent x^c (another calibration)
 
 
 DEFAULT_AUGMENTATION = Augmentation()
+# The adaptive cleaner's: targets of other calibrations too (issue 11).
+WIDE_AUGMENTATION = Augmentation(gain=0.25, offset=0.04, curve=0.2)
 
 
 def augment(anim: Animation, rng: np.random.Generator, aug: Augmentation) -> Animation:
@@ -165,6 +168,8 @@ def augment(anim: Animation, rng: np.random.Generator, aug: Augmentation) -> Ani
     gain *= 1.0 + 0.25 * aug.gain * rng.uniform(-1.0, 1.0, 52)
     offset = aug.offset * rng.uniform(-1.0, 1.0, 52)
     x = np.clip(x * gain + offset, 0.0, top)
+    if aug.curve > 0:  # drawn last among the values: older augmentations keep their draws
+        x = x ** np.exp(aug.curve * rng.standard_normal(52))
     if rng.random() < aug.mirror:
         x = x[:, MIRROR]
     t = anim.times - anim.times[0]
@@ -257,14 +262,22 @@ def make_chunks(
 
 
 def epoch_chunks(
-    takes: Sequence[Take], seed: int, epoch: int, *, synthetic_minutes: float = 0.0, **kwargs
+    takes: Sequence[Take],
+    seed: int,
+    epoch: int,
+    *,
+    synthetic_minutes: float = 0.0,
+    full_range: bool = False,
+    **kwargs,
 ) -> Chunks:
     """Training chunks of one epoch: a fresh corruption and augmentation for every epoch,
     plus ``synthetic_minutes`` of new synthetic performer takes. Keywords go to
     :func:`make_chunks`. Same (seed, epoch), same arrays."""
     pool = list(takes)
     if synthetic_minutes > 0:
-        pool += synthetic_takes(synthetic_minutes, seed=seed * 100003 + epoch)
+        pool += synthetic_takes(
+            synthetic_minutes, seed=seed * 100003 + epoch, full_range=full_range
+        )
     return make_chunks(pool, seed=seed * 1000003 + epoch + 1, **kwargs)
 
 
@@ -283,14 +296,17 @@ def validation_chunks(takes: Sequence[Take], preset: str = "mixed", seed: int = 
     return make_chunks(takes, seed, preset=preset, augmentation=None)
 
 
-def synthetic_takes(minutes: float, seed: int, take_seconds: float = 60.0) -> list[Take]:
-    """``minutes`` of synthetic performer takes (source ``"synthetic"``), 60 fps."""
+def synthetic_takes(
+    minutes: float, seed: int, take_seconds: float = 60.0, full_range: bool = False
+) -> list[Take]:
+    """``minutes`` of synthetic performer takes (source ``"synthetic"``), 60 fps;
+    ``full_range``: every channel through its whole range (performer's range of motion)."""
     from faceclean.evaluation import performer
 
     takes, left, i = [], minutes * 60.0, 0
     while left > 1.0:
         seconds = min(take_seconds, left)
-        anim = performer.perform(seconds, seed=seed * 1000 + i)
+        anim = performer.perform(seconds, seed=seed * 1000 + i, full_range=full_range)
         takes.append(Take("synthetic", f"synth_{seed}_{i}", anim))
         left -= seconds
         i += 1

@@ -1,18 +1,25 @@
 """The RESULTS table: every method x every condition, on sources a model never saw.
 
-Protocol (SPEC section 5, issue 4):
-- Folds: leave one source out (dataset.folds). A fold's validation takes are every take
-  of its held-out source; its training takes are the other sources' takes.
-- Conditions: each validation take corrupted by the simulator with a fixed seed, at 30,
-  60 and 120 fps (the "iphone" preset with the rate replaced; the artefact parameters are
-  the same draw at every rate) and on "webcam" timing (that preset: 24-30 fps, irregular
-  timestamps, dropped frames, heavier noise).
+Protocol (SPEC section 5, issues 4 and 11):
+- Folds: leave one source out (dataset.folds), over every real source. A fold's
+  validation takes are every take of its held-out source; its training takes are the
+  other sources' takes.
+- Artefact models (``ARTEFACTS``): "simulate", faceclean's own simulator (the one the
+  learned models train with), and "degrade", a second model written independently of it
+  (evaluation/degrade.py) that no training ever uses. Every table reports both.
+- Conditions: each validation take corrupted with a fixed seed at 30, 60 and 120 fps
+  (simulate: the "iphone" preset with the rate replaced; degrade: its conditions; the
+  artefact draw is the same at every rate) and on "webcam" timing (24-30 fps, irregular
+  timestamps, dropped frames, heavier noise). Results are keyed "<artefacts> <condition>".
 - Rows: the raw input; the paper's EMA γ 0.3/0.5/0.8 per frame and Gaussian σ 1 and 5
   frames (offline); EMA with a time constant, One Euro and Kalman, each tuned by
   faceclean.filters.tune (global MSE objective) on the fold's training takes corrupted
   the same way at the same condition (first TUNE_SECONDS of each), never on validation
-  takes; the learned FC, GBT and LSTM, each evaluated per fold with a model whose
-  config["val_sources"] holds the fold's source (no model: no figure for that fold).
+  takes, corrupted by the same artefact model; the learned FC, GBT, LSTM and adaptive
+  cleaners, each evaluated per fold with a model whose config["train_sources"] does not
+  hold the fold's source (no model: no figure for that fold).
+- Do no harm (evaluation/harm.py): every real take as recorded, nothing added, through
+  each causal cleaner; the worst shift of a channel's mean level, and blink survival.
 - Columns: MSE (the paper's measure), MSE relative to the raw input on the same takes,
   jitter ratio, lag in ms, blink closure (faceclean.evaluation.metrics), each a frame-weighted mean
   over takes, then over folds pooled.
@@ -30,8 +37,9 @@ from typing import Any
 import numpy as np
 
 from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import dataset, metrics, simulate
+from faceclean.evaluation import dataset, degrade, harm, metrics, simulate
 from faceclean.filters import Cleaner, make
 
 SEED = 2020
@@ -41,10 +49,14 @@ CONDITIONS: dict[str, tuple[str, float | None]] = {  # name -> (preset, fps or p
     "120 fps": ("iphone", 120.0),
     "webcam": ("webcam", None),
 }
+ARTEFACTS = ("degrade", "simulate")  # the independent model first: it decides
 TUNE_SECONDS = 20.0  # s of each training take used to tune the classical filters
 QUICK_SECONDS = 6.0  # s of each take in --quick mode
 METRICS = ("mse", "rel_mse", "jitter_ratio", "lag_ms", "blink_closure")
-FORMATS = {"faceclean-lstm/1": "lstm", "faceclean-fc/1": "fc", "faceclean-gbt/1": "gbt"}
+FORMATS = {
+    "faceclean-lstm/1": "lstm", "faceclean-fc/1": "fc", "faceclean-gbt/1": "gbt",
+    "faceclean-adaptive/1": "adaptive",
+}  # fmt: skip
 
 # label -> (method, params, kind); kind: fixed | offline | tuned | learned
 FIXED_ROWS: list[tuple[str, str, dict[str, float], str]] = [
@@ -59,7 +71,10 @@ TUNED_ROWS: list[tuple[str, str]] = [
     ("One Euro (tuned)", "one-euro"),
     ("Kalman (tuned)", "kalman"),
 ]
-LEARNED_ROWS: list[tuple[str, str]] = [("FC", "fc"), ("GBT", "gbt"), ("LSTM", "lstm")]
+LEARNED_ROWS: list[tuple[str, str]] = [
+    ("FC", "fc"), ("GBT", "gbt"), ("LSTM (paper)", "lstm"), ("Adaptive (ours)", "adaptive"),
+]  # fmt: skip
+SHIPPED = "Adaptive (ours)"  # the row of the shipped default's recipe
 
 Progress = Callable[[str], None]
 
@@ -89,35 +104,47 @@ def model_config(path: Path) -> dict[str, Any]:
 
 
 def pick_models(files: Sequence[Path], sources: Sequence[str]) -> dict[str, dict[str, Path]]:
-    """method -> held-out source -> the first checkpoint that never saw that source."""
+    """method -> held-out source -> the first checkpoint that never saw that source.
+
+    Unseen: not among the checkpoint's ``train_sources`` (a model without that record is
+    never picked); a source added after a model was trained is unseen by it."""
     picked: dict[str, dict[str, Path]] = {m: {} for _, m in LEARNED_ROWS}
     for f in files:
         config = model_config(f)
         method = FORMATS.get(config.get("format", ""))
-        if method is None:
+        if method is None or "train_sources" not in config:
             continue
-        # Unseen: held out and not trained on (a take-level split lists every source).
-        unseen = set(config.get("val_sources", [])) - set(config.get("train_sources", []))
-        for s in sorted(unseen & set(sources)):
+        unseen = set(sources) - set(config["train_sources"])
+        for s in sorted(unseen):
             picked[method].setdefault(s, f)
     return picked
 
 
 def corrupted(
-    takes: Sequence[dataset.Take], condition: str, seed: int, seconds: float | None = None
+    takes: Sequence[dataset.Take],
+    condition: str,
+    seed: int,
+    seconds: float | None = None,
+    artefacts: str = "simulate",
 ) -> list[tuple[Animation, Animation]]:
-    """(noisy, truth) ARKit-52 pairs of every take under ``condition``; seeded per take."""
+    """(noisy, truth) ARKit-52 pairs of every take under ``condition`` by the artefact
+    model ``artefacts`` ("simulate" or "degrade"); seeded per take."""
+    if artefacts not in ARTEFACTS:
+        raise FacecleanError(f"unknown artefact model {artefacts!r} (known: {ARTEFACTS})")
     preset, fps = CONDITIONS[condition]
     pairs = []
     for i, take in enumerate(takes):
         clean = take.animation
         if seconds is not None:
             clean = _head(clean, seconds)
-        rng = np.random.default_rng([seed, i])
-        params = simulate.sample_params(rng, preset)
-        if fps is not None:
-            params = dataclasses.replace(params, fps=fps)
-        noisy, truth = simulate.apply(clean, params, rng)
+        if artefacts == "degrade":
+            noisy, truth = degrade.degrade(clean, seed=seed * 1000 + i, condition=condition)
+        else:
+            rng = np.random.default_rng([seed, i])
+            params = simulate.sample_params(rng, preset)
+            if fps is not None:
+                params = dataclasses.replace(params, fps=fps)
+            noisy, truth = simulate.apply(clean, params, rng)
         pairs.append((noisy.with_values(noisy.arkit()[0]), truth.with_values(truth.arkit()[0])))
     return pairs
 
@@ -178,17 +205,18 @@ def evaluate(
             per_take.setdefault(label, {}).setdefault(cond, []).append((source, take.name, sc))
 
     for source, train, val in folds:
-        for cond in CONDITIONS:
+        for artefacts, cond0 in ((a, c) for a in ARTEFACTS for c in CONDITIONS):
+            cond = f"{artefacts} {cond0}"
             if progress:
                 progress(f"fold {source}, {cond}")
-            pairs = corrupted(val, cond, seed, seconds)
+            pairs = corrupted(val, cond0, seed, seconds, artefacts)
             inputs = [noisy for noisy, _ in pairs]
             names = inputs[0].names
             record("Raw input", cond, source, val, _scores([a.values for a in inputs], pairs))
             for label, method, params, _ in FIXED_ROWS:
                 outs = run_streams(make(method, params, names=names), inputs)
                 record(label, cond, source, val, _scores(outs, pairs))
-            tune_pairs = corrupted(train, cond, seed + 1, tune_seconds)
+            tune_pairs = corrupted(train, cond0, seed + 1, tune_seconds, artefacts)
             for label, method in TUNED_ROWS:
                 result = tune.tune(method, tune_pairs)
                 tuned_params.setdefault(label, {}).setdefault(cond, {})[source] = result.params
@@ -199,10 +227,18 @@ def evaluate(
                 if path is not None:
                     outs = run_streams(_learned(method, path, names), inputs)
                     record(label, cond, source, val, _scores(outs, pairs))
+    if progress:
+        progress("do no harm")
     return {
         "seed": seed,
         "quick": quick,
-        "conditions": {c: {"preset": p, "fps": f} for c, (p, f) in CONDITIONS.items()},
+        "artefacts": list(ARTEFACTS),
+        "conditions": {
+            f"{a} {c}": {"artefacts": a, "condition": c, "preset": p, "fps": f}
+            for a in ARTEFACTS
+            for c, (p, f) in CONDITIONS.items()
+        },
+        "harm": _harm(takes, picked, seconds),
         "folds": {
             s: {"val_takes": [t.name for t in v], "train_takes": len(tr)} for s, tr, v in folds
         },
@@ -225,11 +261,37 @@ def _shown(path: Path) -> str:
 
 
 def _learned(method: str, path: Path, names: Sequence[str]) -> Cleaner:
-    key = "path" if method == "lstm" else "model"
+    key = "path" if method in ("lstm", "adaptive") else "model"
     return make(method, {key: str(path)}, names=names)
 
 
-def _mean(scores: list[dict[str, float]], key: str) -> float:
+def _harm(
+    takes: Sequence[dataset.Take], picked: dict[str, dict[str, Path]], seconds: float | None
+) -> dict[str, dict[str, Any]]:
+    """The do-no-harm table: shipped presets and defaults on every take; fold models on
+    the source they never saw."""
+    if seconds is not None:
+        takes = [dataclasses.replace(t, animation=_head(t.animation, seconds)) for t in takes]
+    from faceclean.settings import MODELS
+
+    rows: dict[str, Any] = {
+        f"{label} (shipped preset)": (lambda _t, m=method: make(m)) for label, method in TUNED_ROWS
+    }
+    for label, method in LEARNED_ROWS:
+        if method in ("fc", "gbt"):
+            continue
+        rows[label] = lambda t, m=method: (
+            _learned(m, picked[m][t.source], ARKIT52) if t.source in picked[m] else None
+        )
+    default = MODELS / "default.npz"
+    if default.is_file():
+        from faceclean.cleaner import Cleaner as Facade
+
+        rows["Shipped default"] = lambda _t: Facade.load(default)
+    return harm.table(rows, takes)
+
+
+def weighted_mean(scores: list[dict[str, float]], key: str) -> float:
     """Frame-weighted mean of one measure over takes, ignoring NaN figures."""
     v = np.array([s[key] for s in scores])
     w = np.array([s["frames"] for s in scores])
@@ -248,8 +310,10 @@ def _aggregate(per_take: dict[str, dict[str, list]]) -> dict[str, dict[str, dict
             for g, its in groups.items():
                 keys = {(s, n) for s, n, _ in its}
                 base = [sc for s, n, sc in raw[cond] if (s, n) in keys]
-                figs = {k: _mean([sc for _, _, sc in its], k) for k in METRICS if k != "rel_mse"}
-                figs["rel_mse"] = figs["mse"] / _mean(base, "mse")
+                figs = {
+                    k: weighted_mean([sc for _, _, sc in its], k) for k in METRICS if k != "rel_mse"
+                }
+                figs["rel_mse"] = figs["mse"] / weighted_mean(base, "mse")
                 figs["takes"] = len(its)
                 out[g] = figs
             rows.setdefault(label, {})[cond] = out

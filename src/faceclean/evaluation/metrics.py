@@ -131,11 +131,19 @@ def lag_ms(times: np.ndarray, pred: np.ndarray, truth: np.ndarray) -> float:
 def blink_closure(
     times: np.ndarray, pred: np.ndarray, truth: np.ndarray, names: Sequence[str]
 ) -> float:
-    """Mean over true blinks of (output peak / true peak); 1.0 is ideal.
+    """Mean over true blinks of (output peak / true peak); 1.0 is ideal (see blink_peaks)."""
+    r = blink_peaks(times, pred, truth, names)
+    return float(r.mean()) if r.size else float("nan")
+
+
+def blink_peaks(
+    times: np.ndarray, pred: np.ndarray, truth: np.ndarray, names: Sequence[str]
+) -> np.ndarray:
+    """(B,) output peak / true peak for each true blink.
 
     True blinks: peaks of the truth's eyeBlinkLeft / eyeBlinkRight (any spelling in
     ``names``) with prominence >= BLINK_PROMINENCE. The output peak is its maximum within
-    +-BLINK_WINDOW s of the true peak. NaN when the truth holds no blink.
+    +-BLINK_WINDOW s of the true peak. Empty when the truth holds no blink.
     """
     times, pred, truth = _rows(times, pred, truth)
     keys = [canonical(n) for n in names]
@@ -156,8 +164,7 @@ def blink_closure(
         out_peak = windowed.max(axis=1)
         keep = np.isfinite(out_peak) & (y[peaks] > 0)
         ratios.append(out_peak[keep] / y[peaks][keep])
-    r = np.concatenate(ratios) if ratios else np.zeros(0)
-    return float(r.mean()) if r.size else float("nan")
+    return np.concatenate(ratios) if ratios else np.zeros(0)
 
 
 def _paired(pred: Animation, truth: Animation) -> tuple[np.ndarray, np.ndarray, list[str]]:

@@ -18,8 +18,12 @@ from faceclean.channels import INDEX
 from faceclean.errors import FacecleanError
 
 
-def perform(seconds: float, seed: int, fps: float = 60.0) -> Animation:
-    """A synthetic ARKit-52 performance of ``seconds`` s sampled at ``fps`` Hz."""
+def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = False) -> Animation:
+    """A synthetic ARKit-52 performance of ``seconds`` s sampled at ``fps`` Hz.
+
+    ``full_range``: add a range-of-motion layer (:func:`_range_of_motion`) that moves
+    every channel, the rare ones too (tongueOut, jawLeft/Right, cheekPuff, noseSneer...),
+    through its whole range."""
     if not (np.isfinite(seconds) and 0.0 < seconds <= 24 * 3600.0):
         raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
     if not (np.isfinite(fps) and 1.0 <= fps <= 1000.0):
@@ -32,7 +36,35 @@ def perform(seconds: float, seed: int, fps: float = 60.0) -> Animation:
     _expressions(x, t, rng)
     _gaze(x, t, rng)
     _blinks(x, t, rng)
+    if full_range:  # drawn after every other layer: plain takes keep their draws
+        _range_of_motion(x, t, rng)
     return Animation.from_arkit(t, np.clip(x, 0.0, 1.0))
+
+
+def _range_of_motion(x: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> None:
+    """Every channel, one event every 2-8 s on average: a smooth rise over 40 ms-1 s to
+    a peak anywhere in 0.2-1 (a third of the events the channel's full 1), held 0-1.5 s,
+    released as slowly or fast; left/right pairs move together a third of the time."""
+    for j in range(52):
+        for s in _events(t[-1], rng.uniform(2.0, 8.0), rng):
+            peak = 1.0 if rng.random() < 1 / 3 else rng.uniform(0.2, 1.0)
+            attack, hold, release = (
+                rng.uniform(0.04, 1.0),
+                rng.uniform(0.0, 1.5),
+                rng.uniform(0.04, 1.0),
+            )
+            w = np.zeros(52)
+            w[j] = peak
+            if rng.random() < 1 / 3 and _MIRROR[j] != j:
+                w[_MIRROR[j]] = peak * rng.uniform(0.8, 1.0)
+            _add(x, t, s, attack, hold, release, w)
+
+
+_MIRROR = np.array([
+    INDEX.get(n[:-4] + "Right", i) if n.endswith("Left") else
+    INDEX.get(n[:-5] + "Left", i) if n.endswith("Right") else i
+    for i, n in enumerate(INDEX)
+])  # fmt: skip
 
 
 def _vec(spec: dict[str, float], left: float = 1.0, right: float = 1.0) -> np.ndarray:

@@ -1,6 +1,8 @@
-"""docs/RESULTS.md from :func:`faceclean.evaluation.evaluate.evaluate`'s results: the header (seed,
-takes, folds, models), the issue's targets met or missed, one table per condition in the
-layout of the paper's Tables 1 and 2, and MSE × raw per held-out source."""
+"""docs/RESULTS.md from :func:`faceclean.evaluation.evaluate.evaluate`'s results: the
+header (protocol, folds, models), the "never ship worse" verdict on the shipped recipe,
+the issue's targets met or missed under both artefact models, the do-no-harm table, one
+table per artefact model and condition in the layout of the paper's Tables 1 and 2, and
+MSE × raw per held-out source."""
 
 from __future__ import annotations
 
@@ -9,88 +11,117 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.evaluation.evaluate import CONDITIONS, LEARNED_ROWS, TUNE_SECONDS, TUNED_ROWS, _mean
+from faceclean.evaluation.evaluate import (
+    LEARNED_ROWS,
+    SHIPPED,
+    TUNE_SECONDS,
+    TUNED_ROWS,
+    weighted_mean,
+)
+from faceclean.evaluation.harm import TARGET_SHIFT
 
 CAUSAL_FILTERS = tuple(label for label, _ in TUNED_ROWS)  # "best tuned causal filter"
-TARGET_RELAX = 0.15  # the other conditions: within 15 % of the 60 fps targets
-
+ONE_EURO = "One Euro (tuned)"
 
 NOTES = [
     "- The paper (its private data, 60 fps) reports MSE raw 0.0173, Gaussian σ5 0.0167 "
     "(0.97× raw), EMA γ0.3 0.0170 (0.98×), FC 0.0461 (2.66×), GBT 0.0451 (2.61×), "
-    "LSTM 0.0140 (0.81×). Our absolute MSEs are far smaller (our simulator's artefacts on "
-    "calibrated iPhone takes); compare the × raw column.",
-    "- FC and GBT follow SPEC section 3: K = 4 derivatives predicted from the input alone "
-    "(current value, backward differences ending at the newest and the previous frame), "
-    "integrated by the complementary blend with the paper's α_r (0.9 FC, 0.97 GBT) per "
-    "frame at 60 fps, applied as α_r^(60 Hz · dt) so the blend's time constant (0.16 s "
-    "FC, 0.55 s GBT) is the same at every rate. FC: one "
-    "whole-face MLP (2 × 128, ReLU). GBT: scikit-learn histogram GBT per order, shared by "
-    "all channels (samples are channels; features plus the channel's group), depth ≤ 5, "
-    "30 trees for the first order and 10 for each higher one, run by a numpy tree "
-    "walker. Both trained with L_der (orders scaled by their training std) on the fold's "
-    'training sources, corrupted with the simulator\'s "mixed" preset at the drawn rate '
-    "and resampled ×2 and ×½ (`faceclean train --arch fc|gbt --val-sources SOURCE`).",
-    "- Raw input lag and blink figures are not exactly 0 and 1: the simulator saturates "
-    "blinks and adds correlated noise and drift, and the lag search aligns what it can.",
+    "LSTM 0.0140 (0.81×). Our absolute MSEs are far smaller (artefacts on calibrated "
+    "iPhone takes); compare the × raw column.",
+    "- FC and GBT follow SPEC section 3 (K = 4 derivatives from the input alone, the "
+    "paper's complementary blend at the same time constant at every rate); LSTM (paper) "
+    "is SPEC section 2 with our rate output head; both trained with faceclean.simulate.",
+    "- Adaptive (ours): a One Euro filter whose cut-off a small GRU shared by every "
+    "channel sets per channel and frame, plus a constant per-channel gain on transients; "
+    "its output is always a step from its last output toward the newest input, so it "
+    "cannot learn a pose (docs/MODEL.md).",
+    "- Raw input lag and blink figures are not exactly 0 and 1: both artefact models "
+    "saturate blinks and add correlated noise and drift, and the lag search aligns what "
+    "it can.",
 ]
 
 
-def _fmt(v: float, digits: int = 3) -> str:
+def _fmt(v: float | None, digits: int = 3) -> str:
     if v is None or not np.isfinite(v):
         return "–"
     return f"{v:.{digits}g}" if abs(v) < 1000 else f"{v:.0f}"
 
 
-def targets(results: dict[str, Any], label: str = "LSTM") -> list[tuple[str, dict[str, str]]]:
-    """The issue's targets for ``label``, per condition: (target, {condition: text})."""
+def _vs(results: dict[str, Any], label: str, other: str, cond: str) -> float:
+    """MSE of ``label`` over MSE of ``other`` on the takes ``label`` has figures for."""
+    per = results["per_take"]
+    if label not in per or other not in per or cond not in per[label]:
+        return float("nan")
+    takes = {(s, n) for s, n, _ in per[label][cond]}
+    mine = weighted_mean([sc for _, _, sc in per[label][cond]], "mse")
+    theirs = weighted_mean([sc for s, n, sc in per[other][cond] if (s, n) in takes], "mse")
+    return mine / theirs
+
+
+def targets(results: dict[str, Any], label: str = SHIPPED) -> list[tuple[str, dict[str, str]]]:
+    """Issue 11's targets for ``label``, per condition key: (target, {condition: text})."""
     rows = results["rows"]
-    out: list[tuple[str, dict[str, str]]] = []
     if label not in rows:
-        return out
+        return []
     checks = [
-        ("MSE ≤ 0.5× raw", "rel_mse", 0.5, "max"),
-        ("MSE ≤ 0.8× best tuned causal filter", "vs_filter", 0.8, "max"),
+        ("MSE ≤ 0.7× raw", "rel_mse", 0.7, "max"),
+        ("MSE ≤ 0.85× tuned One Euro", "vs_one_euro", 0.85, "max"),
+        ("no source above 0.95× raw", "worst_source", 0.95, "max"),
         ("jitter ratio ≤ 2", "jitter_ratio", 2.0, "max"),
-        ("lag < 10 ms", "lag_ms", 10.0, "max"),
-        ("blink closure ≥ 0.85", "blink_closure", 0.85, "min"),
+        ("lag ≤ 8 ms", "lag_ms", 8.0, "max"),
+        ("blink closure ≥ 0.9", "blink_closure", 0.9, "min"),
     ]
+    out: list[tuple[str, dict[str, str]]] = []
     for name, key, limit, kind in checks:
         cells = {}
-        for cond in CONDITIONS:
-            fig = rows[label].get(cond, {}).get("all")
-            if fig is None:
+        for cond in results["conditions"]:
+            by = rows[label].get(cond)
+            if by is None:
                 cells[cond] = "–"
                 continue
-            if key == "vs_filter":  # the best filter on the same takes as ``label``
-                takes = {(s, n) for s, n, _ in results["per_take"][label][cond]}
-                best = min(
-                    (
-                        _mean(
-                            [sc for s, n, sc in results["per_take"][f][cond] if (s, n) in takes],
-                            "mse",
-                        )
-                        for f in CAUSAL_FILTERS
-                        if f in rows
-                    ),
-                    default=float("nan"),
-                )
-                value = fig["mse"] / best
+            if key == "vs_one_euro":
+                value = _vs(results, label, ONE_EURO, cond)
+            elif key == "worst_source":
+                value = max(v["rel_mse"] for s, v in by.items() if s != "all")
             else:
-                value = fig[key]
-            relax = 1.0 if cond == "60 fps" else 1.0 + TARGET_RELAX
-            lim = limit * relax if kind == "max" else limit / relax
-            ok = value <= lim if kind == "max" else value >= lim
-            mark = "met" if ok else "**missed**"
-            cells[cond] = f"{_fmt(value)} {mark}" if np.isfinite(value) else "–"
+                value = by["all"][key]
+            ok = value <= limit if kind == "max" else value >= limit
+            cells[cond] = f"{_fmt(value)} {'met' if ok else '**missed**'}"
         out.append((name, cells))
     return out
 
 
-def _findings(rows: dict[str, dict[str, dict]]) -> list[str]:
+def verdict(results: dict[str, Any], label: str = SHIPPED) -> tuple[bool, list[str]]:
+    """Never ship worse: ``label`` beats the raw input and the tuned One Euro on every
+    condition of the unseen-source x second-artefact-model table, and does no harm."""
+    lines, ok = [], True
+    rows = results["rows"].get(label, {})
+    for cond, meta in results["conditions"].items():
+        if meta["artefacts"] != "degrade":
+            continue
+        raw = rows.get(cond, {}).get("all", {}).get("rel_mse", float("nan"))
+        oe = _vs(results, label, ONE_EURO, cond)
+        good = raw < 1.0 and oe < 1.0
+        ok &= bool(good)
+        lines.append(f"| {cond} | {_fmt(raw)} | {_fmt(oe)} | {'yes' if good else '**no**'} |")
+    harm = results.get("harm", {}).get(label)
+    shipped = results.get("harm", {}).get("Shipped default")
+    for what, h in (("fold models", harm), ("shipped default", shipped)):
+        if h is None:
+            continue
+        good = h["max_shift"] <= TARGET_SHIFT
+        ok &= bool(good)
+        lines.append(
+            f"| do no harm ({what}): worst mean shift | {_fmt(h['max_shift'], 2)} | "
+            f"≤ {TARGET_SHIFT:g} | {'yes' if good else '**no**'} |"
+        )
+    return ok and bool(lines), lines
+
+
+def _findings(results: dict[str, Any]) -> list[str]:
     """One line per condition: the best causal filter, and each learned row, × raw."""
-    out = []
-    for cond in CONDITIONS:
+    rows, out = results["rows"], []
+    for cond in results["conditions"]:
         have = [f for f in CAUSAL_FILTERS if f in rows and cond in rows[f]]
         if not have:
             continue
@@ -103,9 +134,24 @@ def _findings(rows: dict[str, dict[str, dict]]) -> list[str]:
     return out
 
 
+def _harm_table(harm: dict[str, dict[str, Any]]) -> list[str]:
+    lines = [
+        "| cleaner | takes | worst mean shift | where | mean of per-take worst | blinks "
+        "| blink peak kept, mean | min |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for label, h in harm.items():
+        lines.append(
+            f"| {label} | {h['takes']} | {_fmt(h['max_shift'], 2)} | {h['where']} | "
+            f"{_fmt(h['mean_take_shift'], 2)} | {h['blinks']} | {_fmt(h['blink_mean'])} | "
+            f"{_fmt(h['blink_min'])} |"
+        )
+    return lines
+
+
 def markdown(results: dict[str, Any]) -> str:
-    """docs/RESULTS.md: header, targets, one table per condition, per-source MSE × raw."""
-    rows, folds = results["rows"], results["folds"]
+    """docs/RESULTS.md (see the module docstring)."""
+    rows, folds, conds = results["rows"], results["folds"], results["conditions"]
     lines = [
         "# Results",
         "",
@@ -115,11 +161,16 @@ def markdown(results: dict[str, Any]) -> str:
         "`faceclean train --arch <arch> --val-sources <source> --out ...`)."
         + (" **Quick run (--quick).**" if results["quick"] else ""),
         "",
-        f"- **Protocol**: leave one source out. Seed {results['seed']}: every validation take "
-        "corrupted by `faceclean.evaluation.simulate` "
-        '(preset "iphone" at 30, 60 and 120 fps, the same '
-        'artefact draw at each rate; preset "webcam": 24–30 fps, irregular timestamps, '
-        "dropped frames, heavier noise).",
+        f"- **Protocol**: leave one source out, over every real source. Seed "
+        f"{results['seed']}. Every validation take is corrupted by two artefact models: "
+        "**degrade** (`faceclean.evaluation.degrade`, written independently of the "
+        "simulator from a description of how trackers fail, never used by any training: "
+        "coloured noise that grows mid-range and with speed, per-channel dead zone, power "
+        "and knee, 36 delayed crosstalk leaks, mean-reverting drift with re-detection "
+        "steps, outliers, bursts, frozen and late frames) and **simulate** "
+        "(`faceclean.evaluation.simulate`, what the learned models train with), each at "
+        "30, 60 and 120 fps (the same artefact draw at each rate) and on webcam timing "
+        "(24–30 fps, irregular timestamps, dropped frames, heavier noise).",
     ]
     for s, f in folds.items():
         lines.append(
@@ -127,13 +178,13 @@ def markdown(results: dict[str, Any]) -> str:
             f"{f['train_takes']} training takes from the other sources."
         )
     lines += [
-        "- **Tuned filters** (EMA τ, One Euro, Kalman): tuned per fold and condition by "
-        "`faceclean.filters.tune` (MSE objective) on the fold's training takes corrupted with "
-        f"seed {results['seed'] + 1} (first {TUNE_SECONDS:g} s of each); never on validation "
-        "takes.",
-        "- **Learned rows**: per fold, a model whose checkpoint config lists the fold's "
-        "source as held out and not trained on; a fold without one has no figure (see "
-        "the per-source table). Models used:",
+        "- **Tuned filters** (EMA τ, One Euro, Kalman): tuned per fold, artefact model and "
+        "condition by `faceclean.filters.tune` (MSE objective) on the fold's training takes "
+        f"corrupted by the same artefact model with seed {results['seed'] + 1} (first "
+        f"{TUNE_SECONDS:g} s of each); never on validation takes. They know the artefact "
+        "model they are judged on; the learned rows never see degrade.",
+        "- **Learned rows**: per fold, a model whose checkpoint lists the fold's source "
+        "among neither its training sources; a fold without one has no figure. Models used:",
     ]
     for method, per in results["models"].items():
         used = ", ".join(f"`{s}`: {Path(p).name}" for s, p in per.items()) or "none found"
@@ -141,9 +192,10 @@ def markdown(results: dict[str, Any]) -> str:
     if results.get("early_stopped"):
         shown = ", ".join(Path(p).name for p in results["early_stopped"])
         lines.append(
-            f"  - {shown}: the checkpoint of the epoch with the best validation loss on the "
-            "held-out source (early stopping, other simulator seeds than here): its figures "
-            "are a little optimistic."
+            f"  - {shown}: the checkpoint of the epoch with the best validation score on "
+            "the held-out source under faceclean.simulate (early stopping, other seeds "
+            "than here): their simulate figures are a little optimistic; degrade never "
+            "took part."
         )
     lines += [
         "- **Columns**: MSE over all channels and frames (the paper's measure); × raw = MSE "
@@ -153,22 +205,40 @@ def markdown(results: dict[str, Any]) -> str:
         "Frame-weighted means over takes, all folds pooled. Gaussian rows are offline "
         "(non-causal); everything else is causal.",
         "",
-        "## Targets (issue 4), LSTM on unseen sources",
+        f"## Never ship worse: {SHIPPED}, unseen sources, second artefact model",
         "",
-        "At 60 fps as stated; at 30, 120 fps and webcam the same targets relaxed by 15 % "
-        "(the paper's frame-rate independence claim, measured).",
+        "The shipped default's recipe must beat the raw input and the tuned One Euro on "
+        "every condition below, and do no harm on clean takes.",
         "",
+        "| condition | MSE × raw | MSE × tuned One Euro | beats both |",
+        "|---|---|---|---|",
     ]
+    ok, vlines = verdict(results)
+    lines += vlines
+    lines += ["", f"**Verdict: {'met' if ok else 'NOT met'}.**", ""]
+    lines += [f"## Targets (issue 11), {SHIPPED} on unseen sources", ""]
     checks = targets(results)
     if checks:
-        lines.append("| target | " + " | ".join(CONDITIONS) + " |")
-        lines.append("|---|" + "---|" * len(CONDITIONS))
+        lines.append("| target | " + " | ".join(conds) + " |")
+        lines.append("|---|" + "---|" * len(conds))
         for name, cells in checks:
-            lines.append(f"| {name} | " + " | ".join(cells[c] for c in CONDITIONS) + " |")
+            lines.append(f"| {name} | " + " | ".join(cells[c] for c in conds) + " |")
     else:
-        lines.append("No LSTM model that held out a source was found: no LSTM figures yet.")
-    lines += ["", *_findings(rows)]
-    for cond in CONDITIONS:
+        lines.append(f"No {SHIPPED} fold model was found: no figures yet.")
+    lines += ["", *_findings(results)]
+    if results.get("harm"):
+        lines += [
+            "",
+            "## Do no harm: clean real takes in, nothing added",
+            "",
+            f"Every real take as recorded through each causal cleaner (fold models only on "
+            f"the source they never saw). Worst mean shift: the largest |mean(out) − "
+            f"mean(in)| of any channel in any take (target ≤ {TARGET_SHIFT:g}); blink peak "
+            "kept: cleaned peak over the take's own peak, per blink.",
+            "",
+            *_harm_table(results["harm"]),
+        ]
+    for cond in conds:
         lines += ["", f"## {cond}", ""]
         lines.append("| method | MSE | × raw | jitter | lag ms | blink |")
         lines.append("|---|---|---|---|---|---|")
@@ -180,13 +250,15 @@ def markdown(results: dict[str, Any]) -> str:
             cells += [_fmt(fig["lag_ms"], 2), _fmt(fig["blink_closure"])]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines += ["", "## Notes", "", *NOTES]
-    lines += ["", "## MSE × raw per held-out source", ""]
-    header = [f"{s} {c}" for s in folds for c in CONDITIONS]
-    lines.append("| method | " + " | ".join(header) + " |")
-    lines.append("|---|" + "---|" * len(header))
-    for label, by_cond in rows.items():
-        cells = [
-            _fmt(by_cond.get(c, {}).get(s, {}).get("rel_mse")) for s in folds for c in CONDITIONS
-        ]
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    for artefacts in results.get("artefacts", []):
+        keys = [c for c, m in conds.items() if m["artefacts"] == artefacts]
+        lines += ["", f"## MSE × raw per held-out source ({artefacts})", ""]
+        header = [f"{s} {conds[c]['condition']}" for s in folds for c in keys]
+        lines.append("| method | " + " | ".join(header) + " |")
+        lines.append("|---|" + "---|" * len(header))
+        for label, by_cond in rows.items():
+            cells = [
+                _fmt(by_cond.get(c, {}).get(s, {}).get("rel_mse")) for s in folds for c in keys
+            ]
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

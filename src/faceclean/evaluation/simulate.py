@@ -55,6 +55,10 @@ class Params:
     drop_burst: float = 1.0  # frames, 1-6: mean length of a run of dropped frames
     loss_rate: float = 0.0  # 1/min, 0-3: tracking-loss gaps per minute
     loss_duration: float = 0.5  # s, 0.2-1.5: mean length of a tracking-loss gap
+    # Drawn only by presets that name them ("wide"), so older presets keep their draws:
+    knee: float = 4.0  # 1.5-8: sharpness n of the saturation x / (1 + (x/c)^n)^(1/n)
+    crosstalk_eye: float = 0.0  # 0-0.25: eyeBlink leaks into eyeLookDown, eyeSquint
+    crosstalk_mouth: float = 0.0  # 0-0.15: jawOpen -> funnel/lowerDown, smile -> cheekSquint
 
 
 # preset -> field -> (low, high), drawn uniformly (fps log-uniformly); fields left out keep
@@ -115,6 +119,25 @@ PRESETS["mixed"] = {
     for k, (lo, hi) in PRESETS["webcam"].items()
 }
 PRESETS["mixed"]["fps"] = (24.0, 120.0)
+# "wide": the training preset of the adaptive cleaner (issue 11): "mixed" with noise from
+# white to strongly low-passed, per-channel levels spread wider, under-shoot from none to
+# severe on any channel with a knee of any sharpness, crosstalk between more related
+# channels (eyeBlink -> eyeLookDown, eyeSquint; jawOpen -> mouth; smile -> cheekSquint).
+# Its severity stays that of "mixed": a first, harsher draw (white noise to 100 %, gains
+# per channel) made the learned filter worse than raw on held-out takes (docs/MODEL.md).
+PRESETS["wide"] = {
+    **PRESETS["mixed"],
+    "jitter_cutoff": (3.0, 24.0),
+    "jitter_white": (0.0, 0.6),
+    "channel_spread": (0.0, 0.7),
+    "blink_peak": (0.55, 1.0),
+    "peak": (0.7, 1.0),
+    "drift_period": (3.0, 40.0),
+    "knee": (1.5, 8.0),
+    "crosstalk_eye": (0.0, 0.25),
+    "crosstalk_mouth": (0.0, 0.15),
+}
+_OPTIONAL = ("knee", "crosstalk_eye", "crosstalk_mouth")
 
 # Fields that ``strength`` scales (a rate or a size); the saturation peaks move toward 1.
 _SCALED = (
@@ -136,12 +159,15 @@ def sample_params(
         raise FacecleanError(f"strength must be a number >= 0, got {strength}")
     values = {}
     for f in fields(Params):  # fixed field order: the draws do not depend on dict order
+        if f.name in _OPTIONAL and f.name not in PRESETS[preset]:
+            values[f.name] = f.default  # not drawn: older presets keep their streams
+            continue
         lo, hi = PRESETS[preset].get(f.name, (f.default, f.default))
         if f.name == "fps":
             values[f.name] = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
         else:
             values[f.name] = float(rng.uniform(lo, hi))
-    for name in _SCALED:
+    for name in _SCALED + ("crosstalk_eye", "crosstalk_mouth"):
         values[name] = min(values[name] * strength, _CAPS.get(name, np.inf))
     for name in ("blink_peak", "peak"):
         values[name] = float(np.clip(1.0 - strength * (1.0 - values[name]), 0.3, 1.0))
@@ -201,11 +227,11 @@ def _describe(params: Params) -> dict[str, float]:
     return {f.name: getattr(params, f.name) for f in fields(Params)}
 
 
-def _knee(peak: np.ndarray) -> np.ndarray:
-    """Ceiling c of x / (1 + (x/c)^4)^(1/4) such that x = 1 reads as ``peak`` (inf at 1)."""
+def _knee(peak: np.ndarray, k: float = 4.0) -> np.ndarray:
+    """Ceiling c of x / (1 + (x/c)^k)^(1/k) such that x = 1 reads as ``peak`` (inf at 1)."""
     peak = np.clip(peak, 1e-3, 1.0)
     with np.errstate(divide="ignore"):
-        return np.where(peak < 1.0, (peak**-4.0 - 1.0) ** -0.25, np.inf)
+        return np.where(peak < 1.0, (peak**-k - 1.0) ** (-1.0 / k), np.inf)
 
 
 def _saturate(y: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
@@ -213,9 +239,10 @@ def _saturate(y: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
     peak = rng.uniform(p.peak, 1.0, 52)
     blink = p.blink_peak + rng.uniform(-0.03, 0.03, 2) * (p.blink_peak < 1.0)
     peak[[INDEX["eyeBlinkLeft"], INDEX["eyeBlinkRight"]]] = blink
-    c = _knee(peak)
+    k = p.knee
+    c = _knee(peak, k)
     pos = np.maximum(y, 0.0)
-    return np.where(y > 0.0, pos / (1.0 + (pos / c) ** 4) ** 0.25, y)
+    return np.where(y > 0.0, pos / (1.0 + (pos / c) ** k) ** (1.0 / k), y)
 
 
 _LR_PAIRS = [
@@ -236,6 +263,13 @@ def _crosstalk(p: Params, rng: np.random.Generator) -> np.ndarray:
     inner, outer = INDEX["browInnerUp"], [INDEX["browOuterUpLeft"], INDEX["browOuterUpRight"]]
     c[inner, outer] += p.crosstalk_brow / 2.0
     c[outer, inner] += p.crosstalk_brow
+    for side in ("Left", "Right"):  # the eyelid drags the gaze and the squint with it
+        blink = INDEX["eyeBlink" + side]
+        c[INDEX["eyeLookDown" + side], blink] += p.crosstalk_eye
+        c[INDEX["eyeSquint" + side], blink] += 0.5 * p.crosstalk_eye
+        c[INDEX["cheekSquint" + side], INDEX["mouthSmile" + side]] += p.crosstalk_mouth
+    for target in ("mouthFunnel", "mouthLowerDownLeft", "mouthLowerDownRight"):
+        c[INDEX[target], INDEX["jawOpen"]] += 0.5 * p.crosstalk_mouth
     return c
 
 

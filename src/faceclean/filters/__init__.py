@@ -20,6 +20,7 @@ METHODS: dict[str, str] = {
     "kalman": "faceclean.filters.kalman:Kalman",
     "gaussian": "faceclean.filters.gaussian:Gaussian",
     "savgol": "faceclean.filters.savgol:SavGol",
+    "adaptive": "faceclean.learned.adaptive:Adaptive",
     "lstm": "faceclean.learned.cleaner:Learned",
     "fc": "faceclean.learned.derivative_net:FullyConnected",
     "gbt": "faceclean.learned.derivative_net:BoostedTrees",
@@ -72,7 +73,8 @@ def make(
 
 
 def default_method() -> str:
-    """The shipped default: the learned cleaner when its model ships, else tuned One Euro."""
+    """The shipped default: the learned adaptive cleaner when its model ships, else tuned
+    One Euro."""
     from faceclean.settings import MODELS
 
     return "lstm" if (MODELS / "default.npz").is_file() else "one-euro"

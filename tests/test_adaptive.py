@@ -1,0 +1,113 @@
+"""The learned adaptive filter: runtime = torch model, zero network = tuned One Euro,
+a held pose stays put, fine-tuning never writes a worse model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+from faceclean.filters import make
+from faceclean.learned.adaptive import Adaptive, AdaptiveWeights, mirror_index
+
+torch = pytest.importorskip("torch")
+
+from faceclean.neural.adaptive import AdaptiveNet  # noqa: E402
+
+
+def _wobbly(seed: int = 0, n: int = 150) -> Animation:
+    """A face moving on irregular times (8-40 ms steps) with noise, values in [0, 1]."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.008, 0.04, n))
+    t -= t[0]
+    phase = np.arange(52)
+    x = 0.5 + 0.3 * np.sin(2.0 * t[:, None] + phase) + 0.04 * rng.standard_normal((n, 52))
+    return Animation.from_arkit(t, np.clip(x, 0.0, 1.0))
+
+
+@pytest.fixture(scope="module")
+def real_pose() -> np.ndarray:
+    """A real iPhone frame (52,), a third of the way into a neurosync take."""
+    from faceclean.io import load
+    from faceclean.settings import takes_dir
+
+    root = takes_dir()
+    if root is None:
+        pytest.skip("shared data folder absent")
+    x, _ = load(sorted((root / "neurosync").glob("*.csv"))[0]).arkit()
+    x = x[np.isfinite(x).all(1)]
+    return x[len(x) // 3]
+
+
+def _random_net(seed: int = 1) -> AdaptiveNet:
+    torch.manual_seed(seed)
+    net = AdaptiveNet(ARKIT52, hidden=8, embed=4)
+    with torch.no_grad():
+        net.head.weight.normal_(0.0, 0.5)
+        net.head.bias.normal_(0.0, 1.0)
+        net.boost.normal_(0.0, 0.5)
+    return net
+
+
+def test_numpy_runtime_matches_the_torch_model():
+    net = _random_net()
+    anim = _wobbly()
+    with torch.no_grad():
+        x = torch.tensor(anim.values[None], dtype=torch.float32)
+        t = torch.tensor(anim.times[None], dtype=torch.float32)
+        expected = net(x, t)[0].numpy()
+    got = Adaptive(weights=net.weights()).clean(anim).values
+    assert np.abs(got - expected).max() < 2e-5
+    assert np.abs(got - anim.values).max() > 1e-3  # it did filter
+
+
+def test_zero_network_is_the_tuned_one_euro():
+    anim = _wobbly(3)
+    net = AdaptiveNet(ARKIT52, hidden=8, embed=4)
+    with torch.no_grad():
+        net.head.bias.copy_(torch.tensor([0.0, -60.0]))  # slope share sigmoid(-60) = 0
+    got = Adaptive(weights=net.weights()).clean(anim).values
+    want = make("one-euro", names=ARKIT52).clean(anim).values
+    assert np.abs(got - want).max() < 1e-5
+
+
+def test_streams_are_independent_and_match_single_streams():
+    w = _random_net().weights()
+    a, b = _wobbly(4, 60), _wobbly(5, 60)
+    batch = Adaptive(weights=w)
+    ys = np.stack(
+        [
+            batch.step(np.stack([a.values[i], b.values[i]]), [a.times[i], b.times[i]])
+            for i in range(60)
+        ]
+    )
+    assert np.allclose(ys[:, 0], Adaptive(weights=w).clean(a).values, atol=1e-12)
+    assert np.allclose(ys[:, 1], Adaptive(weights=w).clean(b).values, atol=1e-12)
+
+
+def test_mirror_pairs_left_and_right():
+    m = mirror_index(ARKIT52)
+    i = ARKIT52.index("eyeBlinkLeft")
+    assert ARKIT52[m[i]] == "eyeBlinkRight" and m[m[i]] == i
+    assert m[ARKIT52.index("jawOpen")] == ARKIT52.index("jawOpen")
+
+
+def test_checkpoint_round_trip_and_refusals(tmp_path):
+    w = _random_net().weights()
+    w.save(tmp_path / "m.npz")
+    back = AdaptiveWeights.load(tmp_path / "m.npz")
+    for k, v in w.arrays.items():
+        assert np.allclose(back.arrays[k], v, atol=1e-6)
+    arrays = dict(w.arrays, **{"head.b": np.array([np.nan, 0.0])})
+    with pytest.raises(FacecleanError, match="non-finite"):
+        AdaptiveWeights.from_arrays(w.config, arrays)
+    with pytest.raises(FacecleanError, match="missing"):
+        AdaptiveWeights.from_arrays(w.config, {k: v for k, v in w.arrays.items() if k != "emb"})
+
+
+def _shipped():
+    from faceclean.settings import MODELS
+
+    return MODELS / "default.npz"
