@@ -23,7 +23,7 @@ $(NODE_STAMP): package.json package-lock.json
 
 venv: $(STAMP) $(NODE_STAMP)
 
-demo: $(STAMP)
+demo: $(STAMP) $(NODE_STAMP)
 	$(BIN)/faceclean demo
 
 lint: $(STAMP)

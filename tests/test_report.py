@@ -120,6 +120,7 @@ def test_html_has_no_external_reference_and_a_strict_policy():
 
 def test_without_node_modules_the_error_says_what_to_run(tmp_path, monkeypatch):
     monkeypatch.setattr(build, "REPO", tmp_path)
+    monkeypatch.setattr(build, "VENDOR", tmp_path / "vendor")
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("FACECLEAN_NODE_MODULES", raising=False)
     with pytest.raises(FacecleanError, match="npm ci"):

@@ -2,8 +2,9 @@
 
 One file, no network when opened: the page's Content-Security-Policy allows inline
 scripts and styles and ``data:`` modules only. three.js comes from the npm package
-installed by ``make venv`` (node_modules/three, never copied into the repository) and
-is inlined at build time as ``data:`` modules behind an import map.
+installed by ``make venv`` (node_modules/three, never copied into the repository), or,
+in an installed wheel, from the copy of it the build put in ``report/vendor/`` (see
+setup.py); it is inlined at report time as ``data:`` modules behind an import map.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from faceclean.report import payload
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]  # src/faceclean/report -> the repository root
+VENDOR = HERE / "vendor"  # in a built wheel only: vendor/three/build/*.js (setup.py)
 NPM_HINT = "run `make venv` (or `npm ci`) in the faceclean repository"
 
 TRUTH_COLUMNS = (
@@ -36,11 +38,11 @@ TRUTH_COLUMNS = (
 
 
 def node_modules() -> Path:
-    """The node_modules folder holding three.js: $FACECLEAN_NODE_MODULES, the repository's,
-    or the current folder's."""
+    """The folder holding three/ (three.js): $FACECLEAN_NODE_MODULES, the repository's
+    node_modules, the wheel's own copy, or the current folder's node_modules."""
     env = os.environ.get("FACECLEAN_NODE_MODULES")
     candidates = [Path(env)] if env else []
-    candidates += [REPO / "node_modules", Path.cwd() / "node_modules"]
+    candidates += [REPO / "node_modules", VENDOR, Path.cwd() / "node_modules"]
     for c in candidates:
         if (c / "three" / "build").is_dir():
             return c
