@@ -117,6 +117,18 @@ class Cleaner:
         return f"Cleaner({self.source!r}, streams={self.streams})"
 
 
+def build(path: str | os.PathLike, names: Sequence[str]) -> tuple[filters.Cleaner, str]:
+    """A learned model file (.npz checkpoint, or .onnx step graph on ONNX Runtime) as a
+    cleaner of ``names``, and how to name it."""
+    p = Path(path)
+    if p.suffix.lower() not in (".npz", ".onnx"):
+        raise FacecleanError(f"{p.name}: a model is a .npz or an .onnx file")
+    if not p.is_file():
+        raise FacecleanError(f"no such model file: {p}")
+    factory, what, _ = _learned(p, None)
+    return factory(tuple(names)), what
+
+
 def _resolve(
     path: str | os.PathLike | None, backend: str | None
 ) -> tuple[Factory, str, str | None]:

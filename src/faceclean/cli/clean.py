@@ -42,6 +42,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="preset file made by 'faceclean tune', or a shipped preset's name (--set overrides)",
     )
+    p.add_argument(
+        "--model",
+        metavar="FILE",
+        help="a learned model: .npz (e.g. fine-tuned by 'faceclean train --resume default') "
+        "or .onnx (made by 'faceclean export')",
+    )
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
 
 
@@ -99,6 +105,12 @@ def build_cleaner(
     from faceclean import filters
     from faceclean.errors import FacecleanError
 
+    if getattr(args, "model", None):
+        if args.method or args.preset is not None or params:
+            raise FacecleanError("--model is the cleaner: give it without --method/--preset/--set")
+        from faceclean.cleaner import build
+
+        return build(args.model, names)
     if args.preset is not None:
         if args.method:
             raise FacecleanError("--preset names its method: give --preset or --method, not both")

@@ -7,7 +7,16 @@ import math
 import sys
 from collections.abc import Sequence
 
-HELP = "train the recurrent (LSTM) cleaner on clean takes corrupted by the simulator"
+HELP = "train or fine-tune a learned cleaner (adaptive, the shipped kind; or lstm, fc, gbt)"
+
+EPILOG = """fine-tune the shipped model on your own clean takes (a folder of takes, one
+subfolder per performer or app), keeping one source apart to judge it on:
+
+  faceclean train --data my_takes --val-sources me --resume default --out mine.npz
+  faceclean clean take.csv -o clean.csv --model mine.npz
+
+--resume MODEL scores MODEL on the validation takes before the first epoch and never
+writes a model worse than it (when no epoch beats it, --out is MODEL itself)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -27,10 +36,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="sources (take subfolders) held out for validation "
         "(default: 20%% of every source's takes)",
     )
-    p.add_argument("--epochs", type=int, default=40)
+    p.add_argument("--epochs", type=int, default=None, help="(default: adaptive 12, lstm 40)")
     p.add_argument("--batch", type=int, default=32, help="chunks per batch (per process)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--hidden", type=int, default=128)
+    p.add_argument("--hidden", type=int, default=None, help="(default: adaptive 32, lstm 128)")
     p.add_argument("--layers", type=int, default=2)
     p.add_argument("--K", type=int, default=1, help="derivative orders (paper: 1)")
     p.add_argument(
@@ -41,7 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "on the corrective derivative plus the residual), or rate (that gain as a "
         "one-pole low-pass with a learned time constant, the same at any frame rate)",
     )
-    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--lr", type=float, default=None, help="Adam's rate (default 1e-3)")
     p.add_argument(
         "--patience",
         type=int,
@@ -61,7 +70,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mesh", help="face mesh (.npz or .glb with ARKit morph targets)")
     p.add_argument("--max-batches", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads per process")
-    p.add_argument("--resume", metavar="CKPT", help="continue from MODEL.last.npz")
+    p.add_argument(
+        "--resume",
+        metavar="MODEL",
+        help="continue MODEL.last.npz, or fine-tune MODEL.npz ('default': the shipped "
+        "model), scored first and never worsened",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar (epoch lines only)")
     p.add_argument(
         "--report",
@@ -71,10 +85,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--arch",
-        choices=("lstm", "fc", "gbt"),
-        default="lstm",
-        help="lstm (default), or the paper's non-recurrent baselines fc / gbt "
-        "(SPEC section 3; they use --data, --val-sources, --seed, --out only)",
+        choices=("adaptive", "lstm", "fc", "gbt"),
+        default="adaptive",
+        help="adaptive (default, the shipped kind: a One Euro filter whose cut-off a GRU "
+        "shared by all channels sets), lstm (the paper's), or the paper's non-recurrent "
+        "baselines fc / gbt (SPEC section 3; they use --data, --val-sources, --seed, --out)",
     )
     p.add_argument("--out", metavar="MODEL", help="best model (.npz)")
     # fmt: skip
@@ -94,8 +109,13 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
+    if args.arch == "adaptive":
+        return _adaptive(args)
     if args.arch != "lstm":
         return _baseline(args)
+    args.epochs = 40 if args.epochs is None else args.epochs
+    args.hidden = 128 if args.hidden is None else args.hidden
+    args.lr = 1e-3 if args.lr is None else args.lr
     if args.epochs < 1 or args.batch < 1:
         raise FacecleanError("--epochs and --batch must be at least 1")
     weights = Weights()
@@ -150,6 +170,46 @@ def _report(args: argparse.Namespace) -> str:
     results = evaluate(model, corrupted(val, list(CONDITIONS)), lag=True)
     names = sorted({t.source for t in val})
     return f"{args.report} on {', '.join(names)} ({len(val)} takes)\n\n{table(results)}"
+
+
+def _adaptive(args: argparse.Namespace) -> int:
+    """``--arch adaptive``: train or fine-tune the adaptive cleaner (neural/adaptive.py)."""
+    from faceclean.errors import FacecleanError
+    from faceclean.neural.adaptive import AdaptiveConfig, train
+
+    if args.resume == "default":
+        from faceclean.settings import MODELS
+
+        args.resume = str(MODELS / "default.npz")
+    cfg = AdaptiveConfig(out=args.out, data=args.data, val_sources=tuple(args.val_sources),
+                         seed=args.seed, batch=args.batch, patience=args.patience,
+                         resume=args.resume, max_batches=args.max_batches,
+                         threads=args.threads)  # fmt: skip
+    for key in ("epochs", "hidden", "lr"):
+        if getattr(args, key) is not None:
+            setattr(cfg, key, getattr(args, key))
+    if args.synthetic_minutes:
+        cfg.synthetic_minutes = args.synthetic_minutes
+    if cfg.epochs < 1 or cfg.batch < 1:
+        raise FacecleanError("--epochs and --batch must be at least 1")
+
+    def report(e: dict) -> None:
+        if e["event"] == "start":
+            bar = e["start_score"]
+            print(f"train on {', '.join(e['train_sources'])}; validate on "
+                  f"{', '.join(e['val_sources']) or '-'}; the bar to beat: "
+                  f"{bar:.3f}x raw ({'the starting model' if cfg.resume else 'tuned One Euro'})",
+                  file=sys.stderr)  # fmt: skip
+        elif e["event"] == "epoch":
+            print(f"epoch {e['epoch']:3d} | train {e['train_loss']:.5f} | validation "
+                  f"{e['score']:.3f}x raw | {e['seconds']:.0f}s" + (" *" if e["improved"] else ""),
+                  file=sys.stderr)  # fmt: skip
+        elif e["event"] == "stop" and e.get("note"):
+            print(f"{e['note']}: {args.out} is the starting model", file=sys.stderr)
+
+    best = train(cfg, report)
+    print(f"best: {args.out} ({best['score']:.3f}x raw on validation)", file=sys.stderr)
+    return 0
 
 
 def _baseline(args: argparse.Namespace) -> int:

@@ -171,6 +171,12 @@ def _train(cfg: Config, report: Report, rank: int, world: int, device) -> dict[s
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     checkpoint.load_optimizer(model, opt, optim_arrays)
     val_streams = corrupted(val_takes, QUICK) if rank == 0 and val_takes else []
+    start_model = None
+    if cfg.resume and start_epoch == 0 and rank == 0 and val_streams:
+        # Fine-tuning: the starting model is the bar; never write a model worse than it.
+        val = evaluate(model, val_streams, loss_fn)
+        best = float(np.mean([v["loss"] for v in val.values()]))
+        start_model = cfg.resume
     facts = {
         "train": _jsonable(cfg),
         "train_sources": sorted({t.source for t in train_takes}),
@@ -218,6 +224,13 @@ def _train(cfg: Config, report: Report, rank: int, world: int, device) -> dict[s
             report({"event": "epoch", "improved": improved, **record})
         if distributed.agree(stop, device):
             break
+    if start_model is not None and not best_record:  # nothing beat it: out is the start
+        import shutil
+
+        shutil.copyfile(start_model, cfg.out)
+        best_record = {"epoch": -1, "score": best, "start": True}
+        report({"event": "stop", "best": best_record, "note": "no epoch beat the start"})
+        return best_record
     report({"event": "stop", "best": best_record})
     return best_record
 
