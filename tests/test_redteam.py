@@ -26,12 +26,14 @@ import math
 import os
 import re
 import resource
+import select
 import signal
 import socket
 import stat
 import struct
 import subprocess
 import sys
+import threading
 import zlib
 from pathlib import Path
 
@@ -2163,3 +2165,467 @@ def test_train_report_on_a_broken_model_is_refused(tmp_path):
 
 def test_eval_with_a_missing_data_folder_is_refused(tmp_path):
     refused(fc("eval", "--quick", "--data", tmp_path / "none", timeout=TIMEOUT))
+
+
+# --------------------------------------------------------------------------------------
+# K. The relay: hostile datagrams, then good frames must still come out cleaned
+
+WAIT = 10.0  # s, for one good frame to come back through the relay
+
+
+def osc_string(s: bytes) -> bytes:
+    return s + b"\0" * (4 - len(s) % 4)
+
+
+def osc_msg(address: str | bytes, tags: str = "", *args) -> bytes:
+    """An OSC message built by hand, so that hostile ones can be built too."""
+    a = address.encode() if isinstance(address, str) else address
+    body = b""
+    values = iter(args)
+    for tag in tags:
+        if tag in "TFN":  # no argument bytes
+            continue
+        v = next(values)
+        if tag == "s":
+            body += osc_string(v if isinstance(v, bytes) else v.encode())
+        elif tag == "f":
+            body += struct.pack(">f", v)
+        elif tag == "d":
+            body += struct.pack(">d", v)
+        elif tag == "i":
+            body += struct.pack(">i", v)
+        elif tag == "b":
+            body += struct.pack(">i", len(v)) + v + b"\0" * (-len(v) % 4)
+    return osc_string(a) + osc_string(b"," + tags.encode()) + body
+
+
+def osc_bundle(*elements: bytes) -> bytes:
+    out = b"#bundle\0" + b"\0" * 7 + b"\1"
+    for e in elements:
+        out += struct.pack(">i", len(e)) + e
+    return out
+
+
+def val(name: str | bytes, value: float, tag: str = "f") -> bytes:
+    return osc_msg("/VMC/Ext/Blend/Val", "s" + tag, name, value)
+
+
+APPLY = osc_msg("/VMC/Ext/Blend/Apply")
+
+
+def vmc_frame(values, t: float | None = None, seq: int | None = None, extra=()) -> bytes:
+    parts = [val(n, float(v)) for n, v in zip(ARKIT, values, strict=True)]
+    if t is not None:
+        parts.insert(0, osc_msg("/VMC/Ext/T", "f", t))
+    if seq is not None:
+        parts.insert(0, osc_msg("/redteam/seq", "i", seq))
+    return osc_bundle(*parts, *extra, APPLY)
+
+
+def ll_packet(
+    values,
+    t_frames: int = 0,
+    subject: bytes = b"good",
+    device: bytes = b"rt",
+    sub: float = 0.0,
+    num: int = 60,
+    den: int = 1,
+    count: int = 61,
+    floats=None,
+) -> bytes:
+    head = bytes([6]) + struct.pack(">i", len(device)) + device
+    head += struct.pack(">i", len(subject)) + subject
+    head += struct.pack(">ifiiB", t_frames, sub, num, den, count)
+    body = list(values) + [0.0] * 9 if floats is None else floats
+    return head + np.asarray(body[:count], ">f4").tobytes()
+
+
+class Relay:
+    """``faceclean relay`` as a process between two loopback sockets of ours."""
+
+    def __init__(self, listen: str, send: str, *extra: str, mem: int = MEM) -> None:
+        self.rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.rx.bind(("127.0.0.1", 0))
+        self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        self.send_scheme = send
+        cmd = [sys.executable, "-m", "faceclean", "relay", "--listen", f"{listen}://127.0.0.1:0",
+               "--send", f"{send}://127.0.0.1:{self.rx.getsockname()[1]}", "--stats", "0.005",
+               *extra]  # fmt: skip
+        self.proc = subprocess.Popen(
+            cmd,
+            cwd=REPO,
+            env=_env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            preexec_fn=_limits(mem),
+        )
+        banner = self.proc.stdout.readline().decode()
+        m = re.search(r"://127\.0\.0\.1:(\d+) ->", banner)
+        assert m, f"no banner: {banner!r} {self.proc.stderr.read(2000)!r}"
+        self.addr = ("127.0.0.1", int(m.group(1)))
+        os.set_blocking(self.proc.stderr.fileno(), False)
+        self.lines: list[str] = []  # stdout after the banner: stats lines, then "stopped:"
+        self.frames_in = -1  # the relay's "in" + "malformed" counters, from its latest stats line
+        self.changed = threading.Condition()
+        self.reader = threading.Thread(target=self._read_stdout, daemon=True)
+        self.reader.start()
+        self.tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.t = 5000.0  # s, sender time of the good frames (always increasing)
+        self.seq = 0
+        self.err = b""
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def _read_stdout(self) -> None:
+        for raw in self.proc.stdout:
+            line = raw.decode("utf-8", "replace")
+            m = re.match(r"stats: in (\d+) .* malformed (\d+) ", line)
+            with self.changed:
+                if m:  # one number that grows when a datagram was decoded, either way
+                    self.frames_in = int(m.group(1)) + int(m.group(2))
+                else:
+                    self.lines.append(line)
+                self.changed.notify_all()
+        with self.changed:
+            self.frames_in = -2  # stdout closed: the relay ended
+            self.changed.notify_all()
+
+    def wait_frames_in(self, target: int, timeout: float = 3.0) -> None:
+        """Until a stats line (printed after a whole drain, frames cleaned and sent) shows
+        ``in`` >= target, or the relay ends, or ``timeout`` s."""
+        with self.changed:
+            self.changed.wait_for(lambda: self.frames_in >= target or self.frames_in == -2, timeout)
+
+    def counted(self) -> int:
+        """The "in" counter of a stats line printed after this call."""
+        with self.changed:
+            self.frames_in = -1
+            self.changed.wait_for(lambda: self.frames_in != -1, WAIT)
+            return self.frames_in
+
+    def send(self, data: bytes, sock: socket.socket | None = None) -> None:
+        with contextlib.suppress(OSError):  # a datagram too long for UDP: the OS refuses
+            (sock or self.tx).sendto(data, self.addr)
+
+    def stderr(self) -> str:
+        with contextlib.suppress(BlockingIOError, TypeError):
+            self.err += self.proc.stderr.read() or b""
+        return self.err.decode("utf-8", "replace")
+
+    def rss(self) -> int:
+        """Resident memory of the relay, bytes."""
+        text = Path(f"/proc/{self.proc.pid}/status").read_text()
+        return int(re.search(r"VmRSS:\s+(\d+) kB", text).group(1)) * 1024
+
+    def receive(self, match) -> object:
+        """The first datagram for which ``match(data)`` is not None (wait at most WAIT s)."""
+        left = WAIT
+        while left > 0:
+            assert self.alive(), f"relay died: {self.stderr()[-800:]}"
+            ready, _, _ = select.select([self.rx], [], [], min(0.5, left))
+            left -= 0.5
+            if ready:
+                got = match(self.rx.recv(65535))
+                if got is not None:
+                    return got
+                left += 0.5  # a datagram came: the wait was not idle
+        raise AssertionError(f"no good frame back within {WAIT} s; relay alive: {self.alive()}")
+
+    def hostile(self, datagrams, frame: bool) -> None:
+        """Send ``datagrams``; when the last is a face frame, wait (at most 3 s) for its
+        output, so that the good frames after it cannot supersede it in one drain."""
+        self.drain()
+        before = self.counted() if frame else 0
+        for d in datagrams:
+            self.send(d)
+        if frame:
+            self.wait_frames_in(before + 1)
+
+    def drain(self) -> None:
+        self.rx.setblocking(False)
+        with contextlib.suppress(BlockingIOError):
+            while True:
+                self.rx.recv(65535)
+        self.rx.setblocking(True)
+
+    def good(self, level: float) -> np.ndarray:
+        """Send one good frame of all channels at ``level``; -> its cleaned (52,) values."""
+        self.t += 1 / 60
+        self.seq += 1
+        x = np.full(52, level)
+        if self.kind == "vmc" and self.send_scheme == "vmc":
+            self.send(vmc_frame(x, self.t, self.seq))
+            return self.receive(self._vmc_match(self.seq))
+        if self.kind == "livelink":
+            self.send(ll_packet(x, round(self.t * 60), subject=b"good-%d" % self.seq))
+            return self.receive(self._ll_match(subject=b"good-%d" % self.seq))
+        if self.kind == "vmc" and self.send_scheme == "livelink":  # known by its frame number
+            self.send(vmc_frame(x, self.t))
+            frame = math.floor(float(np.float32(self.t)) * 60)
+            return self.receive(self._ll_match(frame=frame))
+        marker = f"redteamSeq-{self.seq}"  # ifacialmocap: a non-ARKit channel passes through
+        text = "|".join(f"{n}-{level * 100:g}" for n in ARKIT) + "|" + marker
+        self.send(text.encode())
+        return self.receive(self._vmc_match(self.seq, marker="redteamSeq"))
+
+    def _vmc_match(self, seq: int, marker: str | None = None):
+        from pythonosc.osc_packet import OscPacket
+
+        def match(data: bytes):
+            try:
+                msgs = [m.message for m in OscPacket(data).messages]
+            except Exception:
+                return None
+            vals = {m.params[0]: m.params[1] for m in msgs if m.address == "/VMC/Ext/Blend/Val"}
+            if marker is not None:
+                if abs(vals.get(marker, -1) - seq / 100) > 1e-3:
+                    return None
+            elif not any(m.address == "/redteam/seq" and m.params == [seq] for m in msgs):
+                return None
+            return np.array([vals.get(n, np.nan) for n in ARKIT])
+
+        return match
+
+    def _ll_match(self, subject: bytes | None = None, frame: int | None = None):
+        def match(data: bytes):
+            if len(data) < 5 or data[0] != 6:
+                return None
+            (nd,) = struct.unpack_from(">i", data, 1)
+            (ns,) = struct.unpack_from(">i", data, 5 + nd)
+            subj = data[9 + nd : 9 + nd + ns]
+            number = struct.unpack_from(">i", data, 9 + nd + ns)[0]
+            if subject is not None and subj != subject:
+                return None
+            if frame is not None and number != frame:
+                return None
+            return np.frombuffer(data, ">f4", 52, len(data) - 61 * 4).astype(float)
+
+        return match
+
+    def assert_cleans(self) -> None:
+        """Good frames get through, finite and smoothed (a jump 0.3 -> 0.7 -> 0.3 is eased)."""
+        self.drain()
+        outs = [self.good(v) for v in (0.3, 0.7, 0.3)]
+        for y in outs:
+            assert np.isfinite(y).all(), f"non-finite output: {y}"
+        eased = [bool(np.all((y > 0.3 + 1e-6) & (y < 0.7 - 1e-6))) for y in outs[1:]]
+        assert any(eased), f"not cleaned: {[y[:3] for y in outs]}"
+        clean_stderr(self.stderr())
+        assert self.alive()
+
+    def stop(self) -> tuple[int, str, str]:
+        if self.alive():
+            self.proc.send_signal(signal.SIGINT)
+        self.stderr()
+        os.set_blocking(self.proc.stderr.fileno(), True)
+        try:
+            err = self.proc.stderr.read()
+            self.proc.wait(timeout=TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.reader.join(TIMEOUT)
+        self.err += err or b""
+        out = "".join(self.lines).encode()
+        self.rx.close()
+        self.tx.close()
+        return (
+            self.proc.returncode,
+            out.decode("utf-8", "replace"),
+            self.err.decode("utf-8", "replace"),
+        )
+
+
+_RELAYS: dict[tuple, Relay] = {}
+
+
+def relay_for(listen: str, send: str, *extra: str) -> Relay:
+    """The group's relay, restarted when a case before killed it."""
+    key = (listen, send, *extra)
+    r = _RELAYS.get(key)
+    if r is None or not r.alive():
+        if r is not None:
+            r.stop()
+        r = Relay(listen, send, *extra)
+        r.kind = "ifacialmocap" if listen == "ifacialmocap" else listen
+        _RELAYS[key] = r
+    r.err = b""
+    r.stderr()
+    r.err = b""
+    return r
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _stop_relays():
+    yield
+    for r in _RELAYS.values():
+        alive = r.alive()
+        code, out, err = r.stop()
+        if alive:  # a relay that lived through its group stops cleanly on SIGINT
+            assert code == 0 and "stopped:" in out, (code, out[-300:], err[-300:])
+            assert "Traceback" not in err
+
+
+def _long(n: int) -> bytes:
+    return b"x" * n
+
+
+VMC_HOSTILE = {
+    "random-bytes": [bytes(np.random.default_rng(1).integers(0, 256, 300, dtype=np.uint8))],
+    "empty": [b""],
+    "slash-only": [b"/"],
+    "no-type-tags": [osc_string(b"/VMC/Ext/Blend/Val") + osc_string(b"jawOpen") + b"\0\0\0\0"],
+    "address-without-slash": [osc_msg("VMC/Ext/Blend/Val", "sf", "jawOpen", 0.5)],
+    "bundle-truncated-timetag": [b"#bundle\0\0\0\0"],
+    "bundle-nested-100": [
+        (lambda b: [b := osc_bundle(b) for _ in range(100)][-1])(osc_bundle(APPLY))
+    ],
+    "bundle-size-negative": [b"#bundle\0" + b"\0" * 8 + struct.pack(">i", -4) + APPLY],
+    "bundle-size-huge": [b"#bundle\0" + b"\0" * 8 + struct.pack(">i", 2**31 - 1) + APPLY],
+    "bundle-size-misaligned": [b"#bundle\0" + b"\0" * 8 + struct.pack(">i", 3) + b"/ab"],
+    "bundle-10000-tiny-elements": [osc_bundle(*[osc_msg("/a")] * 6000)],
+    "name-not-utf8": [osc_bundle(val(b"jaw\xffOpen", 0.5), APPLY)],
+    "name-empty": [osc_bundle(val(b"", 0.5), APPLY)],
+    "name-with-nul": [osc_bundle(osc_msg("/VMC/Ext/Blend/Val", "sf", b"jaw\0Open", 0.5), APPLY)],
+    "name-60k": [osc_bundle(val(_long(60_000), 0.5), APPLY)],
+    "val-no-args": [osc_bundle(osc_msg("/VMC/Ext/Blend/Val"), APPLY)],
+    "val-int": [osc_bundle(osc_msg("/VMC/Ext/Blend/Val", "si", "jawOpen", 2**31 - 1), APPLY)],
+    "val-string": [osc_bundle(osc_msg("/VMC/Ext/Blend/Val", "ss", "jawOpen", "x"), APPLY)],
+    "val-true": [osc_bundle(osc_msg("/VMC/Ext/Blend/Val", "sT", "jawOpen"), APPLY)],
+    "val-blob": [osc_bundle(osc_msg("/VMC/Ext/Blend/Val", "sb", "jawOpen", b"abcd"), APPLY)],
+    "val-unknown-tag": [
+        osc_bundle(
+            osc_string(b"/VMC/Ext/Blend/Val")
+            + osc_string(b",sm")
+            + osc_string(b"jawOpen")
+            + b"\0\0\0\0",
+            APPLY,
+        )
+    ],  # fmt: skip
+    "val-truncated-float": [osc_bundle(val("jawOpen", 0.5)[:-2] + b"\0\0", APPLY)],
+    "val-nan": [osc_bundle(val("jawOpen", math.nan), APPLY)],
+    "val-inf": [osc_bundle(val("jawOpen", math.inf), APPLY)],
+    "val-double-1e308": [osc_bundle(val("jawOpen", 1e308, "d"), APPLY)],
+    "val-double-minus-1e308": [osc_bundle(val("jawOpen", -1e308, "d"), APPLY)],
+    "val-f32-max": [osc_bundle(val("jawOpen", 3.4e38), APPLY)],
+    "time-double-1e308": [
+        vmc_frame(np.full(52, 0.5))[:16]
+        + (lambda m: struct.pack(">i", len(m)) + m)(osc_msg("/VMC/Ext/T", "d", 1e308))
+        + vmc_frame(np.full(52, 0.5))[16:]
+    ],  # fmt: skip
+    "time-double-nan": [
+        osc_bundle(osc_msg("/VMC/Ext/T", "d", math.nan), val("jawOpen", 0.5), APPLY)
+    ],
+    "time-string": [osc_bundle(osc_msg("/VMC/Ext/T", "s", "noon"), val("jawOpen", 0.5), APPLY)],
+    "time-far-past": [osc_bundle(osc_msg("/VMC/Ext/T", "f", -1e30), val("jawOpen", 0.5), APPLY)],
+    "time-f32-max": [osc_bundle(osc_msg("/VMC/Ext/T", "f", 3.4e38), val("jawOpen", 0.5), APPLY)],
+    "apply-alone": [APPLY],
+    "apply-with-args": [osc_msg("/VMC/Ext/Blend/Apply", "sf", "x", 1.0)],
+    "513-loose-vals": [val(f"n{i}", 0.5) for i in range(513)],
+    "600-vals-one-bundle": [osc_bundle(*[val(f"n{i}", 0.5) for i in range(600)], APPLY)],
+    "only-vrm-clips": [osc_bundle(val("Joy", 1.0), val("Angry", 1.0), APPLY)],
+    "duplicate-names": [osc_bundle(val("jawOpen", 0.1), val("jawOpen", 0.9), APPLY)],
+    "odd-spellings": [
+        osc_bundle(
+            val("JAWOPEN", 0.5),
+            val("jawOpen ", 0.5),
+            val("jaw_L", 0.5),
+            val("eyeBlink_L", 0.5),
+            APPLY,
+        )
+    ],  # fmt: skip
+    "max-datagram-garbage": [b"/" + bytes(65000)],
+    "backwards-time-flood": [
+        osc_bundle(osc_msg("/VMC/Ext/T", "f", 100.0 - k * 0.1), val("jawOpen", 0.5), APPLY)
+        for k in range(50)
+    ],
+    "bone-only": [osc_msg("/VMC/Ext/Bone/Pos", "sfffffff", "Head", 0, 0, 0, 0, 0, 0, 1)],
+}
+
+
+@pytest.mark.parametrize("name", list(VMC_HOSTILE))
+def test_vmc_relay_survives_hostile_datagrams(name):
+    r = relay_for("vmc", "vmc", "--method", "ema")
+    r.hostile(VMC_HOSTILE[name], frame=name != "apply-alone" and APPLY in VMC_HOSTILE[name][-1])
+    r.assert_cleans()
+
+
+@fail("wrong answer: a second sender's loose Val (no Apply) is merged into the good frame")
+def test_vmc_relay_keeps_senders_apart():
+    """Sender B's pending 'Joy' must not appear in sender A's frame."""
+    r = relay_for("vmc", "vmc", "--method", "ema")
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        r.send(val("Joy", 1.0), sock=other)
+        r.drain()
+        r.t += 1 / 60
+        r.seq += 1
+        r.send(vmc_frame(np.full(52, 0.5), r.t, r.seq))
+        from pythonosc.osc_packet import OscPacket
+
+        def names(data: bytes):
+            msgs = [m.message for m in OscPacket(data).messages]
+            if not any(m.address == "/redteam/seq" and m.params == [r.seq] for m in msgs):
+                return None
+            return {m.params[0] for m in msgs if m.address == "/VMC/Ext/Blend/Val"}
+
+        assert r.receive(names) == set(ARKIT)
+    finally:
+        other.close()
+        r.send(APPLY, sock=None)  # flush whatever is pending
+
+
+@fail("wrong answer: 470 loose Vals from another sender make the next good frame 'malformed'")
+def test_vmc_relay_good_frame_survives_another_senders_pile():
+    r = relay_for("vmc", "vmc", "--method", "ema")
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for k in range(10):
+            r.send(osc_bundle(*[val(f"pile{k}_{i}", 0.5) for i in range(47)]), sock=other)
+        r.drain()
+        r.good(0.5)
+    finally:
+        other.close()
+
+
+VMC_TO_LL_HOSTILE = {
+    "time-double-1e308": [
+        osc_bundle(osc_msg("/VMC/Ext/T", "d", 1e308), val("jawOpen", 0.5), APPLY)
+    ],
+    "time-double-minus-1e308": [
+        osc_bundle(osc_msg("/VMC/Ext/T", "d", -1e308), val("jawOpen", 0.5), APPLY)
+    ],
+    "time-double-1e300": [
+        osc_bundle(osc_msg("/VMC/Ext/T", "d", 1e300), val("jawOpen", 0.5), APPLY)
+    ],
+    "time-double-tiny": [
+        osc_bundle(osc_msg("/VMC/Ext/T", "d", 5e-324), val("jawOpen", 0.5), APPLY)
+    ],
+    "time-f32-max": [osc_bundle(osc_msg("/VMC/Ext/T", "f", 3.4e38), val("jawOpen", 0.5), APPLY)],
+    "loose-time-then-frame": [
+        osc_msg("/VMC/Ext/T", "d", 1e308),
+        osc_bundle(val("jawOpen", 0.5), APPLY),
+    ],
+    "val-double-1e308": [osc_bundle(val("jawOpen", 1e308, "d"), APPLY)],
+    "name-60k": [osc_bundle(val(_long(60_000), 0.5), APPLY)],
+}
+VMC_TO_LL_FAILS = {
+    "time-double-1e308": "crash: VMC time 1e308 relayed to livelink:// kills the relay "
+    "(OverflowError in the encoder)",
+    "time-double-minus-1e308": "crash: VMC time -1e308 relayed to livelink:// kills the relay",
+    "loose-time-then-frame": "crash: a loose /VMC/Ext/T 1e308 then a frame kills the relay",
+}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(n, id=n, marks=[fail(VMC_TO_LL_FAILS[n])] if n in VMC_TO_LL_FAILS else [])
+        for n in VMC_TO_LL_HOSTILE
+    ],
+)
+def test_vmc_to_livelink_relay_survives_hostile_datagrams(name):
+    r = relay_for("vmc", "livelink", "--method", "ema")
+    r.hostile(VMC_TO_LL_HOSTILE[name], frame=True)
+    r.assert_cleans()
