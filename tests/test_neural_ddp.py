@@ -36,7 +36,7 @@ SCRIPT = textwrap.dedent(
 
     tr.distributed.wrap = wrap
     out = sys.argv[1]
-    rc = tr.main(["--val-sources", "jmtechart", "--epochs", "1", "--batch", "2",
+    rc = tr.main(["--arch", "lstm", "--val-sources", "jmtechart", "--epochs", "1", "--batch", "2",
                   "--hidden", "8", "--layers", "1", "--max-batches", "2", "--seed", "5",
                   "--quiet", "--out", out])
     rank = int(os.environ["RANK"])
