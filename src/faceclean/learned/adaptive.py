@@ -15,7 +15,7 @@ state (y, edx, h, s):
              e_{mirror(c)}/E0, log(60 dt)] (clipped to ±F_MAX) ++ emb[c]      (7 + E,)
     h_c   = GRUCell(f_c, h_c)                       the same weights for every channel
     a, b  = head(h_c)
-    fc    = (min_cutoff_c + beta_c |edx|) exp(clip(a, ±A_MAX))                  Hz
+    fc    = (min_cutoff_c + beta_c |edx|) exp(clip(a, A_MIN, A_MAX))             Hz
     p     = y + sigmoid(b) dt edx                   a learned share of the slope (lag)
     y'    = p + alpha(fc, dt) (x - p),  clamped to [min(0, x), max(1, x)]   the state
     s'    = s + alpha(F_SLOW, dt) (y' - s)          the slow level of y', F_SLOW Hz
@@ -58,7 +58,11 @@ N_FEATURES = 7  # per-channel signal features before the embedding
 E0 = 0.05  # weight units: the innovation scale the features are measured in
 V0 = 5.0  # weight/s: the slope scale
 F_MAX = 10.0  # features are clipped to +-F_MAX (a glitch must not saturate the core)
-A_MAX = 1.5  # the cut-off moves at most e^1.5 = 4.5x either way from One Euro's
+# The cut-off may open up to e^1.5 = 4.5x One Euro's (follow a fast move, or a take that
+# needs no cleaning) but close only to e^-0.5 = 0.6x: smoothing much more than the tuned
+# filter was what made a learned cut-off worse than raw on held-out takes whose clean
+# truth itself jitters (sentien, jmtechart; docs/MODEL.md).
+A_MIN, A_MAX = -0.5, 1.5
 F_SLOW = 0.5  # Hz: the slow level the transient gain is measured from (tau 0.32 s)
 G_MAX = 1.0  # the transient gain lies in (-G_MAX, G_MAX)
 DT_MIN = 1e-4  # s; a smaller step is taken as this one
@@ -253,7 +257,7 @@ class Adaptive(StreamCleaner):
         n = np.tanh(gi[..., 2 * H :] + r * gh[..., 2 * H :])
         h = (1.0 - z) * n + z * h
         out = h @ self._head_w + self._head_b  # (S, M, 2)
-        a = np.where(self._learn, np.clip(out[..., 0], -A_MAX, A_MAX), 0.0)
+        a = np.where(self._learn, np.clip(out[..., 0], A_MIN, A_MAX), 0.0)
         k = np.where(self._learn, sigmoid(out[..., 1]), 0.0)
         fc = (self.min_cutoff + self.beta * np.abs(edx)) * np.exp(a)
         p = y + k * dt * edx

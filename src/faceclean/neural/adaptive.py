@@ -39,6 +39,7 @@ from faceclean.evaluation import dataset, metrics
 from faceclean.filters import make
 from faceclean.learned.adaptive import (
     A_MAX,
+    A_MIN,
     DT_MIN,
     E0,
     F_MAX,
@@ -66,7 +67,7 @@ class AdaptiveConfig:
     synthetic_minutes: float = 3.0  # fresh synthetic performers per epoch
     full_range: bool = True  # ... moving every channel through its range (performer)
     wide_augmentation: bool = True  # dataset.WIDE_AUGMENTATION of the real takes
-    epochs: int = 12
+    epochs: int = 8
     batch: int = 32
     seed: int = 0
     hidden: int = 32
@@ -74,7 +75,7 @@ class AdaptiveConfig:
     lr: float = 1e-3
     clip: float = 1.0
     w_acc: float = 1e-7  # s⁴; weight of the second-derivative error
-    patience: int = 4
+    patience: int = 3
     preset: str = "wide"
     strength: float = 1.0
     resume: str | None = None
@@ -140,7 +141,7 @@ class AdaptiveNet(torch.nn.Module):
             f = torch.cat([f, emb], -1).reshape(B * M, -1)
             h_n = self.cell(f, h)
             o = self.head(h_n).reshape(B, M, 2)
-            fc = (mc + be * edx_n.abs()) * torch.exp(o[..., 0].clamp(-A_MAX, A_MAX))
+            fc = (mc + be * edx_n.abs()) * torch.exp(o[..., 0].clamp(A_MIN, A_MAX))
             p = y + torch.sigmoid(o[..., 1]) * dt * edx_n
             y_n = p + _alpha(fc, dt) * (xn - p)
             lo, hi = xn.clamp(max=0.0), xn.clamp(min=1.0)
