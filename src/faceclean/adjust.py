@@ -41,6 +41,7 @@ import numpy as np
 
 from faceclean.channels import ARKIT52, GROUPS, canonical
 from faceclean.errors import FacecleanError
+from faceclean.filters.base import Cleaner
 
 MAP_KEYS: tuple[str, ...] = ("gain", "offset", "curve", "clamp", "off")
 FORMAT = "faceclean-adjust/1"
@@ -193,6 +194,15 @@ class Adjust:
         return lines or ["identity (no level mapping)"]
 
 
+def is_level_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a JSON file in this module's format (looks at its start only)."""
+    if not str(path).lower().endswith(".json") or not os.path.isfile(path):
+        return False
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    return FORMAT.encode() in head
+
+
 def apply_levels(lv: Levels, x: np.ndarray) -> np.ndarray:
     """The module equation on (N, M) or (M,) values for resolved levels."""
     out = x.copy()
@@ -257,3 +267,45 @@ def _show(key: str, value: Any) -> str:
     if key == "clamp":
         return f"clamp [{value[0]:g}, {value[1]:g}]"
     return f"{key} {value:.4g}"
+
+
+def split_items(items: Iterable[str]) -> tuple[list[tuple[str, str, object]], list[str]]:
+    """``--set`` words: (level items (pattern, key, value), the rest untouched).
+
+    A level item is ``PATTERN.KEY=VALUE`` with KEY in MAP_KEYS (``eyeBlink*.gain=1.2``,
+    ``jawOpen.clamp=0,0.8``), or ``PATTERN.off`` alone. Values: JSON, else the text.
+    """
+    levels, rest = [], []
+    for item in items:
+        lhs, eq, text = item.partition("=")
+        pattern, dot, key = lhs.strip().rpartition(".")
+        if not dot or key.strip().lower() not in MAP_KEYS or not pattern:
+            rest.append(item)
+            continue
+        value: object = None
+        if eq:
+            try:
+                value = json.loads(text)
+            except json.JSONDecodeError:
+                value = text.strip()
+        elif key.strip().lower() != "off":
+            raise FacecleanError(f"--set {item!r}: expected {lhs}=VALUE")
+        levels.append((pattern, key.strip().lower(), value))
+    return levels, rest
+
+
+class Adjusted(Cleaner):
+    """A stream cleaner whose input goes through a level mapping first (fixed columns)."""
+
+    def __init__(self, inner: Any, adjust: Adjust, names: Sequence[str]) -> None:
+        self.inner, self.adjust, self.names = inner, adjust, tuple(names)
+        self.name = getattr(inner, "name", "cleaner")
+        self._levels = adjust.levels(self.names)
+        self.reset()
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+        x = np.asarray(frame, dtype=np.float64)
+        return self.inner.step(apply_levels(self._levels, x), t)

@@ -17,7 +17,7 @@ from faceclean.errors import FacecleanError
 
 # In the order --help lists them.
 COMMANDS: tuple[str, ...] = (
-    "demo", "clean", "info", "convert", "tune",
+    "demo", "clean", "calibrate", "info", "convert", "tune",
     "corrupt", "synth",
     "train", "eval", "plot", "export", "bench",
     "relay", "replay",

@@ -1,5 +1,15 @@
 """``faceclean clean IN -o OUT``: clean a file with one cleaner and write it back.
 
+Batch: ``faceclean clean A.csv B.csv -o OUTDIR/`` or ``faceclean clean FOLDER -o OUTDIR/``
+(recursing; each file keeps its relative path and its format) with one progress bar, a
+line per file and a summary of what failed and why; exit 1 when any file failed (the
+others are written, a failed one leaves nothing). ``--jobs N`` cleans N files at once.
+
+Levels (before the cleaner, faceclean.adjust): ``--calibration calib.json`` (from
+``faceclean calibrate``) and ``--set PATTERN.KEY=VALUE`` with KEY gain, offset, curve,
+clamp or off, on a channel name, a glob or a group: ``--set 'eyeBlink*.gain=1.2'
+--set tongueOut.off --set jawOpen.clamp=0,0.8``.
+
 The output format follows OUT's extension (``--format`` forces one); a ``.csv`` out of a
 Live Link Face CSV stays Live Link, with only the blendshape values changed. OUT may be
 IN: the output replaces it atomically once complete. A causal cleaner on a Live Link or
@@ -26,8 +36,14 @@ PROGRESS_BYTES = 8 << 20  # ... or, when streaming a file, from this many bytes 
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", metavar="IN", help="animation file to clean")
-    p.add_argument("-o", "--output", metavar="OUT", required=True, help="where to write")
+    p.add_argument("input", metavar="IN", nargs="+", help="animation file(s) or folder(s)")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="OUT",
+        required=True,
+        help="where to write; a folder (OUTDIR/) for several inputs or a folder input",
+    )
     p.add_argument("--method", help="cleaner (default: the shipped default cleaner)")
     p.add_argument(
         "--set",
@@ -35,7 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         action="append",
         default=[],
-        help="cleaner parameter, repeatable (numbers, true/false, JSON lists, strings)",
+        help="cleaner parameter, repeatable (numbers, true/false, JSON lists, strings); "
+        "PATTERN.gain|offset|curve|clamp|off=VALUE maps a channel's level before cleaning "
+        "(e.g. 'eyeBlink*.gain=1.2', tongueOut.off)",
     )
     p.add_argument(
         "--preset",
@@ -49,6 +67,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "or .onnx (made by 'faceclean export')",
     )
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
+    p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="level mapping from 'faceclean calibrate', applied before the cleaner",
+    )
+    p.add_argument(
+        "--jobs", type=int, default=1, metavar="N", help="batch: clean N files at once (processes)"
+    )
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
@@ -75,27 +101,53 @@ def parse_params(items: list[str]) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from faceclean.cli import clean_batch
+    from faceclean.errors import FacecleanError
+
+    if clean_batch.is_batch(args.input, args.output):
+        return clean_batch.run(args)
+    if args.jobs != 1:
+        raise FacecleanError("--jobs is for a batch (several files, or a folder)")
+    print(clean_one(args, args.input[0], args.output))
+    return 0
+
+
+def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool = True) -> str:
+    """Clean one file as the options ask; the line that says what was written."""
     from pathlib import Path
 
     from faceclean import io
+    from faceclean.adjust import Adjusted, split_items
     from faceclean.io import stream
 
-    params = parse_params(args.params)
-    src = Path(args.input)
+    levels, rest = split_items(args.params)
+    params = parse_params(rest)
+    src = Path(input)
     fmt_in = io.detect(src) if src.is_file() else None
-    if fmt_in in stream.FORMATS and io.output_format(args.output, fmt_in, args.fmt) == fmt_in:
+    if fmt_in in stream.FORMATS and io.output_format(output, fmt_in, args.fmt) == fmt_in:
         names = stream.channel_names(src, fmt_in)
         cleaner, what = build_cleaner(args, params, names)
         if names and stream.can_stream(cleaner, fmt_in, fmt_in):
-            frames, missing = _stream(src, args.output, cleaner, fmt_in)
-            _report(args.output, frames, missing, len(names), what)
-            return 0
+            adjust = build_levels(args, levels, names)
+            if not adjust.is_identity:
+                cleaner = Adjusted(cleaner, adjust, names)
+            frames, missing = _stream(src, output, cleaner, fmt_in, progress)
+            return _line(output, frames, missing, names, what, adjust)
     anim = io.load(src)
     cleaner, what = build_cleaner(args, params, anim.names)
-    cleaned = clean_with_progress(cleaner, anim)
-    io.save(cleaned, args.output, fmt=args.fmt)
-    _report(args.output, anim.n_frames, int((~anim.valid).sum()), anim.n_channels, what)
-    return 0
+    adjust = build_levels(args, levels, anim.names)
+    mapped = anim.with_values(adjust.apply(anim.values, anim.names))
+    cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
+    io.save(cleaned, output, fmt=args.fmt)
+    return _line(output, anim.n_frames, int((~anim.valid).sum()), anim.names, what, adjust)
+
+
+def build_levels(args: argparse.Namespace, items: list, names: tuple[str, ...]):
+    """The level mapping: ``--calibration``, then the ``--set`` level items on top."""
+    from faceclean.adjust import Adjust
+
+    base = Adjust.load(args.calibration) if getattr(args, "calibration", None) else Adjust()
+    return base.merged(Adjust.from_overrides(items, names))
 
 
 def build_cleaner(
@@ -125,22 +177,26 @@ def build_cleaner(
     return cleaner, what + (f" {json.dumps(params)}" if params else "")
 
 
-def _report(out: str, frames: int, missing: int, channels: int, what: str) -> None:
-    print(
+def _line(out: str, frames: int, missing: int, names: tuple[str, ...], what: str, adjust) -> str:
+    n = 0 if adjust.is_identity else len(adjust.levels(names).active)
+    return (
         f"wrote {out}: {frames} frames"
         + (f" ({missing} missing)" if missing else "")
-        + f", {channels} channels, cleaned with {what}"
+        + f", {len(names)} channels, cleaned with {what}"
+        + (f" after levels on {n} channels" if n else "")
     )
 
 
-def _stream(src: Path, out: str, cleaner: Cleaner, fmt: str) -> tuple[int, int]:
+def _stream(
+    src: Path, out: str, cleaner: Cleaner, fmt: str, progress: bool = True
+) -> tuple[int, int]:
     """``stream.clean_file`` with a progress bar (bytes) on stderr for big files."""
     from tqdm import tqdm
 
     from faceclean.io import stream
 
     size = src.stat().st_size
-    if size < PROGRESS_BYTES:
+    if size < PROGRESS_BYTES or not progress:
         return stream.clean_file(src, out, cleaner, fmt)
     with tqdm(total=size, unit="B", unit_scale=True, file=sys.stderr, leave=False) as bar:
         return stream.clean_file(src, out, cleaner, fmt, progress=bar.update)

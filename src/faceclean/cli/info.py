@@ -1,4 +1,8 @@
-"""``faceclean info FILE``: what a capture holds: channels, rate, gaps, value ranges."""
+"""``faceclean info FILE``: what a capture holds: channels, rate, gaps, value ranges.
+
+``info TAKE --calibration calib.json`` adds what the level mapping does to the take (its
+rules, and the value range after it); ``info calib.json`` describes a calibration file.
+"""
 
 from __future__ import annotations
 
@@ -8,13 +12,18 @@ from typing import Any
 
 import numpy as np
 
-HELP = "describe an animation file: channels, rate, duration, gaps, value ranges"
+HELP = "describe an animation file (channels, rate, gaps, ranges) or a calibration file"
 GAP_FACTOR = 1.5  # a step longer than this many median steps has dropped frames
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE", help="animation file")
     p.add_argument("--json", action="store_true", help="print the facts as JSON")
+    p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="also show the effect of this level mapping (from 'faceclean calibrate')",
+    )
 
 
 def describe(anim) -> dict[str, Any]:
@@ -66,8 +75,20 @@ def describe(anim) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from faceclean import io
+    from faceclean.adjust import Adjust, is_level_file
 
-    facts = describe(io.load(args.file))
+    if is_level_file(args.file):
+        return _levels_file(args)
+    anim = io.load(args.file)
+    facts = describe(anim)
+    adjust = Adjust.load(args.calibration) if args.calibration else None
+    if adjust is not None:
+        after = describe(anim.with_values(adjust.apply(anim.values, anim.names)))
+        facts["levels"] = {
+            "file": args.calibration,
+            "rules": adjust.describe(anim.names),
+            "after": {k: after[k] for k in ("min", "max", "outside_0_1")},
+        }
     if args.json:
         print(json.dumps(facts, indent=2))
         return 0
@@ -83,8 +104,36 @@ def run(args: argparse.Namespace) -> int:
     ]
     if facts["pose_channels"]:
         lines.append(("passthrough", ", ".join(facts["pose_channels"])))
+    if adjust is not None:
+        rules = facts["levels"]["rules"]
+        lines.append(("calibration", f"{args.calibration}: {len(adjust.rules)} rules"))
+        lines += [("", r) for r in rules[:8]]
+        if len(rules) > 8:
+            lines.append(("", f"... and {len(rules) - 8} more"))
+        lines.append(("after", "range " + _range(after)))
     for key, text in lines:
         print(f"{key:<12}{text}")
+    return 0
+
+
+def _levels_file(args: argparse.Namespace) -> int:
+    """``info calib.json``: the rules, then the measured neutral and top per channel."""
+    from faceclean.adjust import Adjust
+
+    adjust = Adjust.load(args.file)
+    if args.json:
+        print(json.dumps(adjust.to_dict(), indent=2))
+        return 0
+    print(f"{'file':<12}{args.file}")
+    print(f"{'format':<12}faceclean-adjust/1 (level mapping)")
+    for line in adjust.describe():
+        print(f"{'':<12}{line}")
+    chans = adjust.facts.get("channels", {})
+    if chans:
+        print(f"{'':<12}{'channel':<20}{'neutral':>9}{'top':>9}{'noise':>9}")
+        for name, c in chans.items():
+            cols = "".join(f"{c.get(k, float('nan')):>9.4f}" for k in ("neutral", "top", "noise"))
+            print(f"{'':<12}{name:<20}{cols}")
     return 0
 
 

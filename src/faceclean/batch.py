@@ -1,0 +1,71 @@
+"""Batch planning: which files a batch clean reads and where each one goes.
+
+``plan(inputs, outdir)``: a folder input is walked recursively for files whose extension
+``faceclean.io`` reads (hidden files and folders, and the output folder when it lies
+inside the input, are skipped); each keeps its path relative to that folder. A file input
+goes to ``outdir / name``. Two inputs that would write one output are refused up front.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from faceclean.errors import FacecleanError
+from faceclean.io import EXTENSIONS
+
+
+@dataclass(frozen=True)
+class Job:
+    src: Path
+    dst: Path
+
+
+def is_batch(inputs: list[str], output: str) -> bool:
+    """Several inputs, a folder input, or an output that names a folder (``OUT/``)."""
+    return (
+        len(inputs) > 1
+        or Path(inputs[0]).is_dir()
+        or output.endswith(("/", os.sep))
+        or Path(output).is_dir()
+    )
+
+
+def plan(inputs: list[str], outdir: str | os.PathLike) -> list[Job]:
+    """One Job per input file, in input order (a folder's files sorted)."""
+    out = Path(outdir)
+    if out.exists() and not out.is_dir():
+        raise FacecleanError(f"batch output must be a folder, and {out} is a file")
+    jobs: list[Job] = []
+    for given in inputs:
+        root = Path(given)
+        if root.is_dir():
+            found = list(_walk(root, out))
+            if not found:
+                raise FacecleanError(
+                    f"{root}: no animation files ({', '.join(sorted(EXTENSIONS))}) in it"
+                )
+            jobs += [Job(f, out / f.relative_to(root)) for f in found]
+        else:  # a missing or unreadable file fails as its own job, with its reason
+            jobs.append(Job(root, out / root.name))
+    seen: dict[Path, Path] = {}
+    for job in jobs:
+        key = Path(os.path.abspath(job.dst))
+        if key in seen:
+            raise FacecleanError(f"{seen[key]} and {job.src} would both write {job.dst}")
+        seen[key] = job.src
+    return jobs
+
+
+def _walk(root: Path, out: Path):
+    skip = os.path.abspath(out) if os.path.abspath(out) != os.path.abspath(root) else None
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = sorted(
+            d
+            for d in dirs
+            if not d.startswith(".") and os.path.abspath(os.path.join(folder, d)) != skip
+        )
+        for name in sorted(files):
+            if not name.startswith(".") and Path(name).suffix.lower() in EXTENSIONS:
+                yield Path(folder) / name

@@ -1,0 +1,129 @@
+"""Calibration: a per-channel level mapping (faceclean.adjust) measured from a short take.
+
+The take is a neutral hold (its first ``neutral_s`` seconds; the whole take when it is
+shorter) and, optionally, a range-of-motion pass after it. Per ARKit channel present:
+
+    neutral = median over the neutral hold                     (blinks in it do not move it)
+    noise   = 1.4826 * MAD over the neutral hold               (robust standard deviation)
+    top     = HIGH-th percentile over the whole take           (robust: not the maximum)
+    moved   = top - neutral > max(MOVE_MIN, NOISE_K * noise)
+
+    moved:    offset = neutral, gain = 1 / (top - neutral)  (top maps to 1; at most MAX_GAIN)
+    unmoved:  offset = neutral, gain = 1 / (1 - neutral)    (1 still maps to 1)
+    neutral >= 0.5 and unmoved: the identity (a resting level that high is not trusted)
+    always:   curve 1, clamp [0, 1]
+
+So neutral maps to 0 and the observed top to 1; a channel a tracker never lifts above a
+few hundredths (MediaPipe's eyeWide, cheekSquint, noseSneer) gets the gain that lifts it.
+
+Eyelids (eyeBlinkLeft/Right) are blink-aware: their neutral is open (the median of the
+hold, which brief blinks do not move), and their top is not a percentile of all frames
+but the BLINK_Q quantile of the peaks of the blinks the take holds (a blink is a rise of
+at least BLINK_RISE above neutral), so the blinks seen reach full closure; with no blink
+seen the top stays 1, so a full closure still reads 1 after the neutral is subtracted.
+Neither case lets the neutral subtraction stop a blink. Curve stays 1 (linear): one
+take's value distribution says how far a channel goes, not how it should ease.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from faceclean.adjust import Adjust
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+
+NEUTRAL_S = 1.0  # s, default neutral hold at the start of the take
+HIGH = 99.5  # percentile taken as a channel's top
+MOVE_MIN = 0.01  # a channel whose top is within this of neutral did not move
+NOISE_K = 6.0  # ... nor one within this many noise standard deviations
+LIFTED = 0.2  # a moved channel whose top is below this is a weak tracker channel, lifted
+MAX_GAIN = 50.0  # lifts a channel that peaks at 0.02 to 1, not more
+BLINKS = ("eyeBlinkLeft", "eyeBlinkRight")
+BLINK_RISE = 0.25  # a blink rises at least this far above the open eye
+BLINK_Q = 25.0  # percentile of the blink peaks taken as full closure
+MIN_FRAMES = 5  # a neutral hold needs this many valid frames
+
+
+def calibrate(
+    anim: Animation,
+    neutral_s: float = NEUTRAL_S,
+    *,
+    tops: Mapping[str, float] | None = None,
+    take: str | None = None,
+) -> Adjust:
+    """The mapping of the module docstring for ``anim``'s ARKit channels.
+
+    ``tops`` (canonical name -> top) replaces the tops measured here: a live neutral
+    re-measured on top of an earlier full calibration keeps that calibration's range.
+    """
+    if not neutral_s > 0:
+        raise FacecleanError(f"calibration: the neutral hold must be > 0 s (got {neutral_s})")
+    values, present = anim.arkit()  # (N, 52), NaN rows for missing frames
+    valid = anim.valid
+    if not present.any():
+        raise FacecleanError("calibration: the take has no ARKit blendshape channels")
+    if valid.sum() < MIN_FRAMES:
+        raise FacecleanError(f"calibration: the take has fewer than {MIN_FRAMES} valid frames")
+    t, x = anim.times[valid], values[valid]
+    hold = x[t <= t[0] + neutral_s]
+    if len(hold) < MIN_FRAMES:
+        raise FacecleanError(
+            f"calibration: fewer than {MIN_FRAMES} frames in the first {neutral_s:g} s"
+        )
+    with np.errstate(all="ignore"):
+        neutral = np.nanmedian(hold, axis=0)  # (52,)
+        noise = 1.4826 * np.nanmedian(np.abs(hold - neutral), axis=0)
+        top = np.nanpercentile(x, HIGH, axis=0)
+    rules, chans, moved, lifted = [], {}, [], []
+    for i, name in enumerate(ARKIT52):
+        if not present[i] or not np.isfinite(neutral[i]):
+            continue
+        n = float(neutral[i])
+        hi = _blink_top(x[:, i], n) if name in BLINKS else float(top[i])  # None: no blink
+        if tops is not None and name in tops:
+            hi = float(tops[name])
+        offset = n
+        if hi is not None and hi - n > max(MOVE_MIN, NOISE_K * float(noise[i])):
+            gain = min(1.0 / (hi - n), MAX_GAIN)  # the observed range onto [0, 1]
+            moved.append(name)
+            if hi < LIFTED:
+                lifted.append(name)
+        elif n < 0.5:
+            gain, hi = 1.0 / (1.0 - n), 1.0  # unmoved: [neutral, 1] onto [0, 1]
+        else:
+            offset, gain, hi = 0.0, 1.0, 1.0  # a "neutral" this high is no neutral: identity
+        rules += [(name, "offset", offset), (name, "gain", gain)]
+        rules += [(name, "curve", 1.0), (name, "clamp", (0.0, 1.0))]
+        chans[name] = {"neutral": _r(n), "noise": _r(float(noise[i])), "top": _r(hi)}
+    facts = {
+        "take": take,
+        "frames": int(valid.sum()),
+        "neutral_s": float(min(neutral_s, t[-1] - t[0])),
+        "moved": moved,
+        "lifted": lifted,
+        "channels": chans,
+    }
+    return Adjust(tuple(rules), facts)
+
+
+def tops_of(adjust: Adjust) -> dict[str, float]:
+    """The measured tops a calibration file carries (for a live neutral on top of it)."""
+    chans = adjust.facts.get("channels", {})
+    return {n: float(c["top"]) for n, c in chans.items() if isinstance(c, dict) and "top" in c}
+
+
+def _blink_top(x: np.ndarray, neutral: float) -> float | None:
+    """Full closure for one eyelid (N,): the BLINK_Q quantile of blink peaks; None if no
+    blink (the caller then keeps 1 as full closure)."""
+    up = np.nan_to_num(x, nan=neutral) > neutral + BLINK_RISE  # (N,) inside a blink
+    edges = np.flatnonzero(np.diff(np.r_[False, up, False].astype(np.int8)))
+    peaks = [float(np.nanmax(x[a:b])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return float(np.percentile(peaks, BLINK_Q)) if peaks else None
+
+
+def _r(v: float) -> float:
+    return round(v, 6)

@@ -1,0 +1,97 @@
+"""The batch form of ``faceclean clean`` (several files, or folders, into ``OUTDIR/``).
+
+One progress bar (files) on stderr, one line per file on stdout as it finishes, then a
+summary naming each failed file and why; exit 1 when any file failed. Every output is
+written atomically, so a failed file leaves nothing behind (nor a folder made for it).
+``--jobs N`` runs N worker processes, each cleaning whole files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from faceclean.batch import Job, is_batch, plan
+from faceclean.errors import FacecleanError
+
+__all__ = ["is_batch", "run"]
+
+
+def run(args: argparse.Namespace) -> int:
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from tqdm import tqdm
+
+    from faceclean.channels import ARKIT52
+    from faceclean.cli.clean import build_cleaner, build_levels, parse_params
+
+    if args.jobs < 1:
+        raise FacecleanError(f"--jobs must be at least 1 (got {args.jobs})")
+    if args.fmt is not None:
+        raise FacecleanError("a batch keeps each file's format: --format is for one file")
+    # bad options fail once, here, not once per file
+    from faceclean.adjust import split_items
+
+    levels, rest = split_items(args.params)
+    build_cleaner(args, parse_params(rest), ARKIT52)
+    build_levels(args, levels, ARKIT52)
+    jobs = plan(args.input, args.output)
+    Path(args.output).mkdir(parents=True, exist_ok=True)
+    failed: list[tuple[Job, str]] = []
+    bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, desc="cleaning", leave=False)
+    with bar:
+        if args.jobs == 1:
+            results = ((job, _clean(args, job)) for job in jobs)
+            for job, (ok, text) in results:
+                _done(bar, job, ok, text, failed)
+        else:
+            with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+                futures = {pool.submit(_clean, args, job): job for job in jobs}
+                for future in as_completed(futures):
+                    _done(bar, futures[future], *future.result(), failed)
+    print(f"cleaned {len(jobs) - len(failed)} of {len(jobs)} files into {args.output}")
+    if failed:
+        print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
+        for job, why in failed:
+            print(f"  {job.src}: {why}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _done(bar, job: Job, ok: bool, text: str, failed: list) -> None:
+    bar.write(text if ok else f"FAILED {job.src}: {text}", file=sys.stdout)
+    bar.update(1)
+    if not ok:
+        failed.append((job, text))
+
+
+def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:
+    """(True, the written line) or (False, why); never raises for a bad file."""
+    import os
+
+    from faceclean.cli.clean import clean_one
+
+    made = []  # output folders made for this file, removed again if it fails
+    folder = job.dst.parent
+    while not folder.exists():
+        made.append(folder)
+        folder = folder.parent
+    try:
+        for d in reversed(made):
+            d.mkdir(exist_ok=True)
+        return True, clean_one(args, str(job.src), str(job.dst), progress=False)
+    except FacecleanError as e:
+        why = str(e)
+    except (OSError, MemoryError) as e:
+        why = str(e) or type(e).__name__
+    except Exception as e:  # one bad file must not stop the batch
+        if os.environ.get("FACECLEAN_DEBUG"):
+            raise
+        why = f"internal error: {type(e).__name__}: {e}"
+    for d in made:
+        try:
+            d.rmdir()  # only if empty
+        except OSError:
+            break
+    return False, why
