@@ -25,6 +25,7 @@ from faceclean import filters
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
+from faceclean.errors import FacecleanError
 from faceclean.relay import Relay, livelink, parse
 from faceclean.relay.frame import Frame
 from faceclean.relay.replay import frames_from_animation, replay
@@ -436,3 +437,160 @@ def test_replay_command_streams_a_recording_as_livelink(capsys):
     assert "sent 180 packets" in capsys.readouterr().out
     np.testing.assert_array_equal([f.values for f in frames], ref["weights"])
     np.testing.assert_allclose([f.t for f in frames], ref["time"] - ref["time"][0], atol=1e-4)
+
+
+def test_relay_passes_every_frame_from_its_first_packet_on():
+    """The shipped model, as a user starts it: the first second of a 60 fps stream (paced
+    as a tracker sends it) comes out whole; before the warm-up, 24-27 frames were stale."""
+    import time
+
+    from faceclean.evaluation.performer import perform
+
+    take = perform(1.0, 11, fps=60.0).values.astype(np.float32).astype(np.float64)
+    with vmc_peer() as peer:
+        proc = _start(["--listen", "vmc://127.0.0.1:0", "--send", f"vmc://127.0.0.1:{peer.port}"])
+        try:
+            ready, _, _ = select.select([proc.stdout], [], [], 120.0)
+            assert ready, "relay did not start"
+            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            client = UDPClient("127.0.0.1", port)
+            start = time.perf_counter()
+            for i, row in enumerate(take):  # the pace of the stream, not a wait for the relay
+                time.sleep(max(0.0, start + i / 60.0 - time.perf_counter()))
+                client.send(vmc_bundle(ARKIT52, row, t=i / 60.0))
+            assert peer.wait_for(len(take), 30.0)
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    n = len(take)
+    assert f"stopped: in {n} out {n} dropped 0 (order 0, stale 0)" in out, out + err
+    first = np.array([peer.frames[0][k] for k in ARKIT52])
+    np.testing.assert_array_equal(first, take[0])  # the first packet itself starts the state
+
+
+def test_a_recorded_session_replays_and_recleans_to_what_was_sent(tmp_path):
+    from faceclean import io
+    from faceclean.relay.recorder import Recorder
+
+    rng = np.random.default_rng(4)
+    v = rng.uniform(0.0, 1.0, (40, 52)).astype(np.float32).astype(np.float64)
+    v[20] = np.nan  # tracking loss
+    rec = Recorder(tmp_path / "session.npz")
+    with vmc_peer() as peer:
+        relay = Relay(parse("vmc://127.0.0.1:0"), parse(f"vmc://127.0.0.1:{peer.port}", "send"),
+                      filters.make("ema"), recorder=rec)  # fmt: skip
+        thread = threading.Thread(target=relay.run, daemon=True)
+        thread.start()
+        client = UDPClient("127.0.0.1", relay.address.port)
+        for i, row in enumerate(v):
+            before = len(peer.frames)
+            client.send(vmc_bundle(ARKIT52, row, t=5.0 + i / 60.0))
+            assert peer.wait_for(before + 1)
+        relay.stop()
+        thread.join(WAIT)
+        relay.close()
+    take_path, clean_path = rec.save()
+    assert clean_path.name == "session.clean.npz"
+    take, cleaned = io.load(take_path), io.load(clean_path)
+    np.testing.assert_allclose(take.times, np.arange(40) / 60.0, atol=1e-6)  # from 0 (float32)
+    np.testing.assert_array_equal(take.values, v)  # the input, exactly, NaN row included
+    sent = np.array([[f[k] for k in ARKIT52] for f in peer.frames])
+    np.testing.assert_allclose(cleaned.values, sent, atol=1e-6)  # the output, as it went out
+    again = filters.make("ema").clean(take)  # the recording re-cleans to the same output
+    np.testing.assert_allclose(np.delete(again.values, 20, 0), np.delete(sent, 20, 0), atol=1e-6)
+    np.testing.assert_array_equal(cleaned.values[20], cleaned.values[19])  # held, as sent
+
+    with vmc_peer() as peer:  # and replays as a live stream
+        assert main(["replay", str(take_path), "--send", f"vmc://127.0.0.1:{peer.port}",
+                     "--speed", "20"]) == 0  # fmt: skip
+        assert peer.wait_for(39)
+    replayed = np.array([[f[k] for k in ARKIT52] for f in peer.frames])
+    np.testing.assert_array_equal(replayed, np.delete(v, 20, axis=0))
+
+
+def test_a_sender_restart_goes_on_after_a_gap_in_the_recording(tmp_path):
+    from faceclean.relay.recorder import GAP, Recorder
+
+    rec = Recorder(tmp_path / "s.csv")
+    x = np.full(52, 0.5)
+    for t in (100.0, 100.5, 101.0):
+        rec.add(t, x, x, None)
+    rec.restart()
+    rec.add(3.0, x, x, None)
+    take, _ = rec.animations()
+    np.testing.assert_allclose(take.times, [0.0, 0.5, 1.0, 1.0 + GAP])
+    with pytest.raises(FacecleanError, match=r"\.csv \(Live Link\) or \.npz"):
+        Recorder(tmp_path / "s.json")
+    with pytest.raises(FacecleanError, match="does not exist"):
+        Recorder(tmp_path / "absent" / "s.csv")
+
+
+def test_relay_calibrates_the_neutral_from_its_first_seconds(capsys):
+    from faceclean.calibration import LiveCalibration
+
+    n = 120  # 2 s at 60 fps: 1 s neutral (jawOpen rests at 0.2), then the jaw opens
+    v = np.full((n, 52), 0.05)
+    v[:, 17] = 0.2
+    v[90:, 17] = 0.9
+    v[100:104, 0] = 0.95  # a blink after the calibration
+    v = v.astype(np.float32).astype(np.float64)
+    done = []
+    cleaner = LiveCalibration(filters.make("ema"), 1.0, on_done=done.append)
+    with vmc_peer() as peer:
+        relay = Relay(parse("vmc://127.0.0.1:0"), parse(f"vmc://127.0.0.1:{peer.port}", "send"),
+                      cleaner)  # fmt: skip
+        thread = threading.Thread(target=relay.run, daemon=True)
+        thread.start()
+        client = UDPClient("127.0.0.1", relay.address.port)
+        for i, row in enumerate(v):
+            before = len(peer.frames)
+            client.send(vmc_bundle(ARKIT52, row, t=i / 60.0))
+            assert peer.wait_for(before + 1)
+        relay.stop()
+        thread.join(WAIT)
+        relay.close()
+    out = np.array([[f[k] for k in ARKIT52] for f in peer.frames])
+    assert len(out) == n and len(done) == 1  # every frame relayed, calibrated once
+    np.testing.assert_allclose(out[:60, 17], 0.2, atol=1e-6)  # passed through meanwhile
+    assert abs(out[85, 17]) < 1e-3  # then the neutral reads 0
+    assert out[-1, 17] == pytest.approx((0.9 - 0.2) / 0.8, abs=0.02)  # and 1 still maps to 1
+    assert out[100:110, 0].max() > 0.7  # a blink still closes
+
+
+def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
+    session = tmp_path / "session.csv"
+    with raw_receiver() as rx:
+        proc = _start(
+            ["--listen", "vmc://127.0.0.1:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
+            + ["--method", "ema", "--set", "jawOpen.gain=2", "--calibrate-seconds", "0.05"]
+            + ["--record", str(session)]
+        )
+        try:
+            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+            assert ready, "relay did not start"
+            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            client = UDPClient("127.0.0.1", port)
+            for i in range(30):
+                client.send(vmc_bundle(["jawOpen", "eyeBlinkLeft"], [0.25, 0.1], t=i / 60.0))
+                OscPacket(rx.recv(65536))
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, err
+    assert "calibrated the neutral of 2 channels" in out
+    assert f"recorded 30 frames: {session} (input)" in out
+    from faceclean import io
+
+    take, cleaned = io.load(session), io.load(tmp_path / "session.clean.csv")
+    assert take.meta["format"] == "livelink" and take.n_frames == 30
+    np.testing.assert_allclose(take.channel("jawOpen"), 0.25, atol=1e-6)
+    assert cleaned.channel("jawOpen")[0] == pytest.approx(0.5, abs=1e-6)  # gain 2 before
+    assert abs(cleaned.channel("jawOpen")[-1]) < 0.01  # the neutral, once calibrated
+    assert main(["relay", "--listen", "vmc://:0", "--send", "vmc://:9", "--record", "x.json"]) == 2
+    assert "--record x.json" in capsys.readouterr().err

@@ -27,14 +27,17 @@ take's value distribution says how far a channel goes, not how it should ease.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import warnings
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
-from faceclean.adjust import Adjust
+from faceclean.adjust import Adjust, apply_levels
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
+from faceclean.filters.base import Cleaner
 
 NEUTRAL_S = 1.0  # s, default neutral hold at the start of the take
 HIGH = 99.5  # percentile taken as a channel's top
@@ -64,6 +67,7 @@ def calibrate(
         raise FacecleanError(f"calibration: the neutral hold must be > 0 s (got {neutral_s})")
     values, present = anim.arkit()  # (N, 52), NaN rows for missing frames
     valid = anim.valid
+    present &= np.isfinite(values).any(axis=0)  # a column without one value is absent
     if not present.any():
         raise FacecleanError("calibration: the take has no ARKit blendshape channels")
     if valid.sum() < MIN_FRAMES:
@@ -74,7 +78,8 @@ def calibrate(
         raise FacecleanError(
             f"calibration: fewer than {MIN_FRAMES} frames in the first {neutral_s:g} s"
         )
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: absent channels
         neutral = np.nanmedian(hold, axis=0)  # (52,)
         noise = 1.4826 * np.nanmedian(np.abs(hold - neutral), axis=0)
         top = np.nanpercentile(x, HIGH, axis=0)
@@ -127,3 +132,72 @@ def _blink_top(x: np.ndarray, neutral: float) -> float | None:
 
 def _r(v: float) -> float:
     return round(v, 6)
+
+
+class LiveCalibration(Cleaner):
+    """A stream cleaner that calibrates its neutral from the first ``seconds`` of a stream.
+
+    Until then frames pass through ``base`` (a calibration file's mapping, or none) and
+    the cleaner as usual; from the first frame at least ``seconds`` after the stream's
+    first one (and MIN_FRAMES frames with a face), the mapping is ``base`` with the
+    neutral measured over those seconds (the tops of ``base``'s calibration kept when it
+    has them, else blink-aware defaults: ``calibrate`` above), then ``overrides`` on top.
+    ``reset()`` (a new stream) forgets the measured neutral: each stream calibrates on
+    its own first seconds.
+    ``on_done(adjust)`` is called once per stream when the mapping is measured.
+    """
+
+    def __init__(
+        self,
+        inner: Any,
+        seconds: float,
+        base: Adjust | None = None,
+        overrides: Adjust | None = None,
+        names: tuple[str, ...] = ARKIT52,
+        on_done: Callable[[Adjust], None] | None = None,
+    ) -> None:
+        if not seconds > 0:
+            raise FacecleanError(f"--calibrate-seconds must be > 0 (got {seconds})")
+        self.inner, self.seconds, self.names, self.on_done = inner, float(seconds), names, on_done
+        self.name = getattr(inner, "name", "cleaner")
+        self.base, self.overrides = base or Adjust(), overrides or Adjust()
+        self._before = self.base.merged(self.overrides).levels(names)
+        self._tops = tops_of(self.base)
+        self.reset()
+
+    def reset(self) -> None:
+        self.inner.reset()
+        self.adjust: Adjust | None = None  # the measured mapping, once done
+        self._levels = self._before
+        self._t: list[float] = []
+        self._x: list[np.ndarray] = []
+
+    def warm_up(self) -> None:
+        """Warm the inner cleaner (relay.loop.warm_up) without measuring a neutral."""
+        from faceclean.relay.loop import warm_up
+
+        warm_up(self.inner)
+
+    def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+        x = np.asarray(frame, dtype=np.float64)
+        if self.adjust is None and np.isfinite(t):
+            self._collect(x, float(t))
+        return self.inner.step(apply_levels(self._levels, x), t)
+
+    def _collect(self, x: np.ndarray, t: float) -> None:
+        self._t.append(t)
+        self._x.append(x.copy())
+        elapsed = t - self._t[0]
+        if elapsed < self.seconds:
+            return
+        anim = Animation(np.asarray(self._t), np.asarray(self._x), self.names)
+        if anim.valid.sum() < MIN_FRAMES:  # too few faces yet: keep measuring, a while
+            if elapsed > 10 * self.seconds:
+                self._t, self._x = [], []
+            return
+        live = calibrate(anim, elapsed + 1e-9, tops=self._tops or None, take="live")
+        self.adjust = self.base.merged(live).merged(self.overrides)
+        self._levels = self.adjust.levels(self.names)
+        self._t, self._x = [], []
+        if self.on_done is not None:
+            self.on_done(self.adjust)

@@ -17,6 +17,17 @@ import argparse
 from faceclean.calibration import NEUTRAL_S
 
 HELP = "measure a per-channel level mapping (neutral, range) from a short take"
+EPILOG = """\
+record a take: hold a neutral face for the first second (blinking is fine), then,
+optionally, move through each expression as far as it goes. Then:
+  faceclean calibrate rom.csv -o calib.json
+  faceclean clean take.csv -o out.csv --calibration calib.json
+  faceclean info take.csv --calibration calib.json    (its effect; 'info calib.json': the file)
+  faceclean relay ... --calibration calib.json
+neutral maps to 0 and each channel's observed top (99.5th percentile) to 1; eyelids stay
+blink-aware (blinks still close fully), channels the take never moves keep a near-identity
+mapping, weak channels (a few hundredths at most, as MediaPipe's eyeWide) are lifted.
+"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

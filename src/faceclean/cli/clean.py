@@ -31,6 +31,17 @@ if TYPE_CHECKING:
     from faceclean.filters.base import Cleaner
 
 HELP = "clean an animation file (Live Link CSV, CSV, JSON, NPZ, glTF/GLB)"
+EPILOG = """\
+batch cleaning:
+  faceclean clean a.csv b.csv -o OUTDIR/      several files into a folder
+  faceclean clean takes/ -o cleaned/ --jobs 2  a folder, recursing: same relative paths and
+                                              formats; a line per file, a summary of what
+                                              failed and why, exit 1 if any file failed
+per-channel levels (before the cleaner; y = clip(sign(u)|u|^curve, lo, hi),
+u = gain (x - offset); by channel name, glob or group):
+  --set 'eyeBlink*.gain=1.2' --set tongueOut.off --set jawOpen.clamp=0,0.8
+  --calibration calib.json                    from 'faceclean calibrate' (--set goes on top)
+"""
 PROGRESS_FRAMES = 5000  # show a progress bar from this many frames on
 PROGRESS_BYTES = 8 << 20  # ... or, when streaming a file, from this many bytes on
 

@@ -2,6 +2,14 @@
 and an engine (VMC, Live Link Face UDP, iFacialMocap in; VMC or Live Link out).
 
 Ctrl-C or SIGTERM stops it with exit 0 and a final stats line. See docs/RELAY.md.
+
+Levels before the cleaner (faceclean.adjust): ``--calibration calib.json`` (from
+``faceclean calibrate``), ``--set PATTERN.KEY=VALUE`` (gain, offset, curve, clamp, off),
+and ``--calibrate-seconds N``: hold a neutral face for the first N seconds of the stream
+(no hotkey; frames are relayed meanwhile); from then on each channel's neutral reads 0.
+A new stream (the sender restarted) calibrates again on its own first N seconds.
+``--record take.csv`` (or .npz) saves what came in to take.csv and what went out to
+take.clean.csv when the relay stops: ``faceclean replay take.csv`` streams it again.
 """
 
 from __future__ import annotations
@@ -12,6 +20,17 @@ import sys
 from typing import Any
 
 HELP = "clean a live stream: --listen vmc://|livelink://|ifacialmocap:// --send vmc://|livelink://"
+EPILOG = """\
+levels before the cleaner:
+  --calibration calib.json       from 'faceclean calibrate'
+  --set 'eyeBlink*.gain=1.2'     per channel, glob or group: gain, offset, curve, clamp, off
+  --calibrate-seconds 3          hold a neutral face for the first 3 s of the stream (no
+                                 hotkey; frames are relayed meanwhile); a new stream
+                                 calibrates again
+recording:
+  --record session.csv           input to session.csv, cleaned output to session.clean.csv
+                                 (or .npz); 'faceclean replay session.csv' streams it again
+"""
 
 
 def add_cleaner_arguments(p: argparse.ArgumentParser) -> None:
@@ -22,10 +41,16 @@ def add_cleaner_arguments(p: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         action="append",
         default=[],
-        help="cleaner parameter for --method, repeatable",
+        help="cleaner parameter for --method, repeatable; PATTERN.gain|offset|curve|clamp|off"
+        "=VALUE maps a channel's level before cleaning (e.g. 'eyeBlink*.gain=1.2')",
     )
     p.add_argument("--model", metavar="FILE", help="learned model file (.npz)")
     p.add_argument("--preset", metavar="FILE", help="preset file made by 'faceclean tune'")
+    p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="level mapping from 'faceclean calibrate', applied before the cleaner",
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -34,6 +59,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_cleaner_arguments(p)
     p.add_argument(
         "--stats", type=float, metavar="SECONDS", help="print counters and latency this often"
+    )
+    p.add_argument(
+        "--calibrate-seconds",
+        type=float,
+        metavar="N",
+        help="calibrate the neutral from the first N seconds of the stream (hold still)",
+    )
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        help="save the session: input to FILE, cleaned output to FILE.clean (.csv or .npz)",
     )
 
 
@@ -47,10 +83,13 @@ def build_cleaner(args: argparse.Namespace) -> tuple[Any, str]:
     given = [o for o in ("method", "model", "preset") if getattr(args, o)]
     if len(given) > 1:
         raise FacecleanError(f"give one of --method, --model, --preset (got {', '.join(given)})")
-    if args.params and not args.method:
-        raise FacecleanError("--set needs --method")
+    from faceclean.adjust import split_items
+
+    _, rest = split_items(args.params)  # level items are build_levels' (below)
+    if rest and not args.method:
+        raise FacecleanError("--set needs --method (except level keys: PATTERN.gain=...)")
     if args.method:
-        params = parse_params(args.params)
+        params = parse_params(rest)
         if filters.cleaner_class(args.method).offline:
             raise FacecleanError(f"{args.method} is offline (non-causal): it cannot run live")
         return filters.make(args.method, params, names=ARKIT52), args.method
@@ -62,15 +101,45 @@ def build_cleaner(args: argparse.Namespace) -> tuple[Any, str]:
     return cleaner, cleaner.source + (f"; {cleaner.note}" if cleaner.note else "")
 
 
+def with_levels(args: argparse.Namespace, cleaner: Any) -> tuple[Any, str]:
+    """The cleaner behind the level mapping the options ask for, and a note on it."""
+    from faceclean.adjust import Adjust, Adjusted, split_items
+    from faceclean.calibration import LiveCalibration
+    from faceclean.channels import ARKIT52
+
+    levels, _ = split_items(args.params)
+    base = Adjust.load(args.calibration) if args.calibration else Adjust()
+    overrides = Adjust.from_overrides(levels, ARKIT52)
+    notes = [f"calibration {args.calibration}"] if args.calibration else []
+    notes += [f"{len(overrides.rules)} level overrides"] if overrides.rules else []
+    if args.calibrate_seconds is not None:
+
+        def done(adjust: Adjust) -> None:
+            n = len(adjust.facts.get("channels", {}))
+            print(f"calibrated the neutral of {n} channels", flush=True)
+
+        live = LiveCalibration(cleaner, args.calibrate_seconds, base, overrides, on_done=done)
+        notes.append(f"neutral from the first {args.calibrate_seconds:g} s")
+        return live, "; ".join(notes)
+    adjust = base.merged(overrides)
+    if not adjust.is_identity:
+        cleaner = Adjusted(cleaner, adjust, ARKIT52)
+    return cleaner, "; ".join(notes)
+
+
 def run(args: argparse.Namespace) -> int:
     from faceclean.errors import FacecleanError
     from faceclean.relay import Relay, parse
+    from faceclean.relay.recorder import Recorder
 
     listen, send = parse(args.listen, "listen"), parse(args.send, "send")
     if args.stats is not None and not args.stats > 0:
         raise FacecleanError(f"--stats must be > 0 seconds (got {args.stats})")
+    recorder = Recorder(args.record) if args.record else None
     cleaner, what = build_cleaner(args)
-    with Relay(listen, send, cleaner) as relay:
+    cleaner, levels = with_levels(args, cleaner)
+    what += f"; levels: {levels}" if levels else ""
+    with Relay(listen, send, cleaner, recorder=recorder) as relay:
 
         def stop(signum: int, frame: object) -> None:
             relay.stop()
@@ -83,6 +152,9 @@ def run(args: argparse.Namespace) -> int:
             for s, handler in old.items():
                 signal.signal(s, handler)
     print(f"stopped: {stats.line()}", flush=True)
+    if recorder is not None and len(recorder):
+        take, cleaned = recorder.save()
+        print(f"recorded {len(recorder)} frames: {take} (input), {cleaned} (cleaned)", flush=True)
     if stats.send_errors:
         print(f"faceclean: {stats.send_errors} sends refused by {send}", file=sys.stderr)
     return 0

@@ -9,6 +9,12 @@ output). Ordering: a frame whose time is not after the last one sent is dropped
 arrival time (``time.monotonic``). A long silence restarts the cleaner through its own
 ``max_gap`` rule (filters/base.py), so the face does not jump or drift when it returns.
 The loop sends only to the ``send`` endpoint, never back to a sender.
+
+No dropped start: the cleaner is warmed up (``warm_up``: a few frames through every path
+of its step, then ``reset()``) before the socket is bound, so the first packets meet a
+ready cleaner instead of queueing behind a just-in-time compile (the shipped model's
+numba kernel compiles on its first advancing step). A ``Recorder`` given to the relay
+keeps every cleaned frame (relay/recorder.py).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import numpy as np
 from faceclean.channels import ARKIT52, canonical
 from faceclean.errors import FacecleanError
 from faceclean.relay.frame import Frame, Malformed
+from faceclean.relay.recorder import Recorder
 from faceclean.relay.url import Endpoint
 
 RESTART = 1.0  # s; a backwards jump in sender time larger than this is a new stream
@@ -86,6 +93,26 @@ class Stats:
         )
 
 
+def warm_up(cleaner: Stepper, frames: int = 6) -> None:
+    """Step ``cleaner`` through its first-frame, advancing and missing-value paths on
+    (52,) frames at 60 fps, then ``reset()`` it: whatever it compiles or allocates on
+    first use happens now, not on the first packets. A cleaner with a ``warm_up()``
+    method (one whose steps have effects beyond its state) is asked to do it itself."""
+    own = getattr(cleaner, "warm_up", None)
+    if callable(own):  # a cleaner with side effects warms up in its own way
+        own()
+        return
+    rng = np.random.default_rng(0)
+    for i in range(frames):
+        x = rng.uniform(0.0, 0.5, len(ARKIT52))
+        if i == frames - 2:
+            x[::3] = np.nan  # some channels missing
+        if i == frames - 1:
+            x[:] = np.nan  # a missing frame
+        cleaner.step(x, i / 60.0)
+    cleaner.reset()
+
+
 class Relay:
     """A bound relay: ``run()`` serves until ``stop()`` (thread- and signal-safe)."""
 
@@ -96,8 +123,11 @@ class Relay:
         cleaner: Stepper,
         *,
         clock: Callable[[], float] = time.monotonic,
+        recorder: Recorder | None = None,
     ) -> None:
         self.listen, self.send, self.cleaner, self.clock = listen, send, cleaner, clock
+        self.recorder = recorder
+        warm_up(cleaner)  # before the socket exists: nothing queues behind it
         self.decoder = listen.decoder()
         self.encoder = send.encoder()
         self.stats = Stats()
@@ -197,18 +227,23 @@ class Relay:
             if packet != self._packet_clock:  # the time base changed: a new stream
                 self._packet_clock = packet
                 best_t = self._last_t = None
-                self.cleaner.reset()
+                self._reset()
             elif best_t is not None and t <= best_t:
                 if best_t - t <= RESTART:
                     self.stats.out_of_order += 1
                     continue
                 self.stats.restarts += 1
-                self.cleaner.reset()
+                self._reset()
             if best is not None:
                 self.stats.stale += 1
             best, best_t = (frame, t, received), t
         if best is not None:
             self._process(*best)
+
+    def _reset(self) -> None:
+        self.cleaner.reset()
+        if self.recorder is not None:
+            self.recorder.restart()
 
     def _cols(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
         cols = self._columns.get(names)
@@ -231,6 +266,8 @@ class Relay:
         self._last_t = t
         if np.isnan(y).all():  # nothing seen yet: nothing to send
             return
+        if self.recorder is not None:
+            self.recorder.add(t, x, y, frame.pose)
         if self._vmc_out:
             values = frame.values.copy()  # non-ARKit channels pass unchanged
             values[src] = y[dst]
