@@ -139,3 +139,35 @@ def test_calibrate_command_writes_a_file_clean_and_info_use(tmp_path, capsys):
     assert main(["info", str(take), "--calibration", str(calib)]) == 0
     text = capsys.readouterr().out
     assert "calibration" in text and "after" in text
+
+
+def test_calibrate_never_writes_over_its_take(tmp_path, capsys):
+    take = tmp_path / "take.json"
+    io.save(_take(np.ones(52), np.zeros(52), rom=False), take)
+    before = take.read_bytes()
+    assert main(["calibrate", str(take), "-o", str(take)]) == 2
+    assert main(["calibrate", str(take), "-o", str(tmp_path / "calib.csv")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert "is the take itself" in err[0] and "a calibration is a .json file" in err[1]
+    assert take.read_bytes() == before and not (tmp_path / "calib.csv").exists()
+
+
+def test_the_report_shows_the_levels_its_cleaners_saw(tmp_path, capsys):
+    from faceclean.report.build import node_modules
+
+    try:
+        node_modules()
+    except FacecleanError as e:
+        pytest.skip(f"no three.js for the report here: {e}")
+    take = tmp_path / "take.npz"
+    io.save(_take(np.full(52, 2.0), np.full(52, 0.1)), take)
+    calib = tmp_path / "calib.json"
+    assert main(["calibrate", str(take), "-o", str(calib)]) == 0
+    html = tmp_path / "r.html"
+    argv = ["report", str(take), "-o", str(html), "--method", "ema"]
+    assert main([*argv, "--calibration", str(calib)]) == 0
+    text = html.read_text()
+    assert "Levels before the cleaner" in text and "levels calibrated" in text
+    assert "eyeBlinkLeft (1 channel): offset 0.1" in text and "and 41 more" in text
+    assert main(argv) == 0
+    assert "Levels before the cleaner" not in html.read_text()

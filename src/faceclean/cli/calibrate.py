@@ -47,7 +47,13 @@ def run(args: argparse.Namespace) -> int:
 
     from faceclean import io
     from faceclean.calibration import calibrate
+    from faceclean.errors import FacecleanError
 
+    out = Path(args.output)
+    if out.suffix.lower() != ".json":
+        raise FacecleanError(f"-o {out.name}: a calibration is a .json file")
+    if out.exists() and Path(args.take).exists() and out.samefile(args.take):
+        raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
     anim = io.load(args.take)
     adjust = calibrate(anim, args.neutral, take=Path(args.take).name)
     adjust.save(args.output)

@@ -25,6 +25,11 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         default=[],
         help="other cleaners to show beside it",
     )
+    p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="level mapping from 'faceclean calibrate', applied before every cleaner",
+    )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,7 +53,12 @@ def comparison_from(args: argparse.Namespace):
     noisy = io.load(args.input)
     truth = io.load(args.truth) if args.truth else None
     methods = [args.method or filters.default_method(), *args.compare]
-    return comparison.compare(noisy, truth, methods)
+    adjust = None
+    if getattr(args, "calibration", None):
+        from faceclean.adjust import Adjust
+
+        adjust = Adjust.load(args.calibration)
+    return comparison.compare(noisy, truth, methods, adjust)
 
 
 def run(args: argparse.Namespace) -> int:

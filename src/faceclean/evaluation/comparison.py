@@ -33,6 +33,7 @@ class Comparison:
     input: Animation
     truth: Animation | None
     outputs: dict[str, Animation] = field(default_factory=dict)
+    levels: list[str] = field(default_factory=list)  # the level mapping before the cleaners
 
     @property
     def main(self) -> str:
@@ -99,9 +100,12 @@ def compare(
     noisy: Animation,
     truth: Animation | None = None,
     methods: tuple[str, ...] | list[str] = (),
+    adjust: Any = None,
 ) -> Comparison:
     """Clean ``noisy`` with each method spec (the first is the main one; default: the
-    shipped default cleaner) and bring ``truth`` onto the input's timestamps."""
+    shipped default cleaner) and bring ``truth`` onto the input's timestamps. With an
+    ``adjust`` (faceclean.adjust.Adjust) the cleaners see its level mapping of ``noisy``;
+    the input shown stays ``noisy``."""
     from faceclean import filters
 
     if noisy.n_frames < 2 or not noisy.valid.any():
@@ -114,7 +118,11 @@ def compare(
         ]
         if not (same and names_match):
             truth = at_times(truth, noisy.times, noisy.names)
-    return Comparison(noisy, truth, {s: clean_with(s, noisy) for s in specs})
+    if adjust is None or adjust.is_identity:
+        return Comparison(noisy, truth, {s: clean_with(s, noisy) for s in specs})
+    mapped = noisy.with_values(adjust.apply(noisy.values, noisy.names))
+    outputs = {s: clean_with(s, mapped) for s in specs}
+    return Comparison(noisy, truth, outputs, adjust.describe(noisy.names))
 
 
 def jitter_energy(times: np.ndarray, values: np.ndarray) -> float:

@@ -128,6 +128,17 @@ def measures_html(comp: Comparison) -> str:
         "±2 neighbouring frames; removed when the output is within half that distance. "
         "Gaps: missing values of the input (tracking loss) that the output fills.</p>"
     )
+    if comp.levels:
+        shown = comp.levels[:12] + [f"... and {len(comp.levels) - 12} more"] * (
+            len(comp.levels) > 12
+        )
+        items = "".join(f"<li>{html.escape(line)}</li>" for line in shown)
+        parts.append(
+            "<h3>Levels before the cleaner</h3>"
+            '<p class="note">Every cleaner saw the input through this level mapping '
+            "(faceclean calibrate, --calibration); the input shown is the raw one.</p>"
+            f"<ul>{items}</ul>"
+        )
     return "\n".join(parts)
 
 
@@ -156,6 +167,7 @@ def render(comp: Comparison, face: FaceMesh | None = None, source: str = "input"
     if len(comp.outputs) > 1:
         sub += " · compared: " + ", ".join(list(comp.outputs)[1:])
     sub += " · with a truth" if comp.truth is not None else " · no truth given"
+    sub += " · levels calibrated" if comp.levels else ""
     shapes = int(face.present.sum())
     note = (
         f"Left: the input; right: cleaned with {comp.main}; both play in sync on "
