@@ -68,7 +68,9 @@ def test_later_rules_win_and_groups_and_spellings_match():
         (("jawOpen", "speed", 1), "valid: gain, offset, curve, clamp, off"),
         (("noSuchChannel*", "gain", 1), "names no channel"),
         (("jawOpen", "gain", "fast"), "expected a number"),
-        (("jawOpen", "curve", 0), "must be > 0"),
+        (("jawOpen", "curve", 0), r"must be in \(0, 100\]"),
+        (("jawOpen", "gain", 1e308), "within"),
+        (("jawOpen", "offset", -1e4), "within"),
         (("jawOpen", "clamp", [1, 0]), "LO <= HI"),
         (("jawOpen", "gain", float("inf")), "finite"),
     ],
@@ -111,3 +113,11 @@ def test_describe_names_each_pattern():
         "tongueOut (1 channel): off",
     ]
     assert Adjust().describe() == ["identity (no level mapping)"]
+
+
+def test_extreme_levels_and_glitch_values_never_warn(recwarn):
+    a = Adjust.from_overrides([("jawOpen", "gain", 1e3), ("jawOpen", "curve", 100)])
+    x = np.array([[1e6, 0.5], [0.5, 0.5], [np.nan, 0.5]])
+    y = a.apply(x, ("jawOpen", "mouthClose"))
+    assert np.isposinf(y[0, 0]) and np.isnan(y[2, 0]) and list(y[:, 1]) == [0.5] * 3
+    assert not recwarn.list

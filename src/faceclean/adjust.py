@@ -45,6 +45,8 @@ from faceclean.filters.base import Cleaner
 
 MAP_KEYS: tuple[str, ...] = ("gain", "offset", "curve", "clamp", "off")
 FORMAT = "faceclean-adjust/1"
+MAX_LEVEL = 1e3  # |gain|, |offset| at most this (weights live in [0, 1])
+MAX_CURVE = 100.0  # curve exponent in (0, MAX_CURVE]
 Rule = tuple[str, str, Any]  # (pattern, key, value), value already validated
 
 
@@ -209,9 +211,10 @@ def apply_levels(lv: Levels, x: np.ndarray) -> np.ndarray:
     a = lv.active
     if not len(a):
         return out
-    u = lv.gain[a] * (x[..., a] - lv.offset[a])
-    u = np.sign(u) * np.abs(u) ** lv.curve[a]
-    u = np.clip(u, lv.lo[a], lv.hi[a])
+    with np.errstate(over="ignore", invalid="ignore"):  # a glitch value may overflow to inf
+        u = lv.gain[a] * (x[..., a] - lv.offset[a])
+        u = np.sign(u) * np.abs(u) ** lv.curve[a]
+        u = np.clip(u, lv.lo[a], lv.hi[a])
     u = np.where(lv.off[a] & ~np.isnan(u), 0.0, u)
     out[..., a] = u
     return out
@@ -256,8 +259,10 @@ def _checked(key: str, value: object, where: str) -> Any:
         raise FacecleanError(f"{where}: expected a number, got {value!r}") from None
     if isinstance(value, bool) or not math.isfinite(number):
         raise FacecleanError(f"{where}: expected a finite number, got {value!r}")
-    if key == "curve" and number <= 0:
-        raise FacecleanError(f"{where}: the curve exponent must be > 0, got {value!r}")
+    if key == "curve" and not 0 < number <= MAX_CURVE:
+        raise FacecleanError(f"{where}: the curve exponent must be in (0, {MAX_CURVE:g}]")
+    if key in ("gain", "offset") and abs(number) > MAX_LEVEL:
+        raise FacecleanError(f"{where}: must be within +-{MAX_LEVEL:g} (weights are 0..1)")
     return number
 
 
