@@ -171,3 +171,26 @@ def test_the_report_shows_the_levels_its_cleaners_saw(tmp_path, capsys):
     assert "eyeBlinkLeft (1 channel): offset 0.1" in text and "and 41 more" in text
     assert main(argv) == 0
     assert "Levels before the cleaner" not in html.read_text()
+
+
+def test_a_live_neutral_on_top_of_a_calibration_file_keeps_its_ranges():
+    from faceclean.calibration import LiveCalibration
+
+    rng = np.random.default_rng(8)
+    offset, gain = rng.uniform(0.0, 0.1, 52), rng.uniform(1.0, 4.0, 52)
+    gain[list(BLINK)] = 1.3
+    base = calibrate(_take(gain, offset))  # a full calibration: neutral and tops
+    top = offset + 1.0 / gain
+    shifted = offset + 0.05  # today the tracker rests a little higher
+    overrides = Adjust.from_overrides([("tongueOut", "off", None)])
+    live = LiveCalibration(filters.make("ema"), 0.5, base, overrides)
+    for i in range(40):
+        live.step(shifted, i / 60.0)
+    assert live.adjust is not None
+    lv = live.adjust.levels(ARKIT52)
+    moved = [i for i in range(52) if i not in BLINK and i != INDEX["tongueOut"]]
+    np.testing.assert_allclose(lv.offset[moved], shifted[moved], atol=1e-9)
+    np.testing.assert_allclose(lv.gain[moved], 1.0 / (top - shifted)[moved], rtol=0.02)
+    assert lv.off[INDEX["tongueOut"]] and lv.off.sum() == 1  # the overrides stay on top
+    live.reset()  # a new stream measures its own neutral again
+    assert live.adjust is None

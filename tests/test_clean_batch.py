@@ -125,3 +125,15 @@ def test_level_overrides_stream_a_livelink_file_like_the_whole_file_path(tmp_pat
     assert main(["clean", str(take), "-o", str(streamed), *sets]) == 0  # streams (same format)
     assert main(["clean", str(take), "-o", str(whole), *sets]) == 0  # reads it whole
     np.testing.assert_allclose(io.load(streamed).arkit()[0], io.load(whole).arkit()[0], atol=1e-9)
+
+
+def test_one_file_into_a_folder_needs_the_folders_spelling(tmp_path, capsys):
+    take = tmp_path / "take.csv"
+    io.save(_take(9), take, fmt="livelink")
+    (tmp_path / "out").mkdir()
+    assert main(["clean", str(take), "-o", str(tmp_path / "out"), *EMA]) == 2  # a typo?
+    assert not any((tmp_path / "out").iterdir())
+    assert main(["clean", str(take), "-o", f"{tmp_path / 'out'}/", *EMA]) == 0
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["take.csv"]
+    assert main(["clean", str(take), "-o", f"{tmp_path / 'new'}/", *EMA]) == 0  # made
+    assert (tmp_path / "new" / "take.csv").is_file()

@@ -23,13 +23,10 @@ class Job:
 
 
 def is_batch(inputs: list[str], output: str) -> bool:
-    """Several inputs, a folder input, or an output that names a folder (``OUT/``)."""
-    return (
-        len(inputs) > 1
-        or Path(inputs[0]).is_dir()
-        or output.endswith(("/", os.sep))
-        or Path(output).is_dir()
-    )
+    """Several inputs, a folder input, or an output spelled as a folder (``OUT/``). One
+    file into an existing folder without the slash stays refused (the folder is not a
+    file), so a typo never scatters outputs."""
+    return len(inputs) > 1 or Path(inputs[0]).is_dir() or output.endswith(("/", os.sep))
 
 
 def plan(inputs: list[str], outdir: str | os.PathLike) -> list[Job]:
