@@ -196,73 +196,12 @@ def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def to_glb(mesh: FaceMesh) -> bytes:
     """The mesh as GLB bytes: positions, normals, colours, indices and 52 dense morph
-    targets named in ``mesh.extras.targetNames`` (weights 0)."""
-    import pygltflib as G
+    targets named in ``mesh.extras.targetNames`` (weights 0), no animation; the layout of
+    :mod:`faceclean.io.gltf_take`, which also writes animated ones."""
+    from faceclean.io import gltf_take
 
-    blob = bytearray()
-    views: list = []
-    accessors: list = []
-
-    def add(data: np.ndarray, kind: str, ctype: int, target: int | None, minmax=False) -> int:
-        while len(blob) % 4:
-            blob.append(0)
-        views.append(
-            G.BufferView(buffer=0, byteOffset=len(blob), byteLength=data.nbytes, target=target)
-        )
-        blob.extend(data.tobytes())
-        acc = G.Accessor(bufferView=len(views) - 1, componentType=ctype, count=len(data), type=kind)
-        if minmax:
-            acc.min, acc.max = data.min(0).tolist(), data.max(0).tolist()
-        accessors.append(acc)
-        return len(accessors) - 1
-
-    v = np.ascontiguousarray(mesh.vertices, "<f4")
-    attrs = G.Attributes(
-        POSITION=add(v, "VEC3", G.FLOAT, G.ARRAY_BUFFER, minmax=True),
-        NORMAL=add(_normals(v, mesh.faces).astype("<f4"), "VEC3", G.FLOAT, G.ARRAY_BUFFER),
-    )
-    if mesh.colors is not None:
-        attrs.COLOR_0 = add(
-            np.ascontiguousarray(mesh.colors, "<f4"), "VEC3", G.FLOAT, G.ARRAY_BUFFER
-        )
-    indices = np.ascontiguousarray(mesh.faces.reshape(-1), "<u4")
-    index_acc = add(indices, "SCALAR", G.UNSIGNED_INT, G.ELEMENT_ARRAY_BUFFER)
-    targets = [
-        {
-            "POSITION": add(
-                np.ascontiguousarray(d, "<f4"), "VEC3", G.FLOAT, G.ARRAY_BUFFER, minmax=True
-            )
-        }
-        for d in mesh.deltas
-    ]
-    material = G.Material(
-        name="skin",
-        pbrMetallicRoughness=G.PbrMetallicRoughness(
-            baseColorFactor=[1, 1, 1, 1], metallicFactor=0.0, roughnessFactor=0.75
-        ),
-        doubleSided=True,
-    )
-    prim = G.Primitive(attributes=attrs, indices=index_acc, material=0, targets=targets)
-    gltf = G.GLTF2(
-        asset=G.Asset(generator="faceclean face-mesh", version="2.0"),
-        scene=0,
-        scenes=[G.Scene(nodes=[0])],
-        nodes=[G.Node(mesh=0, name="face")],
-        meshes=[
-            G.Mesh(
-                name=mesh.name,
-                primitives=[prim],
-                weights=[0.0] * len(ARKIT52),
-                extras={"targetNames": list(ARKIT52), "landmarks": mesh.landmarks},
-            )
-        ],
-        materials=[material],
-        accessors=accessors,
-        bufferViews=views,
-        buffers=[G.Buffer(byteLength=len(blob))],
-    )
-    gltf.set_binary_blob(bytes(blob))
-    return b"".join(gltf.save_to_bytes())
+    doc, data, _ = gltf_take.document(mesh)
+    return gltf_take.encode(doc, data, glb=True)
 
 
 def save_glb(mesh: FaceMesh, path: str | os.PathLike) -> None:
