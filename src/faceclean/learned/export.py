@@ -143,7 +143,13 @@ def export(model_path: str | os.PathLike, out: str | os.PathLike) -> dict[str, A
     Returns facts for the caller to print: channels, layers, hidden, bytes.
     """
     from faceclean.io.atomic import atomic_write
+    from faceclean.learned.adaptive import is_adaptive
 
+    if is_adaptive(model_path):
+        raise FacecleanError(
+            "ONNX export covers the LSTM step graph; the adaptive model (the shipped "
+            "default) runs in faceclean's numpy runtime and relay, not yet as ONNX"
+        )
     weights = LSTMWeights.load(model_path)
     data = build(weights).SerializeToString()
     atomic_write(out, data)
