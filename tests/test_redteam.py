@@ -44,7 +44,7 @@ REPO = Path(__file__).resolve().parents[1]
 MiB = 1 << 20
 MEM = 1024 * MiB  # address-space cap per run (a normal run needs well under half)
 TIMEOUT = 90.0  # s, per run, for cases that are not about time
-HANG = 12.0  # s, for cases that are about time (a right answer takes ~1 s)
+HANG = 8.0  # s, for cases that are about time (a right answer takes ~1 s)
 
 # ARKit's 52 blendshapes, canonical order (a published constant, not faceclean's code).
 ARKIT = [
@@ -647,8 +647,6 @@ LL_FAILS = {
         "timecode-99",
         "convert",
     ): "wrong answer: timecode 99:99:99:99.999 accepted (a fake midnight wrap)",
-    ("timecode-frame-75", "convert"): "wrong answer: frame 75 of a 60 fps timecode accepted",
-    ("timecode-minute-60", "convert"): "wrong answer: minute 60 in a timecode accepted",
     (
         "timecode-hours-400-digits",
         "stream",
@@ -666,7 +664,7 @@ LL_FAILS = {
 
 def _ll_cases():
     for name in LL_REFUSED:
-        for how in ("info", "stream", "convert"):
+        for how in ("info", "stream"):  # in memory, in blocks
             reason = LL_FAILS.get((name, how))
             marks = [fail(reason)] if reason else []
             yield pytest.param(name, how, id=f"{name}-{how}", marks=marks)
@@ -690,11 +688,11 @@ def test_livelink_malformed_is_refused_by_every_reader(tmp_path, name, how):
     no_temp_files(tmp_path)
 
 
-LL_ODD_CELLS = ["inf", "-inf", "nan", "1e308", "-1e308", "1e-320", "-0.0", "1e30"]
+LL_ODD_CELLS = ["inf", "nan", "1e308", "-1e308", "1e-320", "1e30"]
 
 
 @pytest.mark.parametrize("cell", LL_ODD_CELLS)
-@pytest.mark.parametrize("method", ["lstm", "one-euro", "kalman"])
+@pytest.mark.parametrize("method", ["lstm", "one-euro"])
 def test_livelink_odd_cell_never_erases_other_cells(tmp_path, cell, method):
     """One absurd cell: every finite input cell comes out finite (plain CSV shows NaN)."""
     src = tmp_path / "take.csv"
@@ -762,7 +760,7 @@ PLAIN_REFUSED = {
 }
 
 
-@pytest.mark.parametrize("how", ["info", "stream", "convert"])
+@pytest.mark.parametrize("how", ["info", "stream"])
 @pytest.mark.parametrize("name", list(PLAIN_REFUSED))
 def test_plain_malformed_is_refused_by_every_reader(tmp_path, name, how):
     src = tmp_path / "plain.csv"
@@ -850,7 +848,7 @@ JSON_REFUSED = {
 }
 
 
-@pytest.mark.parametrize("how", ["info", "convert"])
+@pytest.mark.parametrize("how", ["info"])
 @pytest.mark.parametrize("name", list(JSON_REFUSED))
 def test_json_malformed_is_refused(tmp_path, name, how):
     src = tmp_path / "take.json"
@@ -1064,7 +1062,7 @@ def _npz_bytes(tmp_path: Path, spec) -> bytes:
     return write_npz(tmp_path / "spec.npz", spec).read_bytes()
 
 
-@pytest.mark.parametrize("how", ["info", "convert"])
+@pytest.mark.parametrize("how", ["info"])
 @pytest.mark.parametrize("name", list(NPZ_REFUSED))
 def test_npz_malformed_is_refused(tmp_path, name, how):
     src = tmp_path / "take.npz"
@@ -1666,7 +1664,7 @@ def test_corrupt_output_and_truth_out_the_same_file_is_refused(tmp_path, take):
 
 def test_export_onto_the_model_is_refused(tmp_path):
     model = tmp_path / "m.npz"
-    model.write_bytes((REPO / "src/faceclean/models/default.npz").read_bytes())
+    model.write_bytes(SHIPPED.read_bytes())
     before = model.read_bytes()
     refused(fc("export", model, "-o", model))
     assert model.read_bytes() == before
@@ -2023,7 +2021,28 @@ def test_tune_absurd_input_is_refused(tmp_path, case):
 # --------------------------------------------------------------------------------------
 # J. Model checkpoints (clean --method lstm --set path=M, export, relay --model)
 
-SHIPPED = REPO / "src" / "faceclean" / "models" / "default.npz"
+
+def _lstm_checkpoint() -> Path:
+    """A shipped LSTM checkpoint (``faceclean-lstm/1``), wherever the package keeps it."""
+    for p in sorted((REPO / "src" / "faceclean").rglob("*.npz")):
+        with contextlib.suppress(Exception), np.load(p, allow_pickle=False) as z:
+            if "lstm.0.w_ih" in z.files and "out_scale" in z.files:
+                return p
+    pytest.skip("no shipped LSTM checkpoint")
+
+
+class _Shipped:
+    def __fspath__(self) -> str:
+        return str(_lstm_checkpoint())
+
+    def __str__(self) -> str:
+        return str(_lstm_checkpoint())
+
+    def read_bytes(self) -> bytes:
+        return _lstm_checkpoint().read_bytes()
+
+
+SHIPPED = _Shipped()
 
 
 def _model(tmp_path: Path, arrays=None, config=None, raw_config=None) -> Path:
@@ -2036,6 +2055,9 @@ def _model(tmp_path: Path, arrays=None, config=None, raw_config=None) -> Path:
     for k, v in (arrays or {}).items():
         a[k] = v(a[k]) if callable(v) else v
     return write_npz(tmp_path / "model.npz", a)
+
+
+NUMPY = ["--set", 'kernel="numpy"']  # the numpy LSTM kernel: no JIT compile per run
 
 
 def _nan_like(x):
@@ -2081,7 +2103,7 @@ MODEL_FAILS = {
 def test_malformed_model_is_refused(tmp_path, take, name):
     m = _model(tmp_path, **MODEL_REFUSED[name])
     out = tmp_path / "out.csv"
-    refused(fc("clean", take, "-o", out, "--method", "lstm", "--set", f"path={m}"))
+    refused(fc("clean", take, "-o", out, "--method", "lstm", "--set", f"path={m}", *NUMPY))
     assert not out.exists()
 
 
@@ -2100,6 +2122,8 @@ MODEL_NOT_FINITE_FAILS = {
     "feat-mean-inf": "silent loss: a model with infinite feat_mean erases every cell, exit 0",
     "lstm-weight-nan": "silent loss: a model with NaN LSTM weights erases every cell, exit 0",
     "huge-weights": "silent loss: a model with float32-max weights erases 93% of the cells",
+    "value-range-nan": "silent loss: a model with value_range [NaN, NaN] erases 96% of the cells "
+    "(numpy kernel)",
 }
 
 
@@ -2115,7 +2139,9 @@ MODEL_NOT_FINITE_FAILS = {
 def test_broken_model_never_erases_data(tmp_path, plain, name):
     m = _model(tmp_path, **MODEL_NOT_FINITE[name])
     out = tmp_path / "out.csv"
-    if ok_or_refused(fc("clean", plain, "-o", out, "--method", "lstm", "--set", f"path={m}")):
+    if ok_or_refused(
+        fc("clean", plain, "-o", out, "--method", "lstm", "--set", f"path={m}", *NUMPY)
+    ):
         finite_where_input_was(read_plain(plain)[1], read_plain(out)[1])
 
 
@@ -2170,7 +2196,7 @@ def test_eval_with_a_missing_data_folder_is_refused(tmp_path):
 # --------------------------------------------------------------------------------------
 # K. The relay: hostile datagrams, then good frames must still come out cleaned
 
-WAIT = 10.0  # s, for one good frame to come back through the relay
+WAIT = 5.0  # s, for one good frame to come back through the relay (it takes ms)
 
 
 def osc_string(s: bytes) -> bytes:
@@ -2629,3 +2655,296 @@ def test_vmc_to_livelink_relay_survives_hostile_datagrams(name):
     r = relay_for("vmc", "livelink", "--method", "ema")
     r.hostile(VMC_TO_LL_HOSTILE[name], frame=True)
     r.assert_cleans()
+
+
+GOOD = np.full(52, 0.5)
+LL_HOSTILE = {
+    "empty": [b""],
+    "random-bytes": [bytes(np.random.default_rng(2).integers(0, 256, 300, dtype=np.uint8))],
+    "version-5": [b"\x05" + ll_packet(GOOD)[1:]],
+    "truncated-everywhere": [ll_packet(GOOD)[:k] for k in range(0, 60)],
+    "one-byte-short": [ll_packet(GOOD)[:-1]],
+    "one-byte-long": [ll_packet(GOOD) + b"\0"],
+    "device-length-negative": [b"\x06" + struct.pack(">i", -5) + ll_packet(GOOD)[5:]],
+    "device-length-huge": [b"\x06" + struct.pack(">i", 2**31 - 1) + ll_packet(GOOD)[5:]],
+    "subject-not-utf8": [ll_packet(GOOD, subject=b"\xff\xfe")],
+    "subject-60k": [ll_packet(GOOD, subject=_long(60_000))],
+    "device-60k": [ll_packet(GOOD, device=_long(60_000))],
+    "count-0": [ll_packet(GOOD, count=0, floats=[])],
+    "count-255": [ll_packet(GOOD, count=255, floats=[0.5] * 255)],
+    "count-52": [ll_packet(GOOD, count=52)],
+    "count-61-but-52-floats": [ll_packet(GOOD, count=52)[:-208].replace(b"\x34", b"\x3d")],
+    "rate-zero": [ll_packet(GOOD, num=0, den=0)],
+    "rate-negative": [ll_packet(GOOD, num=-60, den=1)],
+    "rate-absurd": [ll_packet(GOOD, t_frames=2**31 - 1, num=1, den=2**31 - 1)],
+    "frame-negative": [ll_packet(GOOD, t_frames=-(2**31))],
+    "subframe-nan": [ll_packet(GOOD, sub=math.nan)],
+    "subframe-inf": [ll_packet(GOOD, sub=math.inf)],
+    "subframe-f32-max": [ll_packet(GOOD, sub=3.4e38, num=1, den=2**31 - 1)],
+    "values-nan": [ll_packet(np.full(52, np.nan))],
+    "values-inf": [ll_packet(np.full(52, np.inf))],
+    "values-f32-max": [ll_packet(np.full(52, 3.4e38))],
+    "values-negative-huge": [ll_packet(np.full(52, -3.4e38))],
+    "angles-nan": [ll_packet(GOOD, floats=[0.5] * 52 + [math.nan] * 9)],
+    "backwards-flood": [ll_packet(GOOD, t_frames=1000 - k) for k in range(100)],
+    "max-datagram": [b"\x06" + bytes(65000)],
+}
+LL_FRAMES = {
+    "subject-60k", "device-60k", "count-52", "rate-zero", "rate-negative", "rate-absurd",
+    "frame-negative", "subframe-nan", "subframe-inf", "subframe-f32-max", "values-nan",
+    "values-inf", "values-f32-max", "values-negative-huge", "angles-nan", "backwards-flood",
+    "one-byte-long", "subject-not-utf8", "count-255",
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", list(LL_HOSTILE))
+def test_livelink_relay_survives_hostile_packets(name):
+    r = relay_for("livelink", "livelink", "--method", "ema")
+    r.hostile(LL_HOSTILE[name], frame=name in LL_FRAMES)
+    r.assert_cleans()
+
+
+IFM_GOOD = "|".join(f"{n}-50" for n in ARKIT)
+IFM_HOSTILE = {
+    "not-utf8": [b"jawOpen-\xff\xfe50"],
+    "empty": [b""],
+    "bars-only": [b"||||"],
+    "name-without-value": [b"jawOpen-"],
+    "value-without-name": [b"-50"],
+    "value-word": [b"jawOpen-abc"],
+    "value-1e999": [b"jawOpen-1e999|" + IFM_GOOD.encode()],
+    "value-nan": [b"jawOpen-nan|" + IFM_GOOD.encode()],
+    "value-1e308-ampersand": [b"jawOpen&1e308|" + IFM_GOOD.encode()],
+    "value-negative-huge": [b"jawOpen--1e300|" + IFM_GOOD.encode()],
+    "head-only": [b"=head#1,2,3,4,5,6|rightEye#1,2,3"],
+    "16k-names": [b"|".join(b"a%d-1" % i for i in range(9000))[:65000]],
+    "name-60k": [_long(60_000) + b"-50"],
+    "surrogate-escape": [b"\xed\xa0\x80-50"],  # UTF-8 of a lone surrogate: invalid
+    "nul-in-name": [b"jaw\x00Open-50|" + IFM_GOOD.encode()],
+}
+IFM_FRAMES = {"value-1e999", "value-nan", "value-1e308-ampersand", "value-negative-huge",
+              "16k-names", "name-60k", "nul-in-name"}  # fmt: skip
+IFM_FAILS = {
+    "value-negative-huge": "wrong answer: a -1e298 weight overflows float32 in the VMC encoder "
+    "(RuntimeWarning on stderr)",
+}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(n, id=n, marks=[fail(IFM_FAILS[n])] if n in IFM_FAILS else [])
+        for n in IFM_HOSTILE
+    ],
+)
+def test_ifacialmocap_relay_survives_hostile_datagrams(name):
+    r = relay_for("ifacialmocap", "vmc", "--method", "ema")
+    r.hostile(IFM_HOSTILE[name], frame=name in IFM_FRAMES)
+    r.assert_cleans()
+
+
+def _flood(r: Relay, packets) -> int:
+    """Send each packet and wait for the relay's answer (so each one is cleaned and
+    encoded, not superseded); -> RSS growth in bytes."""
+    r.good(0.5)
+    before = r.rss()
+    answered = 0
+    for p in packets:
+        r.drain()
+        r.send(p)
+        answered += bool(select.select([r.rx], [], [], 0.5)[0])
+        assert r.alive(), r.stderr()[-500:]
+        assert answered or r.rss() - before < 64 * MiB  # the flood must reach the encoder
+    return r.rss() - before
+
+
+@fail("leak: Live Link packets with ever-new 40 KB subjects grow the relay by ~60 MB")
+def test_livelink_relay_memory_is_bounded_under_new_subjects():
+    r = relay_for("livelink", "livelink", "--method", "ema")
+    t0 = round(r.t * 60) + 100
+    packets = (ll_packet(GOOD, t0 + k, subject=b"%06d" % k + _long(40_000)) for k in range(1500))
+    grew = _flood(r, packets)
+    assert grew < 32 * MiB, f"RSS grew {grew / MiB:.0f} MiB"
+    r.t += 2000 / 60
+    r.assert_cleans()
+
+
+@fail("leak: VMC frames with ever-new 40 KB names grow the relay by ~60 MB (name cache)")
+def test_vmc_relay_memory_is_bounded_under_new_names():
+    r = relay_for("vmc", "vmc", "--method", "ema")
+    t0 = r.t + 1.0
+    packets = (
+        osc_bundle(osc_msg("/VMC/Ext/T", "f", t0 + k / 60), val(b"%06d" % k + _long(40_000), 0.5),
+                   val("jawOpen", 0.5), APPLY)
+        for k in range(1500)
+    )  # fmt: skip
+    grew = _flood(r, packets)
+    r.t = t0 + 1600 / 60
+    assert grew < 32 * MiB, f"RSS grew {grew / MiB:.0f} MiB"
+    r.assert_cleans()
+
+
+@fail("leak: iFacialMocap datagrams with ever-new 40 KB names grow the relay by ~60 MB")
+def test_ifacialmocap_relay_memory_is_bounded_under_new_names():
+    r = relay_for("ifacialmocap", "vmc", "--method", "ema")
+    packets = (b"%06d" % k + _long(40_000) + b"-50|jawOpen-50" for k in range(1500))
+    grew = _flood(r, packets)
+    assert grew < 32 * MiB, f"RSS grew {grew / MiB:.0f} MiB"
+    r.assert_cleans()
+
+
+@fail("wrong answer: a second sender stamping its frames 0.5 s ahead makes every good frame "
+      "'out of order' (one clock for all senders)")  # fmt: skip
+def test_vmc_relay_good_sender_is_not_silenced_by_another_sender():
+    r = relay_for("vmc", "vmc", "--method", "ema")
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for _ in range(3):
+            r.drain()
+            r.send(vmc_frame(np.full(52, 0.9), r.t + 1 / 60 + 0.5), sock=other)
+            select.select([r.rx], [], [], 2.0)  # its frame goes through first
+            r.good(0.5)
+    finally:
+        other.close()
+
+
+def _free_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def relay_start(*args: str, timeout: float = HANG):
+    """Start ``faceclean relay ARGS``: CompletedProcess when it exits by itself, or
+    ``"started"`` when it printed its banner (then it is stopped)."""
+    cmd = [sys.executable, "-m", "faceclean", "relay", *args]
+    proc = subprocess.Popen(
+        cmd, cwd=REPO, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        preexec_fn=_limits(MEM),
+    )  # fmt: skip
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], timeout)
+        if ready:
+            line = proc.stdout.readline()
+            if line.startswith(b"relay "):
+                return "started"
+            rest, err = proc.communicate(timeout=timeout)
+            return subprocess.CompletedProcess(
+                cmd, proc.returncode, (line + rest).decode(), err.decode("utf-8", "replace")
+            )
+        return None
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.communicate(timeout=TIMEOUT)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.communicate()
+
+
+def relay_refused(*args: str) -> None:
+    r = relay_start(*args)
+    assert r != "started", "the relay started"
+    refused(r)
+
+
+@pytest.mark.parametrize(
+    ("listen", "send"),
+    [
+        pytest.param("vmc://127.0.0.1:{p}", "vmc://127.0.0.1:{p}", id="vmc-same"),
+        pytest.param("livelink://127.0.0.1:{p}", "livelink://127.0.0.1:{p}", id="livelink-same"),
+        pytest.param("vmc://0.0.0.0:{p}", "vmc://127.0.0.1:{p}", id="any-interface-same-port"),
+        pytest.param("vmc://localhost:{p}", "vmc://127.0.0.1:{p}", id="localhost-same-port"),
+        pytest.param("vmc://127.0.0.1:{p}", "livelink://127.0.0.1:{p}", id="vmc-to-own-port"),
+    ],
+)
+@fail("wrong answer: --listen equal to --send starts a relay that feeds itself (a storm)")
+def test_relay_listening_where_it_sends_is_refused(listen, send):
+    p = _free_port()
+    relay_refused("--listen", listen.format(p=p), "--send", send.format(p=p), "--method", "ema")
+
+
+STATS_FAILS = {
+    "inf": "crash: --stats inf starts, then dies in select (OverflowError)",
+    "1e308": "crash: --stats 1e308 starts, then dies in select (OverflowError)",
+    "1e-300": "wrong answer: --stats 1e-300 is accepted: a busy loop printing stats lines",
+}
+
+
+@pytest.mark.parametrize(
+    "value",
+    [
+        pytest.param(v, id=v, marks=[fail(STATS_FAILS[v])] if v in STATS_FAILS else [])
+        for v in ("inf", "1e308", "nan", "0", "-1", "=-inf", "1e-300")
+        # 1e-300: accepted, the relay then prints stats lines in a busy loop
+    ],
+)
+def test_relay_absurd_stats_interval_is_refused(value):
+    flag = ["--stats" + value] if value.startswith("=") else ["--stats", value]
+    relay_refused("--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9", *flag)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        pytest.param(["--listen", "vmc://127.0.0.1:99999"], id="listen-port-99999"),
+        pytest.param(["--listen", "http://127.0.0.1:1"], id="listen-http"),
+        pytest.param(["--listen", "vmc://[::1"], id="listen-broken-ipv6"),
+        pytest.param(["--listen", "vmc://u:p@127.0.0.1:1"], id="listen-credentials"),
+        pytest.param(["--listen", "vmc://127.0.0.1:1/x"], id="listen-path"),
+        pytest.param(["--listen", "vmc://127.0.0.1:0?names=arkit"], id="listen-option"),
+        pytest.param(["--listen", "vmc://" + "a" * 300 + ":0"], id="listen-long-host"),
+        pytest.param(["--listen", "vmc://256.1.1.1:0"], id="listen-bad-ip"),
+        pytest.param(["--send", "ifacialmocap://127.0.0.1:9"], id="send-ifacialmocap"),
+        pytest.param(["--send", "vmc://127.0.0.1:0"], id="send-port-0"),
+        pytest.param(["--send", "vmc://127.0.0.1:9?names=yell"], id="send-bad-names"),
+        pytest.param(["--method", "gaussian"], id="offline-method"),
+        pytest.param(["--method", "savgol"], id="offline-savgol"),
+        pytest.param(["--set", "beta=1"], id="set-without-method"),
+        pytest.param(["--method", "one-euro", "--set", "beta=1e999"], id="set-inf"),
+        pytest.param(
+            ["--method", "one-euro", "--set", "beta=" + "9" * 400],
+            id="set-huge-int",
+            marks=fail("internal error: relay --set beta=<400 digits> (OverflowError)"),
+        ),
+        pytest.param(["--method", "one-euro", "--model", "model.npz"], id="method-and-model"),
+        pytest.param(["--model", "/nonexistent.npz"], id="model-missing"),
+        pytest.param(["--model", "/etc/passwd"], id="model-not-npz"),
+        pytest.param(["--preset", "/nonexistent.json"], id="preset-missing"),
+        pytest.param(["--method", "potato"], id="method-unknown"),
+    ],
+)
+def test_relay_bad_start_is_refused(args):
+    base = {"--listen": "vmc://127.0.0.1:0", "--send": "vmc://127.0.0.1:9"}
+    for k in ("--listen", "--send"):
+        if k in args:
+            base[k] = args[args.index(k) + 1]
+    rest = [a for i, a in enumerate(args) if a not in base and (i == 0 or args[i - 1] not in base)]
+    relay_refused("--listen", base["--listen"], "--send", base["--send"], *rest)
+
+
+def test_relay_port_in_use_is_refused():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    try:
+        port = s.getsockname()[1]
+        relay_refused("--listen", f"vmc://127.0.0.1:{port}", "--send", "vmc://127.0.0.1:9")
+    finally:
+        s.close()
+
+
+@fail("silent loss: the relay starts with a model whose out_scale is NaN (sends NaN/zeros)")
+def test_relay_model_with_nan_scales_is_refused(tmp_path):
+    m = _model(tmp_path, arrays={"out_scale": _nan_like})
+    relay_refused("--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9", "--model", str(m))
+
+
+@fail("internal error: relay --preset whose method is a list (unhashable TypeError)")
+def test_relay_broken_preset_is_refused(tmp_path):
+    p = preset(tmp_path, _preset_doc(method=["one-euro"]))
+    relay_refused(
+        "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9", "--preset", str(p)
+    )
