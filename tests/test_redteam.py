@@ -396,6 +396,7 @@ def plain(tmp_path) -> Path:
 # A. --set values a careless or hostile user types (clean, streaming Live Link path)
 
 DEEP = "[" * 100_000 + "]" * 100_000
+ARG_DEEP = "[" * 20_000 + "]" * 20_000  # fits in one command-line argument (128 KiB)
 
 SET_REFUSED = [
     pytest.param("one-euro", "min_cutoff=1e999", id="inf-by-overflow"),
@@ -412,9 +413,9 @@ SET_REFUSED = [
     ),
     pytest.param(
         "one-euro",
-        "min_cutoff=" + DEEP,
+        "min_cutoff=" + ARG_DEEP,
         id="deep-nesting",
-        marks=fail("internal error: 100k nested JSON lists (RecursionError)"),
+        marks=fail("internal error: 20k nested JSON lists (RecursionError)"),
     ),
     pytest.param("one-euro", "min_cutoff=[[1.0]]", id="2d-list"),
     pytest.param("one-euro", "min_cutoff=[1.0, 2.0]", id="wrong-length"),
@@ -456,7 +457,7 @@ SET_FINITE = [
         "kalman",
         "r=1e300",
         id="kalman-r-1e300",
-        marks=fail("silent loss: kalman r=1e300 writes a file with every changed cell NaN"),
+        marks=fail("silent loss: kalman r=1e300 erases 97% of the cells (with RuntimeWarnings)"),
     ),
     pytest.param("kalman", "q=1e300", id="kalman-q-1e300"),
     pytest.param("kalman", "q=1e-300", id="kalman-q-tiny"),
@@ -1568,13 +1569,20 @@ def test_convert_json_onto_itself_keeps_the_data(tmp_path):
         pytest.param(
             "out.csv/",
             id="trailing-slash",
-            marks=fail("wrong answer: -o out.csv/ (a folder's spelling) writes a file out.csv"),
+            marks=fail(
+                "wrong answer: -o out.csv/ (a folder's spelling) writes a file named out.csv"
+            ),
         ),
     ],
 )
 def test_bad_output_path_is_refused(tmp_path, take, out):
     (tmp_path / "folder").mkdir()
-    refused(fc("clean", take, "-o", str(tmp_path / out), "--method", "ema"))
+    r = fc("clean", take, "-o", str(tmp_path / out), "--method", "ema")
+    if out.endswith("/") and r is not None and r.returncode == 0:  # OUT/ may mean a folder
+        ok(r)
+        assert (tmp_path / out).is_dir(), "-o out.csv/ wrote a file named out.csv"
+        return
+    refused(r)
     assert (tmp_path / "folder").is_dir() and not any((tmp_path / "folder").iterdir())
 
 
@@ -2117,11 +2125,14 @@ MODEL_NOT_FINITE = {
     "huge-weights": dict(arrays={"lstm.1.w_hh": lambda x: np.full_like(x, 3e38)}),
 }
 MODEL_NOT_FINITE_FAILS = {
-    "out-scale-nan": "silent loss: a model whose out_scale is NaN erases every cell, exit 0",
-    "head-bias-inf": "silent loss: a model with an infinite head bias erases every cell, exit 0",
-    "feat-mean-inf": "silent loss: a model with infinite feat_mean erases every cell, exit 0",
-    "lstm-weight-nan": "silent loss: a model with NaN LSTM weights erases every cell, exit 0",
-    "huge-weights": "silent loss: a model with float32-max weights erases 93% of the cells",
+    "out-scale-nan": "silent loss: a model whose out_scale is NaN erases 96% of the cells, exit 0",
+    "head-bias-inf": "silent loss: a model with an infinite head bias erases 95% of the cells "
+    "(RuntimeWarning), exit 0",
+    "feat-mean-inf": "silent loss: a model with infinite feat_mean erases 97% of the cells "
+    "(RuntimeWarning), exit 0",
+    "lstm-weight-nan": "silent loss: a model with NaN LSTM weights erases 96% of the cells, exit 0",
+    "huge-weights": "silent loss: a model with float32-max weights erases 95% of the cells "
+    "(RuntimeWarning)",
     "value-range-nan": "silent loss: a model with value_range [NaN, NaN] erases 96% of the cells "
     "(numpy kernel)",
 }
@@ -2758,7 +2769,7 @@ def _flood(r: Relay, packets) -> int:
     return r.rss() - before
 
 
-@fail("leak: Live Link packets with ever-new 40 KB subjects grow the relay by ~60 MB")
+@fail("leak: Live Link packets with ever-new 40 KB subjects grow the relay by ~115 MiB")
 def test_livelink_relay_memory_is_bounded_under_new_subjects():
     r = relay_for("livelink", "livelink", "--method", "ema")
     t0 = round(r.t * 60) + 100
@@ -2769,7 +2780,7 @@ def test_livelink_relay_memory_is_bounded_under_new_subjects():
     r.assert_cleans()
 
 
-@fail("leak: VMC frames with ever-new 40 KB names grow the relay by ~60 MB (name cache)")
+@fail("leak: VMC frames with ever-new 40 KB names grow the relay by ~115 MiB (name caches)")
 def test_vmc_relay_memory_is_bounded_under_new_names():
     r = relay_for("vmc", "vmc", "--method", "ema")
     t0 = r.t + 1.0
@@ -2784,7 +2795,7 @@ def test_vmc_relay_memory_is_bounded_under_new_names():
     r.assert_cleans()
 
 
-@fail("leak: iFacialMocap datagrams with ever-new 40 KB names grow the relay by ~60 MB")
+@fail("leak: iFacialMocap datagrams with ever-new 40 KB names grow the relay by ~115 MiB")
 def test_ifacialmocap_relay_memory_is_bounded_under_new_names():
     r = relay_for("ifacialmocap", "vmc", "--method", "ema")
     packets = (b"%06d" % k + _long(40_000) + b"-50|jawOpen-50" for k in range(1500))
