@@ -14,7 +14,7 @@ from faceclean.learned.adaptive import Adaptive, AdaptiveWeights, mirror_index
 
 torch = pytest.importorskip("torch")
 
-from faceclean.neural.adaptive import AdaptiveNet  # noqa: E402
+from faceclean.neural.adaptive import AdaptiveConfig, AdaptiveNet, score, train  # noqa: E402
 
 
 def _wobbly(seed: int = 0, n: int = 150) -> Animation:
@@ -87,6 +87,26 @@ def test_streams_are_independent_and_match_single_streams():
     assert np.allclose(ys[:, 1], Adaptive(weights=w).clean(b).values, atol=1e-12)
 
 
+@pytest.mark.parametrize("fps", [24.0, 60.0, 120.0])
+def test_a_held_real_pose_stays_exactly_where_the_tracker_puts_it(real_pose, fps):
+    """Do no harm: a constant pose in, the same pose out (tolerance 1e-9), any rate."""
+    for w in (_random_net().weights(), AdaptiveWeights.load(_shipped())):
+        t = np.arange(int(3 * fps)) / fps
+        y = Adaptive(weights=w).clean(
+            Animation.from_arkit(t, np.repeat(real_pose[None], len(t), 0))
+        )
+        assert np.abs(y.values - real_pose).max() < 1e-9
+
+
+def test_a_noisy_held_pose_keeps_its_mean_level(real_pose):
+    """Zero-mean tracker noise on a held pose: the output's mean stays at the pose."""
+    rng = np.random.default_rng(8)
+    t = np.arange(1200) / 60.0
+    x = np.clip(real_pose + 0.01 * rng.standard_normal((1200, 52)), 0.0, 1.0)
+    y = Adaptive(weights=AdaptiveWeights.load(_shipped())).clean(Animation.from_arkit(t, x)).values
+    assert np.abs(y[60:].mean(0) - x[60:].mean(0)).max() < 0.003
+
+
 def test_mirror_pairs_left_and_right():
     m = mirror_index(ARKIT52)
     i = ARKIT52.index("eyeBlinkLeft")
@@ -105,6 +125,25 @@ def test_checkpoint_round_trip_and_refusals(tmp_path):
         AdaptiveWeights.from_arrays(w.config, arrays)
     with pytest.raises(FacecleanError, match="missing"):
         AdaptiveWeights.from_arrays(w.config, {k: v for k, v in w.arrays.items() if k != "emb"})
+
+
+def test_fine_tuning_never_writes_a_worse_model(tmp_path):
+    """A run that can only make things worse (a huge learning rate) writes the start."""
+    start = tmp_path / "start.npz"
+    AdaptiveWeights.load(_shipped()).save(start)
+    out = tmp_path / "tuned.npz"
+    cfg = AdaptiveConfig(
+        out=str(out), val_sources=("jmtechart",), epochs=1, max_batches=2, lr=5.0,
+        synthetic_minutes=0.0, resume=str(start), preset="mixed", batch=4,
+    )  # fmt: skip
+    record = train(cfg)
+    from faceclean.evaluation import dataset
+    from faceclean.neural.validate import QUICK, corrupted
+
+    _, val = dataset.split(dataset.load_takes(), val_sources=("jmtechart",))
+    streams = corrupted(val, QUICK)
+    assert score(AdaptiveWeights.load(out), streams) <= score(AdaptiveWeights.load(start), streams)
+    assert record.get("start") or record["score"] <= score(AdaptiveWeights.load(start), streams)
 
 
 def _shipped():

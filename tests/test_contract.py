@@ -35,7 +35,7 @@ CONST_TOL = 1e-9
 # takes), settled to 1e-8 a frame; 30 vs 120 fps on a
 # synthetic face, mean 0.006 and max 0.10 (the max sits on blinks, whose 30 fps
 # samples miss the peak).
-LEARNED = {"lstm", "fc", "gbt"}
+LEARNED = {"lstm", "fc", "gbt", "adaptive"}  # adaptive: exact held poses in test_adaptive.py
 LEARNED_CONST_OFFSET = 0.08
 LEARNED_RATE_MEAN = 0.015
 LEARNED_RATE_MAX = 0.2

@@ -135,12 +135,13 @@ def _resolve(
     """(factory of filters.Cleaner for given names, description, note)."""
     from faceclean.settings import MODELS
 
-    if path is None or path == "lstm":
-        default = MODELS / "default.npz"  # = learned.cleaner.default_model_path()
+    if path is None or path in ("default", "adaptive", "lstm"):
+        # default/adaptive: the shipped default; lstm: the paper's, a shipped baseline
+        default = MODELS / ("lstm.npz" if path == "lstm" else "default.npz")
         if default.is_file():
             return _learned(default, backend)
-        if path == "lstm":
-            raise FacecleanError("no shipped model yet (models/default.npz); give a model path")
+        if path is not None:
+            raise FacecleanError(f"no shipped model models/{default.name}; give a model path")
         method = filters.default_method()
         factory, source, _ = _resolve(method, backend)
         return factory, source, f"no shipped model yet (models/default.npz): using {source}"

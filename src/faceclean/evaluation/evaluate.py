@@ -81,7 +81,7 @@ Progress = Callable[[str], None]
 
 def model_files(extra: Sequence[str | os.PathLike] = ()) -> list[Path]:
     """Candidate checkpoints: ``extra`` files or folders first, then models/folds/*.npz,
-    then the shipped models (default.npz, fc.npz, gbt.npz)."""
+    then the shipped models (default.npz, lstm.npz, fc.npz, gbt.npz)."""
     from faceclean.settings import MODELS
 
     out: list[Path] = []
@@ -90,7 +90,8 @@ def model_files(extra: Sequence[str | os.PathLike] = ()) -> list[Path]:
             raise FacecleanError(f"no such model file or folder: {p}")
         out += sorted(p.glob("*.npz")) if p.is_dir() else [p]
     out += sorted((MODELS / "folds").glob("*.npz"))
-    out += [MODELS / f for f in ("default.npz", "fc.npz", "gbt.npz") if (MODELS / f).is_file()]
+    shipped = ("default.npz", "lstm.npz", "fc.npz", "gbt.npz")
+    out += [MODELS / f for f in shipped if (MODELS / f).is_file()]
     return out
 
 

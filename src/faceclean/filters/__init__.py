@@ -77,4 +77,4 @@ def default_method() -> str:
     One Euro."""
     from faceclean.settings import MODELS
 
-    return "lstm" if (MODELS / "default.npz").is_file() else "one-euro"
+    return "adaptive" if (MODELS / "default.npz").is_file() else "one-euro"

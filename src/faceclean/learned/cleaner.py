@@ -43,7 +43,7 @@ def default_model_path():
     """The shipped model file (it may not exist yet)."""
     from faceclean.settings import MODELS
 
-    return MODELS / "default.npz"
+    return MODELS / "lstm.npz"  # the paper's LSTM: a shipped baseline, not the default
 
 
 class Learned(StreamCleaner):
@@ -69,7 +69,7 @@ class Learned(StreamCleaner):
         if weights is None:
             p = default_model_path() if path is None else path
             if path is None and not p.is_file():
-                raise FacecleanError("no shipped model yet (models/default.npz); give a path")
+                raise FacecleanError("no shipped LSTM (models/lstm.npz); give a model path")
             weights = LSTMWeights.load(p)
         if weights.K != 1:
             raise FacecleanError(f"the runtime steps K = 1 models only (this one: K = {weights.K})")

@@ -11,10 +11,10 @@ Loss: mean squared error on the frames whose truth is known, plus ``w_acc`` time
 squared error of the second time-derivative (s⁴ · weight²/s⁴ units: jitter), both over
 real, irregular times.
 
-Every epoch draws fresh augmented chunks corrupted by faceclean.simulate's ``wide``
-preset (never by the evaluation's second artefact model). After every epoch the numpy
-runtime runs over whole validation takes (held-out sources, simulator, fixed seeds); the
-best epoch is written to ``out`` and never one worse than the starting model when
+Every epoch draws fresh augmented chunks corrupted by faceclean.simulate's ``mixed``
+preset (``wide`` on request; never the evaluation's second artefact model). After every
+epoch the numpy runtime runs over whole validation takes (held-out sources, simulator,
+fixed seeds); the best epoch is written to ``out`` and never one worse than the starting model when
 resuming (``--resume`` scores it first); ``out`` minus ``.npz`` plus ``.last.npz`` keeps
 the latest weights, Adam's moments and the epoch for ``--resume`` of an interrupted run.
 """
@@ -65,8 +65,8 @@ class AdaptiveConfig:
     data: str | None = None
     val_sources: tuple[str, ...] = ()  # whole sources held out; empty: 20 % of takes
     synthetic_minutes: float = 3.0  # fresh synthetic performers per epoch
-    full_range: bool = True  # ... moving every channel through its range (performer)
-    wide_augmentation: bool = True  # dataset.WIDE_AUGMENTATION of the real takes
+    full_range: bool = False  # ... moving every channel through its range (performer)
+    wide_augmentation: bool = False  # dataset.WIDE_AUGMENTATION of the real takes
     epochs: int = 8
     batch: int = 32
     seed: int = 0
@@ -76,7 +76,7 @@ class AdaptiveConfig:
     clip: float = 1.0
     w_acc: float = 1e-7  # s⁴; weight of the second-derivative error
     patience: int = 3
-    preset: str = "wide"
+    preset: str = "mixed"  # "wide" (+ full_range, wide_augmentation): see docs/MODEL.md
     strength: float = 1.0
     resume: str | None = None
     max_batches: int | None = None
