@@ -83,7 +83,7 @@ def _build(method: str, trained: bool = False) -> Cleaner:
     if importlib.util.find_spec(module) is None:
         pytest.skip(f"{module} does not exist yet")
     try:
-        return make(method, names=ARKIT52, tuned=False)
+        return make(method, names=ARKIT52)
     except FacecleanError as e:  # a learned cleaner whose shipped model is not there yet
         if method == "lstm" and not trained:
             from faceclean.learned.checkpoint import LSTMWeights

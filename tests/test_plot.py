@@ -14,6 +14,7 @@ from faceclean.errors import FacecleanError
 from faceclean.evaluation import comparison
 from faceclean.io import save
 from faceclean.report import plot
+from faceclean.resolve import resolve, split_spec
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -52,12 +53,12 @@ def test_comparison_holds_the_main_method_first_and_measures_without_truth():
 
 
 def test_method_specs_parse_parameters_and_refuse_nonsense():
-    assert comparison.parse_method("one-euro:min_cutoff=1.5,beta=0.3") == (
+    assert split_spec("one-euro:min_cutoff=1.5,beta=0.3") == (
         "one-euro",
-        {"min_cutoff": 1.5, "beta": 0.3},
+        ["min_cutoff=1.5", "beta=0.3"],
     )
     with pytest.raises(FacecleanError):
-        comparison.parse_method("ema:tau")
+        resolve("ema:tau")
     noisy, _ = _clip()
     with pytest.raises(FacecleanError, match="unknown method"):
         comparison.compare(noisy, None, ["no-such-cleaner"])

@@ -21,7 +21,6 @@ from pythonosc.osc_packet import OscPacket
 from pythonosc.osc_server import BlockingOSCUDPServer
 from pythonosc.udp_client import UDPClient
 
-from faceclean import filters
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
@@ -29,6 +28,7 @@ from faceclean.errors import FacecleanError
 from faceclean.relay import Relay, livelink, parse
 from faceclean.relay.frame import Frame
 from faceclean.relay.replay import frames_from_animation, replay
+from faceclean.resolve import resolve
 from faceclean.settings import data_dir, takes_dir
 
 REPO = Path(__file__).resolve().parents[1]
@@ -85,7 +85,7 @@ def vmc_peer():
 @contextlib.contextmanager
 def running(listen: str, send: str, method: str = "ema"):
     """A relay serving in a thread; stopped and closed on exit."""
-    relay = Relay(parse(listen), parse(send, "send"), filters.make(method))
+    relay = Relay(parse(listen), parse(send, "send"), resolve(method).build())
     thread = threading.Thread(target=relay.run, daemon=True)
     thread.start()
     try:
@@ -244,7 +244,7 @@ def test_only_the_newest_waiting_frame_is_sent():
     v = np.linspace(0.25, 0.75, 3 * 52).reshape(3, 52).astype(np.float32).astype(np.float64)
     with raw_receiver() as rx:
         relay = Relay(parse("livelink://:0"), parse(f"vmc://:{rx.getsockname()[1]}", "send"),
-                      filters.make("ema"))  # fmt: skip
+                      resolve("ema").build())  # fmt: skip
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
             for i in range(3):  # all three wait in the socket before the relay runs
                 tx.sendto(ll(10.0 + i / 60, v[i]), ("127.0.0.1", relay.address.port))
@@ -481,7 +481,7 @@ def test_a_recorded_session_replays_and_recleans_to_what_was_sent(tmp_path):
     rec = Recorder(tmp_path / "session.npz")
     with vmc_peer() as peer:
         relay = Relay(parse("vmc://127.0.0.1:0"), parse(f"vmc://127.0.0.1:{peer.port}", "send"),
-                      filters.make("ema"), recorder=rec)  # fmt: skip
+                      resolve("ema").build(), recorder=rec)  # fmt: skip
         thread = threading.Thread(target=relay.run, daemon=True)
         thread.start()
         client = UDPClient("127.0.0.1", relay.address.port)
@@ -499,7 +499,7 @@ def test_a_recorded_session_replays_and_recleans_to_what_was_sent(tmp_path):
     np.testing.assert_array_equal(take.values, v)  # the input, exactly, NaN row included
     sent = np.array([[f[k] for k in ARKIT52] for f in peer.frames])
     np.testing.assert_allclose(cleaned.values, sent, atol=1e-6)  # the output, as it went out
-    again = filters.make("ema").clean(take)  # the recording re-cleans to the same output
+    again = resolve("ema").build().clean(take)  # the recording re-cleans to the same output
     np.testing.assert_allclose(np.delete(again.values, 20, 0), np.delete(sent, 20, 0), atol=1e-6)
     np.testing.assert_array_equal(cleaned.values[20], cleaned.values[19])  # held, as sent
 
@@ -538,7 +538,7 @@ def test_relay_calibrates_the_neutral_from_its_first_seconds(capsys):
     v[100:104, 0] = 0.95  # a blink after the calibration
     v = v.astype(np.float32).astype(np.float64)
     done = []
-    cleaner = LiveCalibration(filters.make("ema"), 1.0, on_done=done.append)
+    cleaner = LiveCalibration(resolve("ema").build(), 1.0, on_done=done.append)
     with vmc_peer() as peer:
         relay = Relay(parse("vmc://127.0.0.1:0"), parse(f"vmc://127.0.0.1:{peer.port}", "send"),
                       cleaner)  # fmt: skip

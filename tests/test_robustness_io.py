@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceclean import filters, io
+from faceclean import io
 from faceclean.animation import Animation
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.io import stream
+from faceclean.resolve import resolve
 from faceclean.settings import takes_dir
 
 TAKES = takes_dir()
@@ -201,7 +202,7 @@ def test_output_in_a_missing_folder_is_refused(tmp_path, capsys, method):
 def test_output_equal_to_input_is_replaced_whole(tmp_path, capsys, method):
     src = tmp_path / "a.csv"
     src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.9\n0.2,0.1\n")
-    expect = filters.make(method, names=("jawOpen",)).clean(io.load(src))
+    expect = resolve(method).build(("jawOpen",)).clean(io.load(src))
     assert main(["clean", str(src), "-o", str(src), "--method", method]) == 0
     got = io.load(src)
     assert np.array_equal(got.values, expect.values) and np.array_equal(got.times, expect.times)
@@ -227,7 +228,7 @@ def test_nan_inf_and_absurd_values_never_reach_the_output(method):
     x[5, 0], x[9, 1], x[12, 2], x[20] = np.nan, np.inf, -1e300, np.nan  # 20: tracking loss
     x[30, 0] = 1e7
     anim = Animation(t, x, ("jawOpen", "eyeBlinkLeft", "mouthClose"))
-    out = filters.make(method, names=anim.names).clean(anim).values
+    out = resolve(method).build(anim.names).clean(anim).values
     assert np.isnan(out[20]).all()  # a missing frame stays missing
     rest = np.delete(out, 20, axis=0)
     assert np.isfinite(rest).all() and rest.min() > 0.2 and rest.max() < 0.8
@@ -296,7 +297,8 @@ def test_repeated_and_backwards_times_hold_the_last_output(method):
     t = np.array([0.0, 1, 2, 2, 3, 1.5, 4, 5]) / 60  # a duplicate, then a step back
     x = np.linspace(0.1, 0.8, len(t))[:, None] * np.ones((1, 2))
     out = (
-        filters.make(method, names=("jawOpen", "eyeBlinkLeft"))
+        resolve(method)
+        .build(("jawOpen", "eyeBlinkLeft"))
         .clean(Animation(t, x, ("jawOpen", "eyeBlinkLeft")))
         .values
     )
@@ -308,7 +310,7 @@ def test_repeated_and_backwards_times_hold_the_last_output(method):
 def test_one_hour_gap_restarts_without_smearing(method):
     t = np.concatenate([np.arange(30) / 60, 3600 + np.arange(30) / 60])  # s
     x = np.concatenate([np.full(30, 0.1), np.full(30, 0.9)])[:, None]
-    out = filters.make(method, names=("jawOpen",)).clean(Animation(t, x, ("jawOpen",))).values
+    out = resolve(method).build(("jawOpen",)).clean(Animation(t, x, ("jawOpen",))).values
     assert np.allclose(out[:30], 0.1) and np.allclose(out[30:], 0.9)  # no jump across
 
 
@@ -326,12 +328,12 @@ def test_single_frame_comes_back_unchanged(tmp_path, capsys, method):
 
 def _in_memory(src: Path, dst: Path, method: str) -> None:
     anim = io.load(src)
-    io.save(filters.make(method, names=anim.names).clean(anim), dst)
+    io.save(resolve(method).build(anim.names).clean(anim), dst)
 
 
 def _streamed(src: Path, dst: Path, method: str) -> tuple[int, int]:
     fmt = io.detect(src)
-    cleaner = filters.make(method, names=stream.channel_names(src, fmt))
+    cleaner = resolve(method).build(stream.channel_names(src, fmt))
     assert stream.can_stream(cleaner, fmt, fmt)
     return stream.clean_file(src, dst, cleaner, fmt)
 
@@ -383,7 +385,7 @@ def test_iter_lines_matches_splitlines():
 
 
 def test_clean_streams_only_when_it_can():
-    one_euro, gaussian = filters.make("one-euro"), filters.make("gaussian")
+    one_euro, gaussian = resolve("one-euro").build(), resolve("gaussian").build()
     assert stream.can_stream(one_euro, "livelink", "livelink")
     assert stream.can_stream(one_euro, "csv", "csv")
     assert not stream.can_stream(one_euro, "livelink", "json")  # another format: whole
@@ -481,7 +483,7 @@ def test_bad_model_through_the_cli_is_one_line(tmp_path, capsys):
     src = work / "a.csv"
     src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.6\n")
     models = _bad_models(store)
-    for method, key in (("lstm", "path"), ("fc", "model"), ("gbt", "model")):
+    for method, key in (("lstm", "model"), ("fc", "model"), ("gbt", "model")):
         for name in ("pickle", "object_array", "truncated", "too_big"):
             model = models[name][0]
             argv = ["clean", str(src), "-o", str(work / "o.csv"), "--method", method]

@@ -10,11 +10,11 @@ import threading
 import numpy as np
 import pytest
 
-from faceclean import filters
 from faceclean.channels import ARKIT52
 from faceclean.filters.base import StreamCleaner
 from faceclean.relay import Relay, livelink, parse
 from faceclean.relay.frame import Frame
+from faceclean.resolve import resolve
 
 M = 6
 NAMES = ARKIT52[:M]
@@ -28,7 +28,7 @@ def _lstm() -> StreamCleaner:
     return Learned(weights=LSTMWeights.random(NAMES, hidden=16, layers=2, seed=1), names=NAMES)
 
 
-MAKERS = {m: (lambda m=m: filters.make(m, names=NAMES)) for m in ("ema", "one-euro", "kalman")}
+MAKERS = {m: (lambda m=m: resolve(m).build(NAMES)) for m in ("ema", "one-euro", "kalman")}
 MAKERS["lstm"] = _lstm
 
 
@@ -147,7 +147,7 @@ def test_relay_sends_only_to_its_send_address_and_binds_localhost():
     with _udp() as target, _udp() as sender, _udp() as bystander:
         listen, send = parse("livelink://:0"), parse(f"livelink://:{target.getsockname()[1]}")
         assert listen.host == "127.0.0.1" and send.host == "127.0.0.1"
-        relay = Relay(listen, send, filters.make("one-euro"))
+        relay = Relay(listen, send, resolve("one-euro").build())
         thread = threading.Thread(target=relay.run, daemon=True)
         thread.start()
         try:

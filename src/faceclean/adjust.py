@@ -274,31 +274,6 @@ def _show(key: str, value: Any) -> str:
     return f"{key} {value:.4g}"
 
 
-def split_items(items: Iterable[str]) -> tuple[list[tuple[str, str, object]], list[str]]:
-    """``--set`` words: (level items (pattern, key, value), the rest untouched).
-
-    A level item is ``PATTERN.KEY=VALUE`` with KEY in MAP_KEYS (``eyeBlink*.gain=1.2``,
-    ``jawOpen.clamp=0,0.8``), or ``PATTERN.off`` alone. Values: JSON, else the text.
-    """
-    levels, rest = [], []
-    for item in items:
-        lhs, eq, text = item.partition("=")
-        pattern, dot, key = lhs.strip().rpartition(".")
-        if not dot or key.strip().lower() not in MAP_KEYS or not pattern:
-            rest.append(item)
-            continue
-        value: object = None
-        if eq:
-            try:
-                value = json.loads(text)
-            except json.JSONDecodeError:
-                value = text.strip()
-        elif key.strip().lower() != "off":
-            raise FacecleanError(f"--set {item!r}: expected {lhs}=VALUE")
-        levels.append((pattern, key.strip().lower(), value))
-    return levels, rest
-
-
 class Adjusted(Cleaner):
     """A stream cleaner whose input goes through a level mapping first (fixed columns)."""
 

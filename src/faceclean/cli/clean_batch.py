@@ -24,18 +24,17 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from faceclean.channels import ARKIT52
-    from faceclean.cli.clean import build_cleaner, build_levels, parse_params
+    from faceclean.cli import options
+    from faceclean.cli.clean import build_cleaner, build_levels
 
     if args.jobs < 1:
         raise FacecleanError(f"--jobs must be at least 1 (got {args.jobs})")
     if args.fmt is not None:
         raise FacecleanError("a batch keeps each file's format: --format is for one file")
     # bad options fail once, here, not once per file
-    from faceclean.adjust import split_items
-
-    levels, rest = split_items(args.params)
-    build_cleaner(args, parse_params(rest), ARKIT52)
-    build_levels(args, levels, ARKIT52)
+    choice = options.choice(args)
+    build_cleaner(choice, ARKIT52)
+    build_levels(args, choice, ARKIT52)
     jobs = plan(args.input, args.output)
     Path(args.output).mkdir(parents=True, exist_ok=True)
     failed: list[tuple[Job, str]] = []

@@ -20,10 +20,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import filters, io
+    from faceclean import io
     from faceclean.errors import FacecleanError
     from faceclean.evaluation import comparison, metrics, performer, simulate
     from faceclean.report import plot
+    from faceclean.resolve import DEFAULT, resolve
 
     out = Path(args.out)
     if args.seconds <= 0:
@@ -35,9 +36,9 @@ def run(args: argparse.Namespace) -> int:
     io.save(noisy, noisy_path, fmt="livelink")
     io.save(truth, truth_path, fmt="csv")
 
-    method = filters.default_method()
+    method = DEFAULT
     take = io.load(noisy_path)  # the main job starts from the file, as a user's would
-    cleaned = filters.make(method, names=take.names).clean(take)
+    cleaned = resolve(method).build(take.names).clean(take)
     io.save(cleaned, cleaned_path)
 
     # The same clip through the tuned One Euro filter, the usual tool, for comparison.

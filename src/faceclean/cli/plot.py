@@ -5,25 +5,23 @@ from __future__ import annotations
 
 import argparse
 
+from faceclean.cli import options
+
 HELP = "plot channels over time: input, truth, cleaned and compared methods (PNG, SVG, PDF)"
+EPILOG = options.SETTINGS_HELP  # the cleaner options and --set syntax
 
 
 def add_method_arguments(p: argparse.ArgumentParser) -> None:
-    """--truth, --method, --compare: shared by ``plot`` and ``report``."""
+    """--truth, the cleaner options, --compare: shared by ``plot`` and ``report``."""
     p.add_argument("--truth", metavar="CLEAN", help="the clean animation (any timestamps)")
-    p.add_argument(
-        "--method",
-        metavar="M",
-        help="the cleaner shown as 'cleaned' (default: the shipped default); "
-        "parameters as NAME:KEY=VALUE,KEY=VALUE",
-    )
+    options.add_arguments(p, "the cleaner shown as 'cleaned'")
     p.add_argument(
         "--compare",
         metavar="METHOD",
         nargs="+",
         action="extend",
         default=[],
-        help="other cleaners to show beside it",
+        help="other cleaners to show beside it, settings inline: 'one-euro:min_cutoff=2,beta=0.1'",
     )
     p.add_argument(
         "--calibration",
@@ -46,13 +44,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def comparison_from(args: argparse.Namespace):
-    """Load NOISY (and --truth) and clean with --method then --compare."""
-    from faceclean import filters, io
+    """Load NOISY (and --truth) and clean with the cleaner options, then --compare."""
+    from faceclean import io
     from faceclean.evaluation import comparison
+    from faceclean.resolve import DEFAULT
 
     noisy = io.load(args.input)
     truth = io.load(args.truth) if args.truth else None
-    methods = [args.method or filters.default_method(), *args.compare]
+    label = " ".join([options.words(args) or DEFAULT, *args.params])
+    methods = [(label, options.choice(args)), *args.compare]
     adjust = None
     if getattr(args, "calibration", None):
         from faceclean.adjust import Adjust

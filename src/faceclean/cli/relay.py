@@ -17,10 +17,17 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from faceclean.cli import options
+
+if TYPE_CHECKING:
+    from faceclean.resolve import Choice
 
 HELP = "clean a live stream: --listen vmc://|livelink://|ifacialmocap:// --send vmc://|livelink://"
-EPILOG = """\
+EPILOG = (
+    options.SETTINGS_HELP
+    + """\
 levels before the cleaner:
   --calibration calib.json       from 'faceclean calibrate'
   --set 'eyeBlink*.gain=1.2'     per channel, glob or group: gain, offset, curve, clamp, off
@@ -31,32 +38,18 @@ recording:
   --record session.csv           input to session.csv, cleaned output to session.clean.csv
                                  (or .npz); 'faceclean replay session.csv' streams it again
 """
-
-
-def add_cleaner_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--method", help="cleaner by name (default: the shipped default cleaner)")
-    p.add_argument(
-        "--set",
-        dest="params",
-        metavar="KEY=VALUE",
-        action="append",
-        default=[],
-        help="cleaner parameter for --method, repeatable; PATTERN.gain|offset|curve|clamp|off"
-        "=VALUE maps a channel's level before cleaning (e.g. 'eyeBlink*.gain=1.2')",
-    )
-    p.add_argument("--model", metavar="FILE", help="learned model file (.npz)")
-    p.add_argument("--preset", metavar="FILE", help="preset file made by 'faceclean tune'")
-    p.add_argument(
-        "--calibration",
-        metavar="FILE",
-        help="level mapping from 'faceclean calibrate', applied before the cleaner",
-    )
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--listen", required=True, metavar="URL", help="e.g. vmc://127.0.0.1:39540")
     p.add_argument("--send", required=True, metavar="URL", help="e.g. vmc://127.0.0.1:39539")
-    add_cleaner_arguments(p)
+    options.add_arguments(p)
+    p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help="level mapping from 'faceclean calibrate', applied before the cleaner",
+    )
     p.add_argument(
         "--stats", type=float, metavar="SECONDS", help="print counters and latency this often"
     )
@@ -73,43 +66,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def build_cleaner(args: argparse.Namespace) -> tuple[Any, str]:
-    """The cleaner the options ask for (ARKit-52 channels) and a short description."""
-    from faceclean import filters
+def build_cleaner(choice: Choice) -> tuple[Any, str]:
+    """The cleaner the options chose (ARKit-52 channels) and a short description."""
     from faceclean.channels import ARKIT52
-    from faceclean.cli.clean import parse_params
     from faceclean.errors import FacecleanError
 
-    given = [o for o in ("method", "model", "preset") if getattr(args, o)]
-    if len(given) > 1:
-        raise FacecleanError(f"give one of --method, --model, --preset (got {', '.join(given)})")
-    from faceclean.adjust import split_items
-
-    _, rest = split_items(args.params)  # level items are build_levels' (below)
-    if rest and not args.method:
-        raise FacecleanError("--set needs --method (except level keys: PATTERN.gain=...)")
-    if args.method:
-        params = parse_params(rest)
-        if filters.cleaner_class(args.method).offline:
-            raise FacecleanError(f"{args.method} is offline (non-causal): it cannot run live")
-        return filters.make(args.method, params, names=ARKIT52), args.method
-    from faceclean.cleaner import Cleaner
-
-    cleaner = Cleaner.load(args.model or args.preset)  # None: the shipped default
-    if cleaner.offline:
-        raise FacecleanError(f"{cleaner.source} is offline (non-causal): it cannot run live")
-    return cleaner, cleaner.source + (f"; {cleaner.note}" if cleaner.note else "")
+    if choice.offline:
+        raise FacecleanError(f"{choice.source} is offline (non-causal): it cannot run live")
+    return choice.build(ARKIT52), choice.source
 
 
-def with_levels(args: argparse.Namespace, cleaner: Any) -> tuple[Any, str]:
+def with_levels(args: argparse.Namespace, choice: Choice, cleaner: Any) -> tuple[Any, str]:
     """The cleaner behind the level mapping the options ask for, and a note on it."""
-    from faceclean.adjust import Adjust, Adjusted, split_items
+    from faceclean.adjust import Adjust, Adjusted
     from faceclean.calibration import LiveCalibration
     from faceclean.channels import ARKIT52
 
-    levels, _ = split_items(args.params)
     base = Adjust.load(args.calibration) if args.calibration else Adjust()
-    overrides = Adjust.from_overrides(levels, ARKIT52)
+    overrides = choice.adjust(ARKIT52)
     notes = [f"calibration {args.calibration}"] if args.calibration else []
     notes += [f"{len(overrides.rules)} level overrides"] if overrides.rules else []
     if args.calibrate_seconds is not None:
@@ -136,8 +110,9 @@ def run(args: argparse.Namespace) -> int:
     if args.stats is not None and not args.stats > 0:
         raise FacecleanError(f"--stats must be > 0 seconds (got {args.stats})")
     recorder = Recorder(args.record) if args.record else None
-    cleaner, what = build_cleaner(args)
-    cleaner, levels = with_levels(args, cleaner)
+    choice = options.choice(args)
+    cleaner, what = build_cleaner(choice)
+    cleaner, levels = with_levels(args, choice, cleaner)
     what += f"; levels: {levels}" if levels else ""
     with Relay(listen, send, cleaner, recorder=recorder) as relay:
 

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import argparse
 
+from faceclean.cli import options
 from faceclean.cli.plot import add_method_arguments
 
 HELP = "write a self-contained HTML report: measures, curves and a 3D face, input vs cleaned"
+EPILOG = options.SETTINGS_HELP  # the cleaner options and --set syntax
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -8,15 +8,16 @@ need no truth (jitter energy, spikes, gaps) live here too; those that need one a
 
 from __future__ import annotations
 
-import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
+from faceclean.adjust import Adjust
 from faceclean.animation import Animation
 from faceclean.channels import canonical
 from faceclean.errors import FacecleanError
+from faceclean.resolve import DEFAULT, Choice, resolve
 
 SPIKE = 0.15  # weight units: a frame this far from its neighbours' median is a spike
 SPIKE_HALF_WIDTH = 2  # frames each side in that median
@@ -45,29 +46,16 @@ class Comparison:
         return self.input.times - self.input.times[0]
 
 
-def parse_method(spec: str) -> tuple[str, dict[str, Any]]:
-    """``"one-euro:min_cutoff=1.5,beta=0.3"`` -> ``("one-euro", {...})``; values as JSON."""
-    name, _, rest = spec.strip().partition(":")
-    params: dict[str, Any] = {}
-    for item in filter(None, (s.strip() for s in rest.split(","))):
-        key, eq, text = item.partition("=")
-        if not eq or not key.strip():
-            raise FacecleanError(f"method {spec!r}: expected NAME:KEY=VALUE,KEY=VALUE")
-        try:
-            params[key.strip().replace("-", "_")] = json.loads(text)
-        except json.JSONDecodeError:
-            params[key.strip().replace("-", "_")] = text
-    if not name:
-        raise FacecleanError(f"method {spec!r}: no method name")
-    return name, params
-
-
-def clean_with(spec: str, anim: Animation) -> Animation:
-    """The output of the cleaner ``spec`` (see :func:`parse_method`) on ``anim``."""
-    from faceclean import filters
-
-    name, params = parse_method(spec)
-    return filters.make(name, params, names=anim.names).clean(anim)
+def clean_with(spec: str | Choice, anim: Animation, adjust: Adjust | None = None) -> Animation:
+    """The output on ``anim`` of the cleaner ``spec`` names (faceclean.resolve: words, and
+    settings inline as ``WORDS:KEY=VALUE,KEY=VALUE``), after the level mapping ``adjust``
+    with the spec's own level settings on top."""
+    choice = resolve(spec) if isinstance(spec, str) else spec
+    if choice.levels:
+        adjust = (adjust or Adjust()).merged(choice.adjust(anim.names))
+    if adjust is not None and not adjust.is_identity:
+        anim = anim.with_values(adjust.apply(anim.values, anim.names))
+    return choice.build(anim.names).clean(anim)
 
 
 def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Animation:
@@ -99,18 +87,16 @@ def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Anim
 def compare(
     noisy: Animation,
     truth: Animation | None = None,
-    methods: tuple[str, ...] | list[str] = (),
-    adjust: Any = None,
+    methods: Sequence[str | tuple[str, Choice]] = (),
+    adjust: Adjust | None = None,
 ) -> Comparison:
-    """Clean ``noisy`` with each method spec (the first is the main one; default: the
-    shipped default cleaner) and bring ``truth`` onto the input's timestamps. With an
-    ``adjust`` (faceclean.adjust.Adjust) the cleaners see its level mapping of ``noisy``;
-    the input shown stays ``noisy``."""
-    from faceclean import filters
-
+    """Clean ``noisy`` with each method (the first is the main one; default: the shipped
+    default cleaner): a spec string (its own label) or (label, resolved Choice); bring
+    ``truth`` onto the input's timestamps. With an ``adjust`` the cleaners see its level
+    mapping of ``noisy``; the input shown stays ``noisy``."""
     if noisy.n_frames < 2 or not noisy.valid.any():
         raise FacecleanError("the input has fewer than 2 frames with values")
-    specs = list(dict.fromkeys(methods)) or [filters.default_method()]
+    specs = dict(m if isinstance(m, tuple) else (m, m) for m in methods) or {DEFAULT: DEFAULT}
     if truth is not None:
         same = truth.n_frames == noisy.n_frames and np.array_equal(truth.times, noisy.times)
         names_match = [canonical(n) or n for n in truth.names] == [
@@ -118,10 +104,9 @@ def compare(
         ]
         if not (same and names_match):
             truth = at_times(truth, noisy.times, noisy.names)
+    outputs = {label: clean_with(s, noisy, adjust) for label, s in specs.items()}
     if adjust is None or adjust.is_identity:
-        return Comparison(noisy, truth, {s: clean_with(s, noisy) for s in specs})
-    mapped = noisy.with_values(adjust.apply(noisy.values, noisy.names))
-    outputs = {s: clean_with(s, mapped) for s in specs}
+        return Comparison(noisy, truth, outputs)
     return Comparison(noisy, truth, outputs, adjust.describe(noisy.names))
 
 

@@ -41,6 +41,7 @@ from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import dataset, degrade, harm, metrics, simulate
 from faceclean.filters import Cleaner, make
+from faceclean.learned import formats
 
 SEED = 2020
 CONDITIONS: dict[str, tuple[str, float | None]] = {  # name -> (preset, fps or preset's)
@@ -53,10 +54,7 @@ ARTEFACTS = ("degrade", "simulate")  # the independent model first: it decides
 TUNE_SECONDS = 20.0  # s of each training take used to tune the classical filters
 QUICK_SECONDS = 6.0  # s of each take in --quick mode
 METRICS = ("mse", "rel_mse", "jitter_ratio", "lag_ms", "blink_closure")
-FORMATS = {
-    "faceclean-lstm/1": "lstm", "faceclean-fc/1": "fc", "faceclean-gbt/1": "gbt",
-    "faceclean-adaptive/1": "adaptive",
-}  # fmt: skip
+FORMATS = formats.METHODS
 
 # label -> (method, params, kind); kind: fixed | offline | tuned | learned
 FIXED_ROWS: list[tuple[str, str, dict[str, float], str]] = [
@@ -262,8 +260,7 @@ def _shown(path: Path) -> str:
 
 
 def _learned(method: str, path: Path, names: Sequence[str]) -> Cleaner:
-    key = "path" if method in ("lstm", "adaptive") else "model"
-    return make(method, {key: str(path)}, names=names)
+    return make(method, {"model": str(path)}, names=names)
 
 
 def _harm(

@@ -1,4 +1,4 @@
-"""Every cleaner by name. ``make("one-euro", {"min_cutoff": 1.0})`` builds one.
+"""Every cleaner class by name. ``make("one-euro", {"min_cutoff": 1.0})`` builds one.
 
 Method name -> "module:Class". Classes take their parameters as keyword arguments
 (physical units: seconds, Hz) plus ``names`` (the channel names, for per-group values).
@@ -7,6 +7,7 @@ Method name -> "module:Class". Classes take their parameters as keyword argument
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Sequence
 from typing import Any
 
@@ -32,8 +33,8 @@ __all__ = [
     "OfflineCleaner",
     "StreamCleaner",
     "cleaner_class",
-    "default_method",
     "make",
+    "settings_of",
 ]
 
 
@@ -50,31 +51,22 @@ def make(
     params: dict[str, Any] | None = None,
     *,
     names: Sequence[str] = ARKIT52,
-    tuned: bool = True,
 ) -> Cleaner:
-    """Build a cleaner; a bad parameter name or value is a one-line FacecleanError.
-
-    A method named without parameters gets its shipped tuned preset
-    (``presets/<method>.json``) when one exists, so users and comparisons meet the
-    tuned filter, never the constructor's defaults; ``tuned=False`` gives the defaults.
-    """
-    if tuned and not params:
-        from faceclean.settings import PRESETS
-
-        if (PRESETS / f"{method}.json").is_file():
-            from faceclean.filters import presets
-
-            return presets.build(method, names)
+    """The class of ``method`` built with ``params`` (its constructor's defaults for the
+    rest); a bad parameter name or value is a one-line FacecleanError. Shipped tuned
+    presets, model files and ``--set`` words are ``faceclean.resolve``'s."""
     cls = cleaner_class(method)
+    unknown = sorted(set(params or {}) - set(settings_of(cls)))
+    if unknown:
+        valid = ", ".join(settings_of(cls))
+        raise FacecleanError(f"{method}: unknown setting {unknown[0]!r}; valid: {valid}")
     try:
         return cls(**(params or {}), names=tuple(names))
-    except TypeError as e:
+    except TypeError as e:  # a value of the wrong type
         raise FacecleanError(f"{method}: bad parameters ({e})") from None
 
 
-def default_method() -> str:
-    """The shipped default: the learned adaptive cleaner when its model ships, else tuned
-    One Euro."""
-    from faceclean.settings import MODELS
-
-    return "adaptive" if (MODELS / "default.npz").is_file() else "one-euro"
+def settings_of(cls: type[Cleaner]) -> list[str]:
+    """A cleaner class's settings: its constructor's keywords but ``names``/``weights``."""
+    sig = inspect.signature(cls.__init__)
+    return [p for p in sig.parameters if p not in ("self", "names", "weights")]

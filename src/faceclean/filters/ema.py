@@ -27,6 +27,7 @@ class Ema(StreamCleaner):
     """Exponential smoothing: ``tau`` seconds (dt-aware) or per-frame ``gamma`` in (0, 1]."""
 
     name = "ema"
+    PER_CHANNEL = ("tau", "gamma")  # per-channel settings
 
     def __init__(
         self,

@@ -30,6 +30,7 @@ class Gaussian(OfflineCleaner):
     """Gaussian smoothing over the whole clip: ``sigma`` seconds or ``sigma_frames`` frames."""
 
     name = "gaussian"
+    PER_CHANNEL = ("sigma", "sigma_frames")  # per-channel settings
 
     def __init__(
         self,

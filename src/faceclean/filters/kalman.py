@@ -28,6 +28,7 @@ class Kalman(StreamCleaner):
     """Constant-velocity Kalman filter: acceleration density ``q``, measurement std ``r``."""
 
     name = "kalman"
+    PER_CHANNEL = ("q", "r")  # per-channel settings
 
     def __init__(
         self,

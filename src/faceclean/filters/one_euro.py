@@ -33,6 +33,7 @@ class OneEuro(StreamCleaner):
     """One Euro filter: ``min_cutoff`` Hz, ``beta``, ``d_cutoff`` Hz (scalars or (M,))."""
 
     name = "one-euro"
+    PER_CHANNEL = ("min_cutoff", "beta", "d_cutoff")  # per-channel settings
 
     def __init__(
         self,

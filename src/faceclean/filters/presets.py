@@ -136,7 +136,7 @@ def build(
     doc = validate(dict(preset), "preset") if isinstance(preset, Mapping) else read(preset)
     params: dict[str, Any] = expand(doc, names)
     params.update(overrides or {})
-    return make(doc["method"], params, names=names, tuned=False)
+    return make(doc["method"], params, names=names)
 
 
 def save(

@@ -52,8 +52,8 @@ from faceclean.channels import ARKIT52, canonical, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 from faceclean.io.npz_safe import MiB, load_arrays
+from faceclean.learned.formats import ADAPTIVE as FORMAT
 
-FORMAT = "faceclean-adaptive/1"
 N_FEATURES = 7  # per-channel signal features before the embedding
 E0 = 0.05  # weight units: the innovation scale the features are measured in
 V0 = 5.0  # weight/s: the slope scale
@@ -189,18 +189,18 @@ class Adaptive(StreamCleaner):
 
     def __init__(
         self,
-        path: str | os.PathLike | None = None,
+        model: str | os.PathLike | None = None,
         *,
         names: Sequence[str] = ARKIT52,
         weights: AdaptiveWeights | None = None,
         max_gap: float = 0.5,
     ) -> None:
         if weights is None:
-            if path is None:
+            if model is None:
                 from faceclean.settings import MODELS
 
-                path = MODELS / "default.npz"
-            weights = AdaptiveWeights.load(path)
+                model = MODELS / "default.npz"
+            weights = AdaptiveWeights.load(model)
         self.weights = weights
         self.names = tuple(names)
         self.max_gap = float(max_gap)

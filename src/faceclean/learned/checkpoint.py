@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from faceclean.errors import FacecleanError
-from faceclean.io.npz_safe import MiB, load_arrays
+from faceclean.io.npz_safe import load_arrays
+from faceclean.learned.formats import LSTM as FORMAT
+from faceclean.learned.formats import MAX_MODEL_BYTES
 
-FORMAT = "faceclean-lstm/1"
-MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
 OUTPUTS = ("additive", "gated", "rate")  # output heads (docs/ARCHITECTURE.md)
 RATE_TAU0 = 0.002  # s, "rate" head: time constant tau = RATE_TAU0 e^a of a zero network
 RATE_A_MAX = 15.0  # "rate" head: a is clamped to [-RATE_A_MAX, RATE_A_MAX]

@@ -49,7 +49,7 @@ def default_model_path():
 class Learned(StreamCleaner):
     """The paper's causal LSTM cleaner, from a ``faceclean-lstm/1`` checkpoint (.npz).
 
-    ``path`` None means the shipped default model. The model's channels are matched to
+    ``model`` (.npz) None: the shipped default model. The model's channels are matched to
     ``names`` by canonical name: input channels the model lacks pass through untouched;
     model channels the input lacks are fed their own last output (no correction).
     """
@@ -59,7 +59,7 @@ class Learned(StreamCleaner):
 
     def __init__(
         self,
-        path: str | os.PathLike | None = None,
+        model: str | os.PathLike | None = None,
         *,
         names: Sequence[str] = ARKIT52,
         weights: LSTMWeights | None = None,
@@ -67,10 +67,7 @@ class Learned(StreamCleaner):
         kernel: str = "auto",
     ) -> None:
         if weights is None:
-            p = default_model_path() if path is None else path
-            if path is None and not p.is_file():
-                raise FacecleanError("no shipped LSTM (models/lstm.npz); give a model path")
-            weights = LSTMWeights.load(p)
+            weights = LSTMWeights.load(default_model_path() if model is None else model)
         if weights.K != 1:
             raise FacecleanError(f"the runtime steps K = 1 models only (this one: K = {weights.K})")
         if not max_gap > 0:

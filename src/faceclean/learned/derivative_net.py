@@ -48,7 +48,7 @@ from faceclean.channels import ARKIT52, GROUPS, canonical
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 from faceclean.io.npz_safe import load_arrays
-from faceclean.learned.checkpoint import MAX_MODEL_BYTES
+from faceclean.learned import formats
 
 GROUP_NAMES = tuple(GROUPS)
 ALPHA_RATE = 60.0  # Hz; α_r is the paper's per-frame value at its 60 fps test rate
@@ -57,7 +57,7 @@ BIG = 1e30  # derivatives are clipped to +-BIG (a dt of 1e-9 s must not overflow
 
 def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], dict]:
     """(config, arrays) of a baseline checkpoint; FacecleanError if it is not one."""
-    arrays = load_arrays(path, MAX_MODEL_BYTES, "model file")  # no pickle, size-checked
+    arrays = load_arrays(path, formats.MAX_MODEL_BYTES, "model file")  # no pickle, size-checked
     try:
         config = json.loads(str(arrays.pop("config")))
     except (OSError, ValueError, KeyError, json.JSONDecodeError) as e:
@@ -214,7 +214,7 @@ class FullyConnected(_DerivativeNet):
     """FC baseline (method "fc"): whole-face MLP on the 52 channels' features, α = 0.9."""
 
     name = "fc"
-    fmt = "faceclean-fc/1"
+    fmt = formats.FC
     default_file = "fc.npz"
 
     def _load(self, a: dict) -> None:
@@ -241,7 +241,7 @@ class BoostedTrees(_DerivativeNet):
     """GBT baseline (method "gbt"): per-channel trees shared by all channels, α = 0.97."""
 
     name = "gbt"
-    fmt = "faceclean-gbt/1"
+    fmt = formats.GBT
     default_file = "gbt.npz"
     batched = True
 

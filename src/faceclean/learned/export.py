@@ -31,8 +31,8 @@ import numpy as np
 
 from faceclean.errors import FacecleanError
 from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0, LSTMWeights
+from faceclean.learned.formats import STEP as STEP_FORMAT
 
-STEP_FORMAT = "faceclean-lstm-step/1"
 OPSET = 17
 
 

@@ -19,8 +19,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
-
-STEP_FORMAT = "faceclean-lstm-step/1"  # = learned.export.STEP_FORMAT (kept torch-free)
+from faceclean.learned.formats import STEP as STEP_FORMAT
 
 
 def _session(model: bytes, threads: int) -> Any:

@@ -41,6 +41,7 @@ from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import dataset, simulate
 from faceclean.io.atomic import atomic_write
+from faceclean.learned import formats
 from faceclean.learned.derivative_net import GROUP_NAMES, DerivativeFeatures, group_index
 
 K = 4
@@ -141,7 +142,7 @@ def _save(path: str | os.PathLike, config: dict[str, Any], arrays: dict[str, np.
 def save_fc(model: FCNet, path: str | os.PathLike, extra: dict[str, Any] | None = None) -> None:
     """Write an FC checkpoint (``faceclean-fc/1``) readable by learned.derivative_net."""
     config = {
-        "format": "faceclean-fc/1",
+        "format": formats.FC,
         "channels": list(ARKIT52[: model.M]),
         "K": K,
         "alpha": ALPHA["fc"],
@@ -236,7 +237,7 @@ def export_gbt(
     depth = max(int(nodes["depth"].max()) for _, nodes in trees)
     feat, thr, val = zip(*(_complete(nodes, depth) for _, nodes in trees), strict=True)
     config = {
-        "format": "faceclean-gbt/1",
+        "format": formats.GBT,
         "channels": list(ARKIT52),
         "K": K,
         "alpha": ALPHA["gbt"],

@@ -21,9 +21,9 @@ import torch
 
 from faceclean.errors import FacecleanError
 from faceclean.io.atomic import atomic_write
+from faceclean.learned.formats import LSTM as FORMAT
 from faceclean.neural.model import LSTMCleaner
 
-FORMAT = "faceclean-lstm/1"
 _LSTM = {"weight_ih": "w_ih", "weight_hh": "w_hh", "bias_ih": "b_ih", "bias_hh": "b_hh"}
 _HEAD = {"weight": "w", "bias": "b"}
 

@@ -1,0 +1,69 @@
+"""The cleaner options every cleaning command shares (``clean``, ``relay``, ``plot``,
+``report``): ``--method``/``--model``/``--preset`` and ``--set``, read by
+``faceclean.resolve``. Not a command itself."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from faceclean.resolve import Choice
+
+SETTINGS_HELP = """\
+choosing the cleaner (one of --method, --model, --preset; default: the shipped model):
+  --method one-euro                 a method: its shipped tuned preset, or its defaults
+  --method lstm | fc | gbt          a shipped learned model
+  --model my.npz | my.onnx          a learned model file (also --method my.npz)
+  --preset tuned.json | one-euro    a preset file from 'faceclean tune', or a shipped one
+settings (--set, repeatable; values: true/false, numbers, JSON lists, else text):
+  --set min_cutoff=2                one setting for every channel; the rest of a tuned
+                                    preset is kept
+  --set jawOpen.min_cutoff=2.0      per channel: a channel name, a glob or a group
+  --set 'eyeBlink*.beta=0.1'        (eyes, brows, jaw, mouth, cheeks_nose); the smoothing
+                                    settings of ema, one-euro, kalman, gaussian
+  --set 'eyeBlink*.gain=1.2'        levels before the cleaner: gain, offset, curve,
+  --set tongueOut.off               clamp=LO,HI, off (faceclean.adjust)
+  an unknown key is refused with the list of valid ones
+"""
+
+
+def add_arguments(p: argparse.ArgumentParser, what: str = "the cleaner") -> None:
+    p.add_argument(
+        "--method",
+        metavar="NAME",
+        help=f"{what}: a method, a shipped model or preset, or a model file "
+        "(default: the shipped model)",
+    )
+    p.add_argument("--model", metavar="FILE", help="learned model file (.npz or .onnx)")
+    p.add_argument("--preset", metavar="FILE", help="preset file or shipped preset's name")
+    p.add_argument(
+        "--set",
+        dest="params",
+        metavar="[CHANNEL.]KEY=VALUE",
+        action="append",
+        default=[],
+        help="setting, repeatable; per channel by name, glob or group (see below)",
+    )
+
+
+def words(args: argparse.Namespace) -> str | None:
+    """What --method/--model/--preset name (None: the shipped default)."""
+    from faceclean.errors import FacecleanError
+
+    given = [o for o in ("method", "model", "preset") if getattr(args, o, None)]
+    if len(given) > 1:
+        if "model" in given:
+            raise FacecleanError("--model is the cleaner: give it without --method/--preset")
+        raise FacecleanError(f"give one of --method, --model, --preset (got {', '.join(given)})")
+    model = getattr(args, "model", None)
+    if model and not str(model).lower().endswith((".npz", ".onnx")):
+        raise FacecleanError(f"{model}: a model is a .npz or an .onnx file")
+    return getattr(args, given[0]) if given else None
+
+
+def choice(args: argparse.Namespace) -> Choice:
+    """The cleaner the options name, settings applied (faceclean.resolve)."""
+    from faceclean.resolve import resolve
+
+    return resolve(words(args), args.params)

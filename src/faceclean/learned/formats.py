@@ -1,0 +1,59 @@
+"""The learned models' file formats, named once: checkpoints (.npz) and the ONNX step graph.
+
+Every reader and writer (``learned/``, ``neural/``, ``evaluation/``) takes these strings
+from here. A checkpoint's ``config`` (a 0-d JSON string) carries its ``format``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from faceclean.errors import FacecleanError
+from faceclean.io.npz_safe import MiB, load_arrays
+
+LSTM = "faceclean-lstm/1"  # the recurrent cleaner (learned/checkpoint.py)
+FC = "faceclean-fc/1"  # the fully connected baseline (learned/derivative_net.py)
+GBT = "faceclean-gbt/1"  # the boosted-trees baseline (learned/derivative_net.py)
+ADAPTIVE = "faceclean-adaptive/1"  # the learned adaptive One Euro (learned/adaptive.py)
+STEP = "faceclean-lstm-step/1"  # ONNX metadata "faceclean.format" of an exported step graph
+METHODS = {
+    LSTM: "lstm",
+    FC: "fc",
+    GBT: "gbt",
+    ADAPTIVE: "adaptive",
+}  # checkpoint format -> method name
+MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
+
+
+def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict]:
+    """(config, the other arrays) of a checkpoint; one-line FacecleanError otherwise.
+
+    Never unpickles; size-checked (``MAX_MODEL_BYTES``).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FacecleanError(f"no such model file: {p}")
+    with open(p, "rb") as f:
+        if f.read(4) != b"PK\x03\x04":  # an .npz is a zip archive
+            raise FacecleanError(f"{p.name}: not a model .npz (not a zip archive)")
+    arrays = load_arrays(p, MAX_MODEL_BYTES, "model file")
+    try:
+        config = json.loads(str(arrays.pop("config")[()]))
+    except (KeyError, ValueError, TypeError, RecursionError) as e:
+        raise FacecleanError(f"{p.name}: no readable 'config' ({e})") from None
+    if not isinstance(config, dict):
+        raise FacecleanError(f"{p.name}: 'config' is not a JSON object")
+    return config, arrays
+
+
+def method_of(path: str | os.PathLike) -> str:
+    """The method ("lstm", "fc", "gbt") a checkpoint file is for, from its format."""
+    config, _ = read(path)
+    fmt = config.get("format")
+    if fmt not in METHODS:
+        known = ", ".join(METHODS)
+        raise FacecleanError(f"{Path(path).name}: format {fmt!r} is not a model ({known})")
+    return METHODS[fmt]

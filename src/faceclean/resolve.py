@@ -1,0 +1,306 @@
+"""From a user's words to a cleaner: the one answer to "which cleaner?".
+
+Words (``clean --method``, ``relay``, ``plot``/``report``, ``eval``, ``Cleaner.load``):
+
+- None, ``"lstm"`` or ``"default"``: the shipped learned model (``models/default.npz``);
+- a model file: ``.npz`` (an LSTM, FC or GBT checkpoint, told apart by its format) or an
+  exported ``.onnx`` step graph;
+- a preset: a ``.json`` file written by ``faceclean tune``, or a shipped preset's name;
+- a method name (``faceclean.filters.METHODS``): its shipped tuned preset when one
+  exists, else its constructor defaults; ``fc``/``gbt`` are their shipped models.
+
+Settings (``--set``, repeatable; inline as ``WORDS:ITEM,ITEM`` for ``--compare``):
+
+- ``KEY=VALUE`` sets a parameter of the cleaner for every channel; on a tuned preset it
+  replaces that key only and keeps the rest of the preset;
+- ``PATTERN.KEY=VALUE`` sets it for the channels PATTERN names: a channel name,
+  a glob on the canonical name (``eyeBlink*``) or a group (``eyes``, ``mouth``, ...);
+  only the per-channel smoothing parameters of the classical cleaners take a pattern;
+- the level-mapping keys of ``faceclean.adjust`` (``gain``, ``offset``, ``curve``,
+  ``clamp``, ``off``; ``eyeBlink*.gain=1.2``, ``tongueOut.off``) are returned apart as
+  ``Choice.levels``, applied to the raw values before the cleaner.
+
+VALUE is read one way everywhere: true/false (also yes/no, on/off), else JSON (numbers,
+lists, quoted strings, null), else the text itself. ``-`` in a key reads as ``_``. An
+unknown key is a one-line FacecleanError listing the valid ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean import filters
+from faceclean.adjust import MAP_KEYS, matches
+from faceclean.channels import ARKIT52, GROUPS
+from faceclean.errors import FacecleanError
+
+DEFAULT = "default"  # the shipped learned model (models/default.npz)
+MODEL_SUFFIXES = (".npz", ".onnx")
+SHIPPED_MODELS = {
+    "lstm": "default.npz",
+    "adaptive": "default.npz",
+    "fc": "fc.npz",
+    "gbt": "gbt.npz",
+}
+BACKENDS = ("numpy", "onnx")
+Item = tuple[str | None, str, Any]  # (channel pattern or None for every channel, key, value)
+Factory = Callable[[Sequence[str]], filters.Cleaner]
+_HIDDEN = {"path", "model"}  # the model file is in the words, not a setting
+
+
+def parse_value(text: str) -> Any:
+    """A setting's value: true/false/yes/no/on/off, else JSON, else the text."""
+    t = text.strip()
+    low = t.lower()
+    if low in ("true", "yes", "on"):
+        return True
+    if low in ("false", "no", "off"):
+        return False
+    try:
+        return json.loads(t)
+    except (json.JSONDecodeError, RecursionError):
+        return t
+
+
+def parse_item(item: str) -> Item:
+    """``"min_cutoff=2"`` -> (None, "min_cutoff", 2); ``"jawOpen.beta=0.1"`` -> ("jawOpen",
+    "beta", 0.1); ``"tongueOut.off"`` -> ("tongueOut", "off", None)."""
+    lhs, eq, text = item.partition("=")
+    pattern, dot, key = lhs.strip().rpartition(".")
+    key = key.strip().replace("-", "_")
+    if not key or (dot and not pattern.strip()):
+        raise FacecleanError(f"--set {item!r}: expected KEY=VALUE or CHANNEL.KEY=VALUE")
+    if not eq and key != "off":
+        raise FacecleanError(f"--set {item!r}: expected KEY=VALUE")
+    return (pattern.strip() or None), key, (parse_value(text) if eq else None)
+
+
+def parse_items(items: Iterable[str] | Mapping[str, Any]) -> list[Item]:
+    """Settings from ``--set`` words, or from a mapping {"jawOpen.beta": 0.1, ...}."""
+    if isinstance(items, Mapping):
+        out = []
+        for k, v in items.items():
+            pattern, _, key = str(k).rpartition(".")
+            out.append((pattern or None, key.replace("-", "_"), v))
+        return out
+    return [parse_item(s) for s in items]
+
+
+def split_spec(spec: str) -> tuple[str, list[str]]:
+    """``"one-euro:min_cutoff=1.5,jawOpen.beta=0.3"`` -> ("one-euro", ["min_cutoff=1.5",
+    "jawOpen.beta=0.3"]); commas inside brackets stay with their item. A path that exists
+    is never split."""
+    spec = spec.strip()
+    if ":" not in spec or _exists(spec):
+        return spec, []
+    words, _, rest = spec.partition(":")
+    items, depth, start = [], 0, 0
+    for i, ch in enumerate(rest + ","):
+        depth += ch in "[{"
+        depth -= ch in "]}"
+        if ch == "," and depth <= 0:
+            if rest[start:i].strip():
+                items.append(rest[start:i].strip())
+            start = i + 1
+    if not words.strip():
+        raise FacecleanError(f"{spec!r}: no method name before ':'")
+    return words.strip(), items
+
+
+def _exists(path: str) -> bool:
+    try:
+        return Path(path).exists()
+    except (OSError, ValueError):  # a name too long for the file system, a NUL byte
+        return False
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What the words named: ``build(names)`` makes a fresh cleaner for those channels."""
+
+    method: str  # the cleaner's method name ("one-euro", "lstm", ...)
+    source: str  # how to name it to a user ("one-euro (tuned preset) min_cutoff=2")
+    offline: bool  # non-causal: clean() only
+    factory: Factory = field(repr=False)
+    levels: tuple[tuple[str, str, Any], ...] = ()  # (pattern, key, value) for faceclean.adjust
+
+    def build(self, names: Sequence[str] = ARKIT52) -> filters.Cleaner:
+        return self.factory(tuple(names))
+
+    def adjust(self, names: Sequence[str] = ARKIT52):
+        """The level mapping the settings ask for (faceclean.adjust.Adjust)."""
+        from faceclean.adjust import Adjust
+
+        return Adjust.from_overrides(self.levels, names)
+
+
+def resolve(
+    words: str | os.PathLike | None = None,
+    settings: Iterable[str] | Mapping[str, Any] = (),
+    *,
+    backend: str | None = None,
+) -> Choice:
+    """The cleaner ``words`` name (module docstring), with ``settings`` applied.
+
+    backend: "numpy" (the torch-free runtime) or "onnx" (ONNX Runtime) for learned
+    models; None: numpy for .npz, onnx for .onnx.
+    """
+    if backend is not None and backend not in BACKENDS:
+        raise FacecleanError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
+    if isinstance(words, str) and not isinstance(settings, Mapping):
+        words, inline = split_spec(words)
+        settings = [*inline, *settings]
+    items = parse_items(settings)
+    levels = tuple((p or "*", k, v) for p, k, v in items if k in MAP_KEYS)
+    items = [it for it in items if it[1] not in MAP_KEYS]
+    text = "" if words is None else str(words)
+    model = [v for p, k, v in items if k == "model"]
+    if model:  # "--method lstm --set model=FILE" is "--model FILE"
+        if text not in ("", *SHIPPED_MODELS) or len(model) > 1 or not isinstance(model[0], str):
+            raise FacecleanError("model=FILE goes with a learned method (lstm, fc, gbt), once")
+        text, items = model[0], [it for it in items if it[1] != "model"]
+    if text in ("", "default", *SHIPPED_MODELS):
+        from faceclean.settings import MODELS
+
+        choice = _model(MODELS / SHIPPED_MODELS.get(text, "default.npz"), items, backend)
+        if text not in ("", "default") and choice.method != text:
+            raise FacecleanError(f"the shipped model is {choice.method}, not {text}")
+    elif text.lower().endswith(MODEL_SUFFIXES):
+        choice = _model(Path(text), items, backend)
+    else:
+        if backend == "onnx":
+            raise FacecleanError("the onnx backend runs learned models only")
+        choice = _classical(text, items)
+    return dataclasses.replace(choice, levels=levels) if levels else choice
+
+
+def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
+    """A learned model file: the class from its format, settings as keywords."""
+    from faceclean.learned import formats
+
+    if not _exists(str(path)) or not path.is_file():
+        raise FacecleanError(f"no such model file: {path}")
+    onnx = path.suffix.lower() == ".onnx"
+    backend = backend or ("onnx" if onnx else "numpy")
+    if backend == "onnx":
+        from faceclean.learned.onnx import OnnxLearned, model_bytes
+
+        graph = model_bytes(path)
+        params = _checked(OnnxLearned, "lstm", items, per_channel=())
+        OnnxLearned(graph, **params)  # fail now, with the file's reason
+        return Choice(
+            "lstm",
+            _shown(f"lstm (onnx) {path}", items),
+            False,
+            lambda names: OnnxLearned(graph, names=names, **params),
+        )
+    if onnx:
+        raise FacecleanError(f"{path.name}: an ONNX graph runs on backend='onnx'")
+    method = formats.method_of(path)
+    cls = filters.cleaner_class(method)
+    params = _checked(cls, method, items, per_channel=())
+    probe = filters.make(method, {"model": path, **params})  # bad settings fail now
+    weights = getattr(probe, "weights", None)  # read once, shared by every build
+    if weights is None:
+        return Choice(
+            method,
+            _shown(f"{method} {path}", items),
+            False,
+            lambda names: cls(model=path, names=names, **params),
+        )
+    return Choice(
+        method,
+        _shown(f"{method} (numpy) {path}", items),
+        False,
+        lambda names: cls(weights=weights, names=names, **params),
+    )
+
+
+def _classical(text: str, items: list[Item]) -> Choice:
+    """A preset (file or shipped name) or a method name."""
+    from faceclean.filters import presets
+
+    doc: dict[str, Any] | None = None
+    if text in filters.METHODS:
+        method, tuned = text, text in presets.shipped()
+        doc = presets.read(text) if tuned else None
+        what = f"{text} (tuned preset)" if tuned else f"{text} (defaults)"
+    elif text.lower().endswith(".json") or text in presets.shipped():
+        doc = presets.read(text)  # validated once
+        method = doc["method"]
+        what = f"{method} (preset {text})"
+    else:
+        raise FacecleanError(
+            f"unknown method {text!r}: no model, preset or method of that name (methods: "
+            f"{', '.join(filters.METHODS)}; presets: {', '.join(presets.shipped())}; "
+            "or a model file .npz/.onnx)"
+        )
+    cls = filters.cleaner_class(method)
+    per = tuple(getattr(cls, "PER_CHANNEL", ()))
+    _checked(cls, method, items, per)
+    for pattern, key, _ in items:
+        if pattern is not None and not any(matches(pattern, n) for n in ARKIT52):
+            raise FacecleanError(
+                f"{pattern}.{key}: {pattern!r} names no channel (a channel name, a glob "
+                f"such as 'eyeBlink*', or a group: {', '.join(GROUPS)})"
+            )
+
+    def factory(names: Sequence[str]) -> filters.Cleaner:
+        params: dict[str, Any] = presets.expand(doc, names) if doc else {}
+        for pattern, key, value in items:
+            if pattern is None:
+                params[key] = value
+            else:
+                params[key] = _scoped(cls, params, names, pattern, key, value)
+        return filters.make(method, params, names=names)
+
+    factory(ARKIT52)  # bad values fail now, with the parameter's reason
+    return Choice(method, _shown(what, items), bool(cls.offline), factory)
+
+
+def _checked(cls: type, method: str, items: list[Item], per_channel: tuple[str, ...]) -> dict:
+    """Global settings as keywords, after checking every key (one line, valid keys)."""
+    valid = [k for k in filters.settings_of(cls) if k not in _HIDDEN]
+    for pattern, key, _ in items:
+        if key not in valid:
+            raise FacecleanError(f"{method}: unknown setting {key!r}; valid: {_valid(valid)}")
+        if pattern is not None and key not in per_channel:
+            scoped = ", ".join(per_channel) or "none"
+            raise FacecleanError(
+                f"{method}: {pattern}.{key}: {key} is not per channel "
+                f"(per-channel settings: {scoped}; levels: {', '.join(MAP_KEYS)})"
+            )
+    return {k: v for p, k, v in items if p is None}
+
+
+def _valid(valid: list[str]) -> str:
+    return f"{', '.join(valid)}; per channel PATTERN.KEY; levels {', '.join(MAP_KEYS)}"
+
+
+def _scoped(
+    cls: type, params: dict[str, Any], names: Sequence[str], pattern: str, key: str, value: Any
+) -> np.ndarray:
+    """``key`` as (M,) values with ``value`` on the channels ``pattern`` names (none of
+    these channels: unchanged), the others as ``params`` (or the defaults) give them."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise FacecleanError(f"{pattern}.{key}: expected a number (got {value!r})")
+    base = getattr(filters.make(cls.name, params, names=names), key)  # 0-d or (M,)
+    if base is None:
+        raise FacecleanError(f"{pattern}.{key}: set {key} for every channel first ({key}=...)")
+    out = np.array(np.broadcast_to(base, (len(names),)), dtype=np.float64)
+    out[[j for j, n in enumerate(names) if matches(pattern, n)]] = value
+    return out
+
+
+def _shown(what: str, items: list[Item]) -> str:
+    if not items:
+        return what
+    return what + " " + ", ".join(f"{p + '.' if p else ''}{k}={json.dumps(v)}" for p, k, v in items)
