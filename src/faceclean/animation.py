@@ -96,16 +96,6 @@ class Animation:
         out[~self.valid] = np.nan
         return out, present
 
-    def with_arkit(self, values: np.ndarray, names: Sequence[str] = ARKIT52) -> Animation:
-        """A copy whose channels matching ``names`` take ``values`` (N, len(names))."""
-        out = self.values.copy()
-        index = {canonical(n) or n: i for i, n in enumerate(names)}
-        for j, n in enumerate(self.names):
-            i = index.get(canonical(n) or n)
-            if i is not None:
-                out[:, j] = values[:, i]
-        return self.with_values(out)
-
     @classmethod
     def from_arkit(cls, times: np.ndarray, values: np.ndarray) -> Animation:
         """An ARKit-52 animation from (N,) times and (N, 52) values."""

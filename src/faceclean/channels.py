@@ -59,11 +59,6 @@ def group_of(name: str) -> str | None:
     return next((g for g, members in GROUPS.items() if c in members), None)
 
 
-def is_mediapipe_only(name: str) -> bool:
-    """MediaPipe's ``_neutral`` score: not a blendshape, dropped on read."""
-    return name.strip().lower() == "_neutral"
-
-
 def to_side_suffix(name: str) -> str:
     """``eyeBlinkLeft`` -> ``eyeBlink_L`` (iFacialMocap / perfect-sync style)."""
     for side, suffix in (("Left", "_L"), ("Right", "_R")):

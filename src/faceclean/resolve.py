@@ -44,12 +44,8 @@ from faceclean.errors import FacecleanError
 
 DEFAULT = "default"  # the shipped learned model (models/default.npz)
 MODEL_SUFFIXES = (".npz", ".onnx")
-SHIPPED_MODELS = {
-    "lstm": "default.npz",
-    "adaptive": "default.npz",
-    "fc": "fc.npz",
-    "gbt": "gbt.npz",
-}
+# method word -> its shipped file; else models/default.npz when that is of this method
+SHIPPED_MODELS = {"lstm": "lstm.npz", "adaptive": "adaptive.npz", "fc": "fc.npz", "gbt": "gbt.npz"}
 BACKENDS = ("numpy", "onnx")
 Item = tuple[str | None, str, Any]  # (channel pattern or None for every channel, key, value)
 Factory = Callable[[Sequence[str]], filters.Cleaner]
@@ -170,9 +166,10 @@ def resolve(
     if text in ("", "default", *SHIPPED_MODELS):
         from faceclean.settings import MODELS
 
-        choice = _model(MODELS / SHIPPED_MODELS.get(text, "default.npz"), items, backend)
+        own = MODELS / SHIPPED_MODELS.get(text, "default.npz")
+        choice = _model(own if own.is_file() else MODELS / "default.npz", items, backend)
         if text not in ("", "default") and choice.method != text:
-            raise FacecleanError(f"the shipped model is {choice.method}, not {text}")
+            raise FacecleanError(f"no shipped {text} model (the default is {choice.method})")
     elif text.lower().endswith(MODEL_SUFFIXES):
         choice = _model(Path(text), items, backend)
     else:

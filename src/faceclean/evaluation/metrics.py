@@ -78,7 +78,7 @@ def jitter_ratio(times: np.ndarray, pred: np.ndarray, truth: np.ndarray) -> floa
     return num / den
 
 
-def _interp_rows(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
+def interp_rows(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     """Linear interpolation of (N, M) values sampled at increasing times, at (K,) instants."""
     i = np.clip(np.searchsorted(times, at, side="right") - 1, 0, len(times) - 2)
     w = ((at - times[i]) / (times[i + 1] - times[i]))[:, None]
@@ -108,7 +108,7 @@ def lag_ms(times: np.ndarray, pred: np.ndarray, truth: np.ndarray) -> float:
     pred_f = np.where(np.isfinite(pred), pred, np.nan)
 
     def cost(d: float) -> float:
-        err = (_interp_rows(times, pred_f, t_eval + d) - y_eval) ** 2
+        err = (interp_rows(times, pred_f, t_eval + d) - y_eval) ** 2
         return float(np.nanmean(err))
 
     coarse = np.arange(lo, hi + 1e-9, LAG_COARSE * scale)
@@ -167,7 +167,7 @@ def blink_peaks(
     return np.concatenate(ratios) if ratios else np.zeros(0)
 
 
-def _paired(pred: Animation, truth: Animation) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def paired(pred: Animation, truth: Animation) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Columns of pred and truth matched by canonical name (exact name when unknown)."""
     if pred.n_frames != truth.n_frames:
         raise FacecleanError(
@@ -195,7 +195,7 @@ def summary(pred: Animation, truth: Animation) -> dict[str, float]:
     Channels are matched by canonical name; times are the truth's (both sides must be at
     the same instants, as a cleaner's output is at its input's).
     """
-    p, y, names = _paired(pred, truth)
+    p, y, names = paired(pred, truth)
     times, p, y = _rows(truth.times, p, y)
     return {
         "mse": mse(p, y),

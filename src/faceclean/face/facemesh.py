@@ -183,7 +183,7 @@ def _view(gltf, view_index: int, offset: int, count: int, width: int, dtype) -> 
     return rows.copy().view(dtype).reshape(count, width)
 
 
-def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 3) unit area-weighted vertex normals."""
     tri = vertices[faces.astype(np.int64)]
     fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])

@@ -30,7 +30,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import group_of
 from faceclean.errors import FacecleanError
-from faceclean.evaluation.metrics import _interp_rows, _paired
+from faceclean.evaluation.metrics import interp_rows, paired
 from faceclean.filters import Cleaner, cleaner_class, make
 from faceclean.filters import presets as _presets
 
@@ -96,7 +96,7 @@ def align(noisy: Animation, clean: Animation) -> Animation:
     if len(t) < 2 or noisy.times.max() < t[0] or noisy.times.min() > t[-1]:
         raise FacecleanError("the truth does not overlap the noisy take in time")
     at = noisy.times
-    out = _interp_rows(t, v, np.clip(at, t[0], t[-1]))
+    out = interp_rows(t, v, np.clip(at, t[0], t[-1]))
     out[(at < t[0] - 1e-6) | (at > t[-1] + 1e-6) | ~np.isfinite(at)] = np.nan
     return Animation(at, out, clean.names, dict(clean.meta))
 
@@ -105,7 +105,7 @@ def _segments(pairs, names, seconds: float):
     """Pairs cut into pieces of <= ``seconds``, padded: t (T, S), x and y (T, S, M)."""
     pieces = []
     for noisy, truth in pairs:
-        p, y, keys = _paired(noisy, truth)
+        p, y, keys = paired(noisy, truth)
         if set(names) - set(keys):
             raise FacecleanError("every (noisy, truth) pair must carry the same channels")
         if not np.isfinite(noisy.times).all():
@@ -183,7 +183,7 @@ def tune(
         raise FacecleanError(f"cannot tune {method!r} (tunable: {', '.join(SPACES)})")
     if not pairs:
         raise FacecleanError("nothing to tune on: no (noisy, truth) pairs")
-    names = _paired(*pairs[0])[2]
+    names = paired(*pairs[0])[2]
     t, x, y = _segments(pairs, names, segment)
     space = SPACES[method]
     keys = list(space)

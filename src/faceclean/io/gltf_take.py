@@ -114,13 +114,13 @@ class _Blob:
 def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
     """(glTF JSON dict, binary buffer bytes, keyframe counts or None) for ``mesh``, animated
     by ``anim`` when given."""
-    from faceclean.face.facemesh import _normals
+    from faceclean.face.facemesh import normals
 
     blob = _Blob()
     v = np.ascontiguousarray(mesh.vertices, "<f4")
     attrs = {
         "POSITION": blob.add(v, "VEC3", _FLOAT, _ARRAY, True),
-        "NORMAL": blob.add(_normals(v, mesh.faces).astype("<f4"), "VEC3", _FLOAT, _ARRAY, False),
+        "NORMAL": blob.add(normals(v, mesh.faces).astype("<f4"), "VEC3", _FLOAT, _ARRAY, False),
     }
     if mesh.colors is not None:
         colors = np.ascontiguousarray(mesh.colors, "<f4")

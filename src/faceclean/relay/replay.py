@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import ARKIT52, canonical
+from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.relay import livelink, vmc
 from faceclean.relay.frame import POSE_NAMES, Frame, Malformed
@@ -143,8 +143,3 @@ def replay(
             if not loop:
                 break
     return sent
-
-
-def channels_of(frames: list[Frame]) -> int:
-    """How many ARKit channels the frames carry (for the CLI's summary line)."""
-    return sum(canonical(n) is not None for n in frames[0].names) if frames else 0

@@ -1,0 +1,137 @@
+"""docs/ARCHITECTURE.md's dependency rules, checked on the import graph of src/faceclean.
+
+Read from the source with ``ast`` (nothing is imported): every ``import`` and
+``from ... import`` of every module, at module level and inside functions.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+ROOT = SRC / "faceclean"
+
+CORE = {"animation", "channels", "channel_map", "errors", "settings", "timing"}
+# package (a subpackage or a top-level module) -> what it may import besides the core and
+# itself, at module level or inside a function. The same table is in docs/ARCHITECTURE.md.
+MAY_IMPORT: dict[str, set[str]] = {
+    **{c: set() for c in CORE},
+    "io": {"filters", "face"},  # stream.py steps a cleaner; gltf_take.py writes a face
+    "face": {"io"},  # atomic writes
+    "filters": {"io", "evaluation"},  # presets write atomically; tune scores with metrics
+    "adjust": {"filters", "io"},
+    "learned": {"filters", "io"},
+    "resolve": {"filters", "learned", "adjust"},
+    "cleaner": {"filters", "adjust", "resolve"},
+    "calibration": {"adjust", "filters", "relay"},
+    "batch": {"io"},
+    "relay": {"io", "faceclean"},
+    "evaluation": {"filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"},
+    "report": {"evaluation", "face", "io", "faceclean"},
+    "neural": {"filters", "learned", "evaluation", "face", "io", "cli"},
+    "cli": {"*"},  # the command line may use anything (heavy imports inside run)
+    "faceclean": {"io", "cleaner"},  # the package's public face
+    "__main__": {"cli"},
+}
+
+
+def _module(path: Path) -> str:
+    parts = path.relative_to(SRC).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _package(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "faceclean"
+
+
+def _is_module(name: str) -> bool:
+    rel = Path(*name.split(".")[1:]) if "." in name else Path()
+    return (SRC / "faceclean" / rel).with_suffix(".py").is_file() or (
+        SRC / "faceclean" / rel / "__init__.py"
+    ).is_file()
+
+
+def _imports() -> list[tuple[str, str, str | None, bool]]:
+    """(importer, imported module, imported name or None, at module level)."""
+    out = []
+    for path in sorted(ROOT.rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        top = {id(n) for n in tree.body}
+        me = _module(path)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                out += [(me, a.name, None, id(node) in top) for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                for a in node.names:
+                    sub = f"{node.module}.{a.name}"
+                    if node.module.startswith("faceclean") and _is_module(sub):
+                        out.append((me, sub, None, id(node) in top))
+                    else:
+                        out.append((me, node.module, a.name, id(node) in top))
+    return out
+
+
+IMPORTS = _imports()
+OURS = [i for i in IMPORTS if i[1].split(".")[0] == "faceclean"]
+
+
+def test_every_package_has_a_rule():
+    assert {_package(_module(p)) for p in ROOT.rglob("*.py")} <= set(MAY_IMPORT)
+
+
+def test_torch_only_in_neural():
+    bad = [(a, b) for a, b, _, _ in IMPORTS if b.split(".")[0] == "torch"]
+    assert bad and all(_package(a) == "neural" for a, _ in bad), [
+        x for x in bad if _package(x[0]) != "neural"
+    ]
+
+
+def test_no_private_name_across_packages():
+    bad = []
+    for a, b, name, _ in OURS:
+        if _package(a) == _package(b):
+            continue
+        parts = b.split(".")[1:] + ([name] if name else [])
+        if any(p.startswith("_") and not p.startswith("__") for p in parts):
+            bad.append((a, b, name))
+    assert not bad
+
+
+@pytest.mark.parametrize("package", sorted(MAY_IMPORT))
+def test_package_imports_only_what_its_rule_allows(package):
+    allowed = MAY_IMPORT[package] | CORE | {package}
+    if "*" in allowed:
+        return
+    bad = sorted(
+        {(a, b) for a, b, _, _ in OURS if _package(a) == package and _package(b) not in allowed}
+    )
+    assert not bad, f"{package} may import {sorted(MAY_IMPORT[package])} and the core: {bad}"
+
+
+def test_no_import_cycle_at_module_level():
+    """Modules importing each other at load time (a cycle Python may not resolve)."""
+    graph: dict[str, set[str]] = {}
+    for a, b, _, top in OURS:
+        if top and a != b and not b.startswith(a + "."):
+            graph.setdefault(a, set()).add(b)
+    state: dict[str, int] = {}  # 1: on the path, 2: done
+    cycles = []
+
+    def visit(m: str, path: list[str]) -> None:
+        state[m] = 1
+        for n in sorted(graph.get(m, ())):
+            parent = n.rpartition(".")[0]
+            if state.get(n) == 1 and not m.startswith(n + "."):
+                cycles.append([*path[path.index(n) :], n])
+            elif n not in state and parent != m:
+                visit(n, [*path, n])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    assert not cycles, cycles
