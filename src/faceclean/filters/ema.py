@@ -16,9 +16,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from faceclean.channels import ARKIT52
-from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
-from faceclean.filters.params import per_channel
+from faceclean.filters.params import seconds_or
 
 TAU = 0.025  # s; default time constant (a 6.4 Hz low-pass) for 60 fps ARKit data
 
@@ -36,14 +35,9 @@ class Ema(StreamCleaner):
         gamma: float | Sequence[float] | None = None,
         names: Sequence[str] = ARKIT52,
     ) -> None:
-        if tau is not None and gamma is not None:
-            raise FacecleanError("ema: give tau (seconds) or gamma (per frame), not both")
         self.names = tuple(names)
-        self.gamma = None if gamma is None else per_channel(gamma, names, "ema gamma", high=1.0)
-        self.tau = (
-            None
-            if gamma is not None
-            else per_channel(TAU if tau is None else tau, names, "ema tau")
+        self.tau, self.gamma = seconds_or(
+            "ema", names, ("tau", tau, TAU), ("gamma", gamma, "per frame"), high=1.0
         )
         self.reset()
 

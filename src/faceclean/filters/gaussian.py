@@ -17,9 +17,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from faceclean.channels import ARKIT52
-from faceclean.errors import FacecleanError
 from faceclean.filters.base import OfflineCleaner
-from faceclean.filters.params import per_channel
+from faceclean.filters.params import seconds_or
 from faceclean.filters.window import median_dt, reach, shifted
 
 SIGMA = 0.03  # s; default (about 2 frames at 60 fps)
@@ -39,16 +38,9 @@ class Gaussian(OfflineCleaner):
         sigma_frames: float | Sequence[float] | None = None,
         names: Sequence[str] = ARKIT52,
     ) -> None:
-        if sigma is not None and sigma_frames is not None:
-            raise FacecleanError("gaussian: give sigma (seconds) or sigma_frames, not both")
         self.names = tuple(names)
-        self.sigma_frames = (
-            None if sigma_frames is None else per_channel(sigma_frames, names, "sigma_frames")
-        )
-        self.sigma = (
-            None
-            if sigma_frames is not None
-            else per_channel(SIGMA if sigma is None else sigma, names, "gaussian sigma")
+        self.sigma, self.sigma_frames = seconds_or(
+            "gaussian", names, ("sigma", sigma, SIGMA), ("sigma_frames", sigma_frames, "frames")
         )
         self.reset()
 

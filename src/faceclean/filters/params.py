@@ -39,3 +39,25 @@ def per_channel(
     if high is not None and (a > high).any():
         raise FacecleanError(f"{what} must be <= {high}")
     return a
+
+
+def seconds_or(
+    method: str,
+    names: Sequence[str],
+    seconds: tuple[str, Any, float],
+    other: tuple[str, Any, str],
+    **bounds: Any,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """One setting given in seconds or in another unit, not both (e.g. ema ``tau`` or
+    ``gamma``): (the seconds, None) or (None, the other), each from ``per_channel``.
+
+    seconds: (key, value or None, default s); other: (key, value or None, its unit);
+    ``bounds`` go to ``per_channel`` for the other one.
+    """
+    (s_key, s_value, default), (o_key, o_value, unit) = seconds, other
+    if s_value is not None and o_value is not None:
+        raise FacecleanError(f"{method}: give {s_key} (seconds) or {o_key} ({unit}), not both")
+    if o_value is not None:
+        return None, per_channel(o_value, names, f"{method} {o_key}", **bounds)
+    value = default if s_value is None else s_value
+    return per_channel(value, names, f"{method} {s_key}"), None
