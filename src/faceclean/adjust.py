@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, GROUPS, canonical
+from faceclean.channels import ARKIT52, GROUPS, channel_key
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import Cleaner
 
@@ -222,13 +222,13 @@ def apply_levels(lv: Levels, x: np.ndarray) -> np.ndarray:
 
 def matches(pattern: str, name: str) -> bool:
     """Does ``pattern`` (name, glob or group, case-insensitive) name channel ``name``?"""
-    c = canonical(name) or name.strip()
+    c = channel_key(name)
     p = pattern.strip()
     if p.lower() in GROUPS:
         return c in GROUPS[p.lower()]
     if any(ch in p for ch in "*?["):
         return fnmatchcase(c.lower(), p.lower())
-    return (canonical(p) or p).lower() == c.lower()
+    return channel_key(p).lower() == c.lower()
 
 
 def _checked(key: str, value: object, where: str) -> Any:

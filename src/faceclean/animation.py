@@ -8,7 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52, canonical, channel_key
 
 
 @dataclass(eq=False)
@@ -70,7 +71,7 @@ class Animation:
 
     def channel(self, name: str) -> np.ndarray:
         """(N,) values of one channel, by any accepted spelling."""
-        want = canonical(name) or name
+        want = channel_key(name)
         for j, n in enumerate(self.names):
             if n == name or canonical(n) == want:
                 return self.values[:, j]
@@ -85,14 +86,10 @@ class Animation:
 
         Channels the source lacks are zeros and marked absent.
         """
-        cols = {canonical(n): j for j, n in reversed(list(enumerate(self.names)))}
+        cmap = ChannelMap(names, self.names)
         out = np.zeros((self.n_frames, len(names)))
-        present = np.zeros(len(names), bool)
-        for i, n in enumerate(names):
-            j = cols.get(canonical(n) or n)
-            if j is not None:
-                out[:, i] = self.values[:, j]
-                present[i] = True
+        out[:, cmap.have] = self.values[:, cmap.cols]
+        present = cmap.src >= 0
         out[~self.valid] = np.nan
         return out, present
 

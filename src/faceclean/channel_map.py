@@ -1,7 +1,9 @@
-"""A learned model's channels mapped onto an input's columns, by canonical name.
+"""One channel list mapped onto another's columns by ``channels.key`` (canonical name,
+else the name itself): every module that lines up channels by name uses it.
 
-Input columns the model lacks pass through untouched; model channels the input lacks
-are fed the model's own last output (so their corrective derivative is zero).
+For a learned model: input columns the model lacks pass through untouched; model channels
+the input lacks are fed the model's own last output (so their corrective derivative is
+zero).
 """
 
 from __future__ import annotations
@@ -10,17 +12,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from faceclean.channels import canonical
+from faceclean.channels import channel_key
 
 
 class ChannelMap:
-    """Model channel j <- input column ``src[j]`` (-1 when the input lacks it)."""
+    """Wanted (model) channel j <- column ``src[j]`` of ``names`` (-1 when absent; the
+    first column of a name given twice)."""
 
     def __init__(self, model: Sequence[str], names: Sequence[str]) -> None:
         cols: dict[str, int] = {}
         for j, n in enumerate(names):
-            cols.setdefault(canonical(n) or n, j)
-        src = np.array([cols.get(canonical(n) or n, -1) for n in model], dtype=np.intp)
+            cols.setdefault(channel_key(n), j)
+        src = np.array([cols.get(channel_key(n), -1) for n in model], dtype=np.intp)
         self.src = src
         self.have = np.flatnonzero(src >= 0)  # model channels fed from the input
         self.lack = np.flatnonzero(src < 0)  # model channels fed their last output

@@ -53,6 +53,11 @@ def canonical(name: str) -> str | None:
     return None
 
 
+def channel_key(name: str) -> str:
+    """What channels are matched by: the canonical ARKit name, else the name itself."""
+    return canonical(name) or name.strip()
+
+
 def group_of(name: str) -> str | None:
     """The channel group ("eyes", "mouth", ...) of a channel name, or None."""
     c = canonical(name)

@@ -15,7 +15,8 @@ import numpy as np
 
 from faceclean.adjust import Adjust
 from faceclean.animation import Animation
-from faceclean.channels import canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import channel_key
 from faceclean.errors import FacecleanError
 from faceclean.resolve import DEFAULT, Choice, resolve
 
@@ -62,12 +63,11 @@ def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Anim
     """``anim`` linearly interpolated at ``times`` (N,) s, columns in the order of
     ``names`` (matched by canonical name); NaN outside its time span or where absent."""
     times = np.asarray(times, dtype=np.float64)
-    cols = {canonical(n) or n: j for j, n in reversed(list(enumerate(anim.names)))}
+    src = ChannelMap(names, anim.names).src
     out = np.full((len(times), len(names)), np.nan)
     found = False
-    for i, n in enumerate(names):
-        j = cols.get(canonical(n) or n)
-        if j is None:
+    for i, j in enumerate(src):
+        if j < 0:
             continue
         t, v = anim.times, anim.values[:, j]
         ok = np.isfinite(t) & np.isfinite(v)
@@ -99,9 +99,7 @@ def compare(
     specs = dict(m if isinstance(m, tuple) else (m, m) for m in methods) or {DEFAULT: DEFAULT}
     if truth is not None:
         same = truth.n_frames == noisy.n_frames and np.array_equal(truth.times, noisy.times)
-        names_match = [canonical(n) or n for n in truth.names] == [
-            canonical(n) or n for n in noisy.names
-        ]
+        names_match = [channel_key(n) for n in truth.names] == [channel_key(n) for n in noisy.names]
         if not (same and names_match):
             truth = at_times(truth, noisy.times, noisy.names)
     outputs = {label: clean_with(s, noisy, adjust) for label, s in specs.items()}

@@ -77,7 +77,8 @@ import numpy as np
 from scipy.signal import lfilter
 
 from faceclean.animation import Animation
-from faceclean.channels import ARKIT52, INDEX, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52, INDEX, canonical, channel_key
 from faceclean.errors import FacecleanError
 
 CONDITIONS = ("30 fps", "60 fps", "120 fps", "webcam")
@@ -346,7 +347,9 @@ def degrade(
     n, m = len(t_c), len(names)
     x = src.at(t_c)  # (N, M) what the face did at capture
     chans = [_channel(seed, name) for name in names]
-    cols = {canonical(nm) or nm: j for j, nm in reversed(list(enumerate(names)))}
+    cols = {
+        channel_key(nm): int(j) for nm, j in zip(names, ChannelMap(names, names).src, strict=True)
+    }
 
     # Step 2: crosstalk from the clean signal, each leak with its own delay.
     y = x.copy()

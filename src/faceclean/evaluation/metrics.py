@@ -13,7 +13,8 @@ import numpy as np
 from scipy.signal import find_peaks
 
 from faceclean.animation import Animation
-from faceclean.channels import canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import canonical, channel_key
 from faceclean.errors import FacecleanError
 
 BLINK_CHANNELS = ("eyeBlinkLeft", "eyeBlinkRight")
@@ -174,16 +175,10 @@ def paired(pred: Animation, truth: Animation) -> tuple[np.ndarray, np.ndarray, l
             f"prediction has {pred.n_frames} frames, truth {truth.n_frames}: "
             "they must be at the same instants"
         )
-    pcols = {}
-    for j, n in enumerate(pred.names):
-        pcols.setdefault(canonical(n) or n, j)
-    pi, ti, names = [], [], []
-    for j, n in enumerate(truth.names):
-        key = canonical(n) or n
-        if key in pcols and key not in names:
-            pi.append(pcols[key])
-            ti.append(j)
-            names.append(key)
+    names = list(dict.fromkeys(channel_key(n) for n in truth.names))  # truth order, once each
+    pi, ti = ChannelMap(names, pred.names).src, ChannelMap(names, truth.names).src
+    both = pi >= 0
+    pi, ti, names = pi[both], ti[both], [n for n, b in zip(names, both, strict=True) if b]
     if not names:
         raise FacecleanError("prediction and truth share no channel")
     return pred.values[:, pi], truth.values[:, ti], names

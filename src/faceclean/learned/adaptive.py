@@ -48,7 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, canonical, group_of
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 from faceclean.io.npz_safe import MiB, load_arrays
@@ -205,8 +206,7 @@ class Adaptive(StreamCleaner):
         self.names = tuple(names)
         self.max_gap = float(max_gap)
         w = weights.arrays
-        known = {canonical(n) or n: i for i, n in enumerate(weights.channels)}
-        rows = np.array([known.get(canonical(n) or n, -1) for n in self.names])
+        rows = ChannelMap(self.names, weights.channels).src
         self._learn = rows >= 0  # (M,) channels the model knows
         mean = {k: float(np.exp(np.log(w[k]).mean())) for k in ("min_cutoff", "d_cutoff")}
         mean["beta"] = float(w["beta"].mean())

@@ -44,7 +44,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import ARKIT52, GROUPS, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52, GROUPS, channel_key
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 from faceclean.io.npz_safe import load_arrays
@@ -83,7 +84,7 @@ def group_index(names: Sequence[str]) -> np.ndarray:
     """(M,) float: each channel's group in GROUPS order (len(GROUPS) when unknown)."""
     out = []
     for n in names:
-        c = canonical(n) or n
+        c = channel_key(n)
         out.append(next((i for i, g in enumerate(GROUPS.values()) if c in g), len(GROUPS)))
     return np.asarray(out, np.float64)
 
@@ -122,8 +123,7 @@ class _DerivativeNet(StreamCleaner):
         self.per_frame = bool(per_frame)
         self.lo, self.hi = (float(v) for v in config.get("value_range", [0.0, 1.0]))
         # frame column of each model channel (-1: the frame lacks it; it sees zeros)
-        cols = {canonical(n) or n: j for j, n in reversed(list(enumerate(names)))}
-        self._cols = np.array([cols.get(canonical(c) or c, -1) for c in self.channels])
+        self._cols = ChannelMap(self.channels, names).src
         self._have = self._cols >= 0
         self._pending: list[np.ndarray] | None = None  # batch path: precomputed predictions
         self._record: list[np.ndarray] | None = None  # batch path: recorded features

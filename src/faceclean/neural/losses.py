@@ -22,7 +22,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from faceclean.channels import INDEX, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52
 from faceclean.face.mesh import Face
 
 
@@ -43,7 +44,7 @@ class Loss:
         self.w = weights
         self.mesh: tuple[Tensor, Tensor, float] | None = None
         if face is not None and weights.dis > 0:
-            idx = [INDEX.get(canonical(c) or c, -1) for c in channels]
+            idx = ChannelMap(channels, ARKIT52).src
             dv = np.zeros((len(channels), 6, 2, 3))  # (M, 6, 2, 3) mesh units per weight
             for m, j in enumerate(idx):
                 if j >= 0:

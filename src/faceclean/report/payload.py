@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import GROUPS, INDEX, canonical
+from faceclean.channels import GROUPS, INDEX, channel_key
 from faceclean.evaluation.comparison import Comparison, change
 from faceclean.face.facemesh import FaceMesh
 
@@ -60,7 +60,7 @@ def animation(comp: Comparison) -> dict[str, Any]:
     keep = np.arange(0, comp.input.n_frames, k)
     if keep[-1] != comp.input.n_frames - 1:
         keep = np.append(keep, comp.input.n_frames - 1)
-    names = [canonical(n) or n for n in comp.input.names]
+    names = [channel_key(n) for n in comp.input.names]
     moved = change(comp.input.values, comp.outputs[comp.main].values)
     moved = np.nan_to_num(moved)
     groups = []

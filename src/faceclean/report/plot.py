@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from faceclean.channels import canonical
+from faceclean.channels import channel_key
 from faceclean.errors import FacecleanError
 from faceclean.evaluation.comparison import Comparison, change
 from faceclean.io.atomic import atomic_write
@@ -33,13 +33,12 @@ def pick_channels(comp: Comparison, wanted: Sequence[str] | None, count: int = 4
     if not wanted:
         moved = change(comp.input.values, comp.outputs[comp.main].values)
         return [int(j) for j in np.argsort(-moved, kind="stable")[:count]]
-    keys = [canonical(n) or n for n in names]
+    keys = [channel_key(n) for n in names]
     out = []
     for w in wanted:
-        key = canonical(w) or w.strip()
-        if key not in keys:
+        if channel_key(w) not in keys:
             raise FacecleanError(f"no channel {w!r} in the input ({len(names)} channels)")
-        out.append(keys.index(key))
+        out.append(keys.index(channel_key(w)))
     return out
 
 
@@ -72,7 +71,7 @@ def figure(
     for ax, j in zip(axes, cols, strict=True):
         for label, values, style in series:
             ax.plot(t[span], values[span, j], label=label, **style)
-        ax.set_title(canonical(comp.input.names[j]) or comp.input.names[j], loc="left", fontsize=10)
+        ax.set_title(channel_key(comp.input.names[j]), loc="left", fontsize=10)
         ax.set_ylabel("weight")
         ax.grid(True, color="0.9", lw=0.6)
         ax.set_xlim(lo, hi)
