@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Sequence
 
 HELP = "train or fine-tune a learned cleaner (adaptive, the shipped kind; or lstm, fc, gbt)"
 
@@ -237,10 +236,3 @@ def _epoch_line(e: dict) -> str:
 
 def _f(x: float) -> str:
     return "-" if not math.isfinite(x) else f"{x:.2f}"
-
-
-def main(argv: Sequence[str]) -> int:
-    """Entry for ``python -m faceclean.neural.train ARGS`` (no subcommand name)."""
-    from faceclean.cli import main as cli_main
-
-    return cli_main(["train", *argv])

@@ -243,9 +243,9 @@ def _jsonable(cfg: Config) -> dict[str, Any]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m faceclean.neural.train`` (e.g. under torchrun): the train command."""
-    from faceclean.cli import train as command
+    from faceclean.cli import main as cli_main
 
-    return command.main(argv if argv is not None else sys.argv[1:])
+    return cli_main(["train", *(argv if argv is not None else sys.argv[1:])])
 
 
 if __name__ == "__main__":
