@@ -41,7 +41,7 @@ SCRIPT = textwrap.dedent(
                   "--quiet", "--out", out])
     rank = int(os.environ["RANK"])
     np.savez(out + f".rank{rank}.npz", **checkpoint.arrays(held["model"]))
-    sys.stdout.write(f"rank {rank} world {os.environ['WORLD_SIZE']} rc {rc}\n")  # one write
+    sys.stdout.write(f"rank {rank} world {os.environ['WORLD_SIZE']} rc {rc}\\n")  # one write
     """
 )
 

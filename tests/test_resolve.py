@@ -41,7 +41,8 @@ def test_inline_spec_keeps_bracketed_commas_together():
 
 
 def test_words_name_models_presets_and_methods(tmp_path):
-    assert resolve().method == "lstm" and resolve("default").method == "lstm"
+    assert resolve().method == "adaptive" and resolve("default").method == "adaptive"
+    assert resolve("lstm").method == "lstm"  # models/lstm.npz
     assert resolve(MODELS / "fc.npz").method == "fc"  # told apart by the file's format
     assert resolve("gbt").method == "gbt"
     assert resolve("one-euro").source == "one-euro (tuned preset)"

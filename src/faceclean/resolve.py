@@ -2,7 +2,8 @@
 
 Words (``clean --method``, ``relay``, ``plot``/``report``, ``eval``, ``Cleaner.load``):
 
-- None, ``"lstm"`` or ``"default"``: the shipped learned model (``models/default.npz``);
+- None or ``"default"``: the shipped default model (``models/default.npz``); ``lstm``,
+  ``adaptive``, ``fc``, ``gbt``: that shipped model (``SHIPPED_MODELS``);
 - a model file: ``.npz`` (an LSTM, FC or GBT checkpoint, told apart by its format) or an
   exported ``.onnx`` step graph;
 - a preset: a ``.json`` file written by ``faceclean tune``, or a shipped preset's name;
