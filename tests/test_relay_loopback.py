@@ -594,3 +594,26 @@ def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
     assert abs(cleaned.channel("jawOpen")[-1]) < 0.01  # the neutral, once calibrated
     assert main(["relay", "--listen", "vmc://:0", "--send", "vmc://:9", "--record", "x.json"]) == 2
     assert "--record x.json" in capsys.readouterr().err
+
+
+def test_replay_stopped_by_a_signal_says_so_not_refused(tmp_path):
+    from faceclean import io
+
+    take = tmp_path / "take.npz"
+    io.save(Animation.from_arkit(np.arange(600) / 60.0, np.full((600, 52), 0.5)), take)
+    with raw_receiver() as rx:
+        cmd = [sys.executable, "-m", "faceclean", "replay", str(take), "--send"]
+        proc = subprocess.Popen(
+            [*cmd, f"vmc://127.0.0.1:{rx.getsockname()[1]}"],
+            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        try:
+            rx.recv(65536)  # the first packet is out: the replay is running
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, err
+    assert "not sent)" in out and "stopped;" in out and "refused" not in out

@@ -44,10 +44,11 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for s, handler in old.items():
             signal.signal(s, handler)
-    refused = (
-        ""
-        if args.loop or sent == len(frames)
-        else f" ({len(frames) - sent} refused: is anything listening at {send}?)"
-    )
+    if args.loop or sent == len(frames):
+        refused = ""
+    elif stop.is_set():
+        refused = f" (stopped; {len(frames) - sent} not sent)"
+    else:
+        refused = f" ({len(frames) - sent} refused: is anything listening at {send}?)"
     print(f"sent {sent} packets{refused}", flush=True)
     return 0
