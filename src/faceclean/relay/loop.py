@@ -96,7 +96,8 @@ class Stats:
 def warm_up(cleaner: Stepper, frames: int = 6) -> None:
     """Step ``cleaner`` through its first-frame, advancing and missing-value paths on
     (52,) frames at 60 fps, then ``reset()`` it: whatever it compiles or allocates on
-    first use happens now, not on the first packets. A cleaner with a ``warm_up()``
+    first use happens now, not on the first packets; a cleaner that answers finite
+    frames with NaN or inf (a broken model) is refused. A cleaner with a ``warm_up()``
     method (one whose steps have effects beyond its state) is asked to do it itself."""
     own = getattr(cleaner, "warm_up", None)
     if callable(own):  # a cleaner with side effects warms up in its own way
@@ -109,7 +110,11 @@ def warm_up(cleaner: Stepper, frames: int = 6) -> None:
             x[::3] = np.nan  # some channels missing
         if i == frames - 1:
             x[:] = np.nan  # a missing frame
-        cleaner.step(x, i / 60.0)
+        y = np.asarray(cleaner.step(x, i / 60.0), dtype=np.float64)
+        if not np.isfinite(y).all():  # finite weights in must give finite weights out
+            raise FacecleanError(
+                "the cleaner turns finite input into NaN or inf (a broken model file?)"
+            )
     cleaner.reset()
 
 
