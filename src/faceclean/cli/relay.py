@@ -24,6 +24,7 @@ from faceclean.cli import options
 if TYPE_CHECKING:
     from faceclean.resolve import Choice
 
+MIN_STATS, MAX_STATS = 0.1, 86400.0  # s, the --stats period
 HELP = "clean a live stream: --listen vmc://|livelink://|ifacialmocap:// --send vmc://|livelink://"
 EPILOG = (
     options.SETTINGS_HELP
@@ -107,8 +108,10 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.relay.recorder import Recorder
 
     listen, send = parse(args.listen, "listen"), parse(args.send, "send")
-    if args.stats is not None and not args.stats > 0:
-        raise FacecleanError(f"--stats must be > 0 seconds (got {args.stats})")
+    if args.stats is not None and not MIN_STATS <= args.stats <= MAX_STATS:
+        raise FacecleanError(
+            f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} seconds (got {args.stats})"
+        )
     recorder = Recorder(args.record) if args.record else None
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from faceclean.relay import bounds
 from faceclean.relay.frame import Frame, Malformed
 
 DEFAULT_PORT = 49983
@@ -38,7 +39,7 @@ def decode(data: bytes) -> Frame:
         names.append(name)
     if not names:
         raise Malformed("ifacialmocap: no blendshape values")
-    return Frame(tuple(names), np.array(values))
+    return bounds.checked(Frame(tuple(names), np.array(values)))
 
 
 class Decoder:

@@ -20,6 +20,7 @@ import numpy as np
 
 from faceclean.channels import ARKIT52, canonical
 from faceclean.errors import FacecleanError
+from faceclean.relay import bounds
 from faceclean.relay.frame import Frame, Malformed
 
 VERSION = 6
@@ -39,6 +40,8 @@ def _string(data: bytes, at: int) -> tuple[str, int]:
     at += 4
     if n < 0 or at + n > len(data):
         raise Malformed("livelink: bad string length")
+    if n > bounds.MAX_NAME_BYTES:
+        raise Malformed(f"livelink: subject or device id over {bounds.MAX_NAME_BYTES} bytes")
     try:
         return data[at : at + n].decode("utf-8"), at + n
     except UnicodeDecodeError:
@@ -59,10 +62,9 @@ def decode(data: bytes) -> Frame:
         raise Malformed(f"livelink: {count} values in a {len(data)}-byte packet")
     floats = np.frombuffer(data, _BE_F32, count, at).astype(np.float64)  # (count,)
     t = (number + float(sub)) * den / num if num > 0 and den > 0 else None
-    if t is not None and not np.isfinite(t):
-        t = None
     pose = floats[N_SHAPES:] if count > N_SHAPES else None
-    return Frame(ARKIT52, floats[:N_SHAPES], t, pose, (), subject, device)
+    # a non-finite or absurd time (NaN sub-frame, ...) makes the packet malformed
+    return bounds.checked(Frame(ARKIT52, floats[:N_SHAPES], t, pose, (), subject, device))
 
 
 class Decoder:
@@ -82,8 +84,9 @@ class Encoder:
     def __init__(self, subject: str = "faceclean", device: str = "faceclean") -> None:
         self.subject = subject
         self.device = device
-        self._index: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
-        self._heads: dict[tuple[str, str], bytes] = {}
+        # caches keyed by what senders chose: bounded (relay/bounds.py)
+        self._index: bounds.Bounded[tuple[str, ...], tuple] = bounds.Bounded(bounds.MAX_CACHE)
+        self._heads: bounds.Bounded[tuple[str, str], bytes] = bounds.Bounded(bounds.MAX_CACHE)
         self._count = 0
 
     def _columns(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -92,7 +95,7 @@ class Encoder:
             pos = {n: i for i, n in enumerate(ARKIT52)}
             pairs = [(j, pos[c]) for j, n in enumerate(names) if (c := canonical(n)) in pos]
             cols = (np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int))
-            self._index[names] = cols
+            self._index.put(names, cols)
         return cols
 
     def _head(self, device: str, subject: str) -> bytes:
@@ -101,7 +104,7 @@ class Encoder:
         if head is None:
             d, s = device.encode("utf-8"), subject.encode("utf-8")
             head = bytes([VERSION]) + _I32.pack(len(d)) + d + _I32.pack(len(s)) + s
-            self._heads[key] = head
+            self._heads.put(key, head)
         return head
 
     def encode(self, frame: Frame) -> bytes:
@@ -111,14 +114,14 @@ class Encoder:
         if frame.pose is not None:
             floats[N_SHAPES : N_SHAPES + min(N_POSE, len(frame.pose))] = frame.pose[:N_POSE]
         num, den = OUT_RATE
-        if frame.t is not None and np.isfinite(frame.t):
-            x = frame.t * num / den  # frames, 60 fps
+        x = frame.t * num / den if frame.t is not None else None  # frames, 60 fps
+        if x is not None and abs(x) < 2.0**52:  # else no exact frame number: count on
             number = int(np.floor(x))
             sub = x - number
         else:
             number, sub = self._count, 0.0
-        self._count = number + 1
         number = (number + 2**31) % 2**32 - 2**31  # wrap into i32
+        self._count = number + 1
         head = self._head(frame.device or self.device, frame.subject or self.subject)
         timing = _TIMING.pack(number, sub, num, den, N_SHAPES + N_POSE)
         return head + timing + floats.astype(_BE_F32).tobytes()

@@ -2,13 +2,17 @@
 
 Per wake-up the socket is drained without blocking; of the face frames it held, only the
 newest is cleaned and sent (never a queue: a relay that falls behind skips, it does not
-lag). Datagrams that carry only passthrough messages are forwarded as they come (VMC
-output). Ordering: a frame whose time is not after the last one sent is dropped
-(out of order or duplicate); a backwards jump over ``RESTART`` seconds is a new stream
-(the sender restarted) and restarts the cleaner. Frames without a timestamp take their
-arrival time (``time.monotonic``). A long silence restarts the cleaner through its own
-``max_gap`` rule (filters/base.py), so the face does not jump or drift when it returns.
-The loop sends only to the ``send`` endpoint, never back to a sender.
+lag). It follows one sender's face: another sender's face frames are taken only after the
+followed one has been silent for ``HANDOVER`` s. Datagrams that carry only passthrough
+messages are forwarded as they come (VMC output). Ordering: a frame whose time is not
+after the last one sent is dropped (out of order or duplicate); a backwards jump over
+``RESTART`` seconds is a new stream (the sender restarted) and restarts the cleaner.
+Frames without a timestamp take their arrival time (``time.monotonic``). A long silence
+restarts the cleaner through its own ``max_gap`` rule (filters/base.py), so the face does
+not jump or drift when it returns. The loop sends only to the ``send`` endpoint, never
+back to a sender. Decoder state is kept per source address and every sender-driven cache
+is bounded (relay/bounds.py); a datagram from the relay's own sending socket (``--send``
+looping back to ``--listen``) is dropped and counted, never relayed again.
 
 No dropped start: the cleaner is warmed up (``warm_up``: a few frames through every path
 of its step, then ``reset()``) before the socket is bound, so the first packets meet a
@@ -31,7 +35,8 @@ import numpy as np
 
 from faceclean.channels import ARKIT52, canonical
 from faceclean.errors import FacecleanError
-from faceclean.relay.frame import Frame, Malformed
+from faceclean.relay import bounds
+from faceclean.relay.frame import Decoder, Frame, Malformed
 from faceclean.relay.recorder import Recorder
 from faceclean.relay.url import Endpoint
 
@@ -40,6 +45,7 @@ MAX_DATAGRAM = 65535  # bytes
 MAX_DRAIN = 256  # datagrams read per wake-up before the newest frame is processed
 WINDOW = 8192  # latency samples kept for the percentiles
 RCVBUF = 1 << 20  # bytes asked for the receive buffer (the kernel may cap it)
+HANDOVER = 1.0  # s the followed sender must be silent before another sender's face is taken
 
 
 class Stepper(Protocol):
@@ -64,6 +70,8 @@ class Stats:
     missing: int = 0  # frames without a single finite value (tracking loss)
     restarts: int = 0  # sender time jumped back over RESTART s
     send_errors: int = 0  # sends the OS refused (no listener, ...)
+    own: int = 0  # datagrams from the relay's own sending socket (a loop), dropped
+    foreign: int = 0  # face frames from a second sender while the first one streams
     latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(WINDOW, np.int64))
     n_latency: int = 0
 
@@ -89,6 +97,7 @@ class Stats:
             f"in {self.frames_in} out {self.frames_out} "
             f"dropped {self.dropped} (order {self.out_of_order}, stale {self.stale}) "
             f"malformed {self.malformed} passthrough {self.passthrough} "
+            f"foreign {self.foreign} own {self.own} "
             f"latency p50 {self.percentile_ms(50):.3f} ms p99 {self.percentile_ms(99):.3f} ms"
         )
 
@@ -133,13 +142,15 @@ class Relay:
         self.listen, self.send, self.cleaner, self.clock = listen, send, cleaner, clock
         self.recorder = recorder
         warm_up(cleaner)  # before the socket exists: nothing queues behind it
-        self.decoder = listen.decoder()
+        self._decoders: bounds.Bounded[object, Decoder] = bounds.Bounded(bounds.MAX_SENDERS)
         self.encoder = send.encoder()
         self.stats = Stats()
         self._vmc_out = send.scheme == "vmc"
-        self._columns: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self._columns: bounds.Bounded[tuple[str, ...], tuple] = bounds.Bounded(bounds.MAX_CACHE)
         self._last_t: float | None = None  # s, time of the last frame sent
         self._packet_clock: bool | None = None  # the stream's frames carry their time
+        self._source: object = None  # address of the sender whose face is followed
+        self._source_seen = -float("inf")  # time.monotonic() of its last face frame
         self._stopping = False
         family, addr = listen.sockaddr()
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -151,9 +162,19 @@ class Relay:
             out_family, out_addr = send.sockaddr()
             self._out = socket.socket(out_family, socket.SOCK_DGRAM)
             self._out.connect(out_addr)  # the one address we ever send to
+            self._own = self._out.getsockname()  # datagrams from here are our own output
+            if _same_socket(out_addr, self._sock.getsockname()):
+                self._out.close()
+                raise FacecleanError(
+                    f"--send {send} is the address the relay listens on: "
+                    "every datagram would come back to it"
+                )
         except OSError as e:
             self._sock.close()
             raise FacecleanError(f"cannot relay {listen} -> {send}: {e.strerror or e}") from None
+        except FacecleanError:
+            self._sock.close()
+            raise
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -207,15 +228,21 @@ class Relay:
         best_t = self._last_t
         for _ in range(MAX_DRAIN):
             try:
-                data = self._sock.recv(MAX_DATAGRAM)
+                data, sender = self._sock.recvfrom(MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:  # e.g. an ICMP error queued on the socket
                 continue
             received = time.perf_counter_ns()
             self.stats.datagrams += 1
+            if sender == self._own:  # our own output came back: never relay it again
+                self.stats.own += 1
+                continue
+            decoder = self._decoders.get(sender) or self._decoders.put(
+                sender, self.listen.decoder()
+            )
             try:
-                frame = self.decoder.feed(data)
+                frame = decoder.feed(data)
             except Malformed:
                 self.stats.malformed += 1
                 continue
@@ -226,6 +253,11 @@ class Relay:
                     self.stats.passthrough += 1
                     self._send(self.encoder.encode(frame))
                 continue
+            heard = time.monotonic()
+            if sender != self._source and heard - self._source_seen < HANDOVER:
+                self.stats.foreign += 1  # one face at a time: another sender is not mixed in
+                continue
+            self._source, self._source_seen = sender, heard
             self.stats.frames_in += 1
             packet = frame.t is not None
             t = frame.t if packet else self.clock()
@@ -256,9 +288,7 @@ class Relay:
             pos = {n: i for i, n in enumerate(ARKIT52)}
             pairs = [(j, pos[c]) for j, n in enumerate(names) if (c := canonical(n)) in pos]
             cols = (np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int))
-            if len(self._columns) > 64:  # a sender that keeps changing names
-                self._columns.clear()
-            self._columns[names] = cols
+            self._columns.put(names, cols)
         return cols
 
     def _process(self, frame: Frame, t: float, received: int) -> None:
@@ -293,3 +323,11 @@ class Relay:
         except OSError:
             self.stats.send_errors += 1
             return False
+
+
+def _same_socket(a: tuple, b: tuple) -> bool:
+    """True when a datagram sent to ``a`` reaches the socket bound to ``b``: same port, and
+    the same host, or ``b`` bound to every interface."""
+    if a[1] != b[1]:
+        return False
+    return a[0] == b[0] or b[0] in ("0.0.0.0", "::")

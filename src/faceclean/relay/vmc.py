@@ -16,14 +16,14 @@ import struct
 import numpy as np
 
 from faceclean.channels import canonical, pascal, to_side_suffix
-from faceclean.relay import osc
+from faceclean.relay import bounds, osc
+from faceclean.relay.bounds import MAX_PENDING, MAX_PENDING_BYTES
 from faceclean.relay.frame import Frame, Malformed
 
 DEFAULT_PORT = 39539  # the VMC performer (receiver) port
 VAL = b"/VMC/Ext/Blend/Val"
 APPLY = b"/VMC/Ext/Blend/Apply"
 TIME = b"/VMC/Ext/T"
-MAX_PENDING = 512  # values or passthrough messages held while waiting for Apply
 NAME_STYLES = ("keep", "arkit", "pascal", "lr")
 _APPLY_MSG = osc.message(APPLY.decode())
 _VAL_HEAD = osc.pad(VAL) + osc.pad(b",sf")
@@ -42,6 +42,7 @@ class Decoder:
         self._vals: dict[str, float] = {}
         self._t: float | None = None
         self._passthrough: list[bytes] = []
+        self._bytes = 0  # of the held names and passthrough messages
 
     def feed(self, data: bytes) -> Frame | None:
         """A frame when this datagram holds an Apply; a passthrough-only frame when it
@@ -52,6 +53,8 @@ class Decoder:
         applied = False
         for address, start, end in osc.messages(data):  # parse all before changing state
             if address == VAL and (m := _VAL_SF.fullmatch(data, start, end)):  # fast path
+                if len(m.group(1)) > bounds.MAX_NAME_BYTES:
+                    raise Malformed(f"vmc: name longer than {bounds.MAX_NAME_BYTES} bytes")
                 try:
                     vals.append((m.group(1).decode("utf-8"), _F32.unpack(m.group(2))[0]))
                 except UnicodeDecodeError:
@@ -63,14 +66,14 @@ class Decoder:
                 value = args[1]
                 if isinstance(value, bool) or not isinstance(value, int | float):
                     raise Malformed("vmc: Blend/Val value is not a number")
-                vals.append((args[0], float(value)))
+                vals.append((bounds.name(args[0], "vmc: name"), float(value)))
             elif address == APPLY:
                 applied = True
             else:
                 if address == TIME:
                     args = osc.arguments(data, start, end)
-                    if len(args) == 1 and isinstance(args[0], float) and np.isfinite(args[0]):
-                        t = float(args[0])
+                    if len(args) == 1 and isinstance(args[0], float):
+                        t = bounds.time(args[0])  # absurd times: the datagram is malformed
                 other.append(data[start:end])
         if not vals and not applied:
             if t is not None:
@@ -78,9 +81,14 @@ class Decoder:
             return Frame((), np.zeros(0), passthrough=(data,))
         self._vals.update(vals)
         self._passthrough.extend(other)
+        self._bytes += sum(len(n) for n, _ in vals) + sum(len(o) for o in other)
         if t is not None:
             self._t = t
-        if len(self._vals) > MAX_PENDING or len(self._passthrough) > MAX_PENDING:
+        if (
+            len(self._vals) > MAX_PENDING
+            or len(self._passthrough) > MAX_PENDING
+            or self._bytes > MAX_PENDING_BYTES
+        ):
             self._clear()
             raise Malformed("vmc: too many messages without Apply")
         if not applied:
@@ -92,7 +100,7 @@ class Decoder:
             passthrough=tuple(self._passthrough),
         )
         self._clear()
-        return frame
+        return bounds.checked(frame)
 
 
 def rename(name: str, style: str) -> str:
@@ -124,7 +132,7 @@ class Encoder:
         if head is None:
             body = _VAL_HEAD + osc.pad(rename(name, self.style).encode("utf-8"))
             head = struct.pack(">i", len(body) + 4) + body
-            if len(self._heads) < 4 * MAX_PENDING:  # bounded cache
+            if len(self._heads) < 4 * MAX_PENDING:  # bounded: 2,048 x <= 160 bytes
                 self._heads[name] = head
         return head
 
