@@ -8,10 +8,15 @@ Each subcommand is a module ``faceclean.cli.<name>`` with ``HELP`` (one line),
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import importlib.util
 import os
+import signal
 import sys
+import threading
+import warnings
+from collections.abc import Iterator
 
 from faceclean.errors import FacecleanError
 
@@ -54,6 +59,32 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised where the command is, so that atomic outputs clean up as on Ctrl-C."""
+
+
+@contextlib.contextmanager
+def _command() -> Iterator[None]:
+    """One command's scope: the output-path policy (io.paths), SIGTERM as an exception,
+    numpy's floating-point warnings off (results are checked explicitly instead)."""
+    import numpy as np
+
+    from faceclean.io import paths
+
+    def terminate(signum: int, frame: object) -> None:
+        raise Terminated
+
+    on_main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGTERM, terminate) if on_main else None
+    try:
+        with paths.command(), np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            yield
+    finally:
+        if on_main:
+            signal.signal(signal.SIGTERM, old)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = parser()
     args = p.parse_args(argv)
@@ -61,10 +92,14 @@ def main(argv: list[str] | None = None) -> int:
         p.print_help()
         return 2
     try:
-        return int(args._run(args) or 0)
+        with _command():
+            return int(args._run(args) or 0)
     except FacecleanError as e:
         print(f"faceclean: {e}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("faceclean: terminated", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print("faceclean: interrupted", file=sys.stderr)
         return 130

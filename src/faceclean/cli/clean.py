@@ -95,6 +95,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
 
     choice = options.choice(args)
     src = Path(input)
+    io.paths.rewritable(src)  # clean IN -o IN replaces IN (atomically, once complete)
     fmt_in = io.detect(src) if src.is_file() else None
     if fmt_in in stream.FORMATS and io.output_format(output, fmt_in, args.fmt) == fmt_in:
         names = stream.channel_names(src, fmt_in)
@@ -161,7 +162,7 @@ def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
     import numpy as np
     from tqdm import tqdm
 
-    from faceclean.filters.base import Cleaner
+    from faceclean.filters.base import Cleaner, check_finite
 
     valid = np.flatnonzero(anim.valid)
     if cleaner.offline or type(cleaner).clean is not Cleaner.clean or len(valid) < PROGRESS_FRAMES:
@@ -170,4 +171,5 @@ def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
     out = np.full_like(anim.values, np.nan)
     for i in tqdm(valid, unit="frame", file=sys.stderr, leave=False, desc="cleaning"):
         out[i] = cleaner.step(anim.values[i], anim.times[i])
+    check_finite(anim.values, out, cleaner.name)
     return anim.with_values(out)

@@ -30,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean import io
     from faceclean.errors import FacecleanError
 
+    io.paths.rewritable(args.input)  # convert IN -o IN rewrites it in place
     anim = io.load(args.input)
     fmt = io.output_format(args.output, anim.meta.get("format"), args.fmt)
     new_gltf = fmt == "gltf" and (args.mesh is not None or "gltf" not in anim.meta)

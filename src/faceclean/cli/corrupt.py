@@ -23,6 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean import io
     from faceclean.evaluation import simulate
 
+    io.paths.distinct(args.output, args.truth_out)
     clean = io.load(args.input)
     noisy, truth = simulate.corrupt(clean, args.seed, args.preset, args.strength)
     io.save(noisy, args.output, fmt=args.fmt)

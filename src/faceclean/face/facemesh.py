@@ -68,9 +68,10 @@ def stylised() -> FaceMesh:
 def load(path: str | os.PathLike) -> FaceMesh:
     """A face mesh from an npz (``neutral_vertices``, ``faces``/``triangles``, deltas and
     names as in ../shared/data/meshes) or a GLB/glTF with ARKit-named morph targets."""
+    from faceclean.io.source import regular
+
     p = Path(path)
-    if not p.is_file():
-        raise FacecleanError(f"no such mesh file: {p}")
+    regular(p, "mesh file")
     suffix = p.suffix.lower()
     if suffix == ".npz":
         mesh = _read_npz(p)
@@ -98,31 +99,35 @@ def _arkit_deltas(label: str, vertices: np.ndarray, deltas, names) -> np.ndarray
 
 
 def _read_npz(path: Path) -> FaceMesh:
+    from faceclean.io.npz_safe import load_arrays
+    from faceclean.io.source import MAX_UNPACKED
+
+    z = load_arrays(path, MAX_UNPACKED, "face mesh npz")  # truncated, foreign: one line
     try:
-        with np.load(path, allow_pickle=False) as z:
-            keys = set(z.files)
-            vertices = np.asarray(z["neutral_vertices"], np.float32)
-            faces = z["faces"] if "faces" in keys else z["triangles"]
-            if {"arkit_deltas", "arkit_names"} <= keys:
-                deltas, names = z["arkit_deltas"], z["arkit_names"]
-            else:
-                deltas, names = z["blendshape_deltas"], z["names"]
-            deltas = np.asarray(deltas, np.float32)
-    except (KeyError, ValueError, OSError, EOFError) as e:
+        vertices = np.asarray(z["neutral_vertices"], np.float32)
+        faces = z["faces"] if "faces" in z else z["triangles"]
+        if {"arkit_deltas", "arkit_names"} <= set(z):
+            deltas, names = z["arkit_deltas"], z["arkit_names"]
+        else:
+            deltas, names = z["blendshape_deltas"], z["names"]
+        deltas = np.asarray(deltas, np.float32)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or deltas.shape[1:] != vertices.shape:
+            raise ValueError(f"vertices {vertices.shape}, deltas {deltas.shape}")
+        if faces.dtype.kind not in "iu" or names.ndim != 1:
+            raise ValueError("faces must be integers and names a list")
+        faces = np.asarray(faces).reshape(-1, 3).astype(np.uint32)
+    except (KeyError, ValueError, TypeError) as e:
         raise FacecleanError(f"{path.name}: not a face mesh npz ({e})") from None
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or deltas.shape[1:] != vertices.shape:
-        raise FacecleanError(f"{path.name}: vertices {vertices.shape}, deltas {deltas.shape}")
-    faces = np.asarray(faces).reshape(-1, 3).astype(np.uint32)
     out = _arkit_deltas(path.name, vertices, deltas, list(names))
     return FaceMesh(vertices, faces, out, None, path.stem)
 
 
 def _read_gltf(path: Path) -> FaceMesh:
-    import pygltflib
+    from faceclean.io import gltf as gltf_io
 
-    try:
-        gltf = pygltflib.GLTF2().load(str(path))
-    except Exception as e:  # pygltflib raises many kinds on a bad file
+    try:  # bounded, buffer URIs confined to the file's folder (io/gltf.py)
+        _, _, gltf, _, buffers = gltf_io.parse(path)
+    except (IndexError, KeyError, TypeError, AttributeError, ValueError) as e:
         raise FacecleanError(f"{path.name}: not a readable glTF file ({e})") from None
     try:
         for mesh in gltf.meshes or []:
@@ -131,36 +136,51 @@ def _read_gltf(path: Path) -> FaceMesh:
             prim = mesh.primitives[0] if mesh.primitives else None
             if not names or prim is None or not prim.targets:
                 continue
-            vertices = _accessor(gltf, prim.attributes.POSITION).astype(np.float32)
+            vertices = _accessor(gltf, buffers, _attr(prim.attributes, "POSITION")).astype(
+                np.float32
+            )
             if prim.indices is None:
                 faces = np.arange(len(vertices), dtype=np.uint32).reshape(-1, 3)
             else:
-                faces = _accessor(gltf, prim.indices).reshape(-1, 3).astype(np.uint32)
-            deltas = np.stack([_accessor(gltf, t["POSITION"]) for t in prim.targets])
+                faces = _accessor(gltf, buffers, prim.indices).reshape(-1, 3).astype(np.uint32)
+            deltas = np.stack([_accessor(gltf, buffers, t["POSITION"]) for t in prim.targets])
             colors = None
-            if prim.attributes.COLOR_0 is not None:
-                colors = _accessor(gltf, prim.attributes.COLOR_0)[:, :3].astype(np.float32)
+            if _attr(prim.attributes, "COLOR_0") is not None:
+                colors = _accessor(gltf, buffers, _attr(prim.attributes, "COLOR_0"))[:, :3].astype(
+                    np.float32
+                )
             out = _arkit_deltas(path.name, vertices, deltas, names)
             marks = {str(k): int(v) for k, v in (extras.get("landmarks") or {}).items()}
             return FaceMesh(vertices, faces, out, colors, mesh.name or path.stem, marks)
-    except (KeyError, IndexError, ValueError, TypeError) as e:
+    except (KeyError, IndexError, ValueError, TypeError, AttributeError) as e:
         raise FacecleanError(f"{path.name}: unreadable mesh data ({e})") from None
     raise FacecleanError(f"{path.name}: no mesh with named morph targets (extras.targetNames)")
 
 
-def _accessor(gltf, index: int) -> np.ndarray:
+def _attr(attributes: object, name: str) -> int | None:
+    """A primitive attribute's accessor index (pygltflib gives an object or a dict)."""
+    if isinstance(attributes, dict):
+        return attributes.get(name)
+    return getattr(attributes, name, None)
+
+
+def _accessor(gltf, buffers, index: int) -> np.ndarray:
     """(count, width) float64 (or integer for indices) values of an accessor, dense or sparse."""
     acc = gltf.accessors[index]
     width, dtype = _WIDTH[acc.type], np.dtype(_DTYPES[acc.componentType])
     if acc.bufferView is None:
         out = np.zeros((acc.count, width), dtype)
     else:
-        out = _view(gltf, acc.bufferView, acc.byteOffset or 0, acc.count, width, dtype)
+        out = _view(gltf, buffers, acc.bufferView, acc.byteOffset or 0, acc.count, width, dtype)
     if acc.sparse is not None and acc.sparse.count:
         sp = acc.sparse
         idx_type = np.dtype(_DTYPES[sp.indices.componentType])
-        idx = _view(gltf, sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, 1, idx_type)
-        vals = _view(gltf, sp.values.bufferView, sp.values.byteOffset or 0, sp.count, width, dtype)
+        idx = _view(
+            gltf, buffers, sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, 1, idx_type
+        )
+        vals = _view(
+            gltf, buffers, sp.values.bufferView, sp.values.byteOffset or 0, sp.count, width, dtype
+        )
         out = out.copy()
         out[idx[:, 0].astype(np.int64)] = vals
     if acc.normalized and dtype.kind in "iu":
@@ -168,11 +188,10 @@ def _accessor(gltf, index: int) -> np.ndarray:
     return out.astype(np.float64) if dtype.kind == "f" else out
 
 
-def _view(gltf, view_index: int, offset: int, count: int, width: int, dtype) -> np.ndarray:
+def _view(gltf, buffers, view_index: int, offset: int, count: int, width: int, dtype) -> np.ndarray:
     """(count, width) elements of a buffer view, honouring byteStride."""
     view = gltf.bufferViews[view_index]
-    buf = gltf.buffers[view.buffer]
-    data = gltf.binary_blob() if buf.uri is None else gltf.get_data_from_buffer_uri(buf.uri)
+    data = buffers[view.buffer]  # read by io.gltf.parse
     item = width * dtype.itemsize
     stride = view.byteStride or item
     start = (view.byteOffset or 0) + offset

@@ -16,16 +16,24 @@ Time rules, applied per stream, in this order:
 4. t not after the previous frame's time (duplicate or backwards timestamp): the last
    output again, state unchanged. ``t == 0.0`` is a valid time.
 5. Otherwise the cleaner advances by dt = t - t_prev > 0 seconds.
+
+Every ``clean`` (this class's and any subclass's own) ends in ``check_finite``: an output
+that is not finite where its input was (a kalman with ``r=1e300``, a model with NaN
+scales) is a FacecleanError, never a file. Paths that step a cleaner themselves (the
+streaming file path, the CLI's progress loop, the relay's start-up probe) call it too.
 """
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
 
 from faceclean.animation import Animation
+from faceclean.errors import FacecleanError
 
 State = tuple[np.ndarray, ...]  # each (S, M)
 MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
@@ -36,6 +44,12 @@ class Cleaner(ABC):
 
     name: ClassVar[str] = "cleaner"
     offline: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__.get("clean")
+        if own is not None and not getattr(own, "_finite_checked", False):
+            cls.clean = _checked(own)  # a subclass's own clean gets the same check
 
     @abstractmethod
     def reset(self) -> None: ...
@@ -50,7 +64,34 @@ class Cleaner(ABC):
         valid = anim.valid
         for i in np.flatnonzero(valid):
             out[i] = self.step(anim.values[i], anim.times[i])
+        check_finite(anim.values, out, self.name)
         return anim.with_values(out)
+
+    clean._finite_checked = True  # type: ignore[attr-defined]
+
+
+def check_finite(inp: np.ndarray, out: np.ndarray, name: str) -> None:
+    """FacecleanError when ``out`` is not finite in a cell where ``inp`` (same shape) is
+    finite and within MAX_ABS: a cleaner that erases data must not write a file."""
+    with np.errstate(invalid="ignore"):
+        lost = (np.abs(inp) <= MAX_ABS) & ~np.isfinite(out)
+    if lost.any():
+        raise FacecleanError(
+            f"{name}: the output is not finite in {int(lost.sum())} of "
+            f"{int((np.abs(inp) <= MAX_ABS).sum())} cells where the input is finite; "
+            "check its parameters or model (nothing written)"
+        )
+
+
+def _checked(clean: Callable[[Cleaner, Animation], Animation]) -> Callable:
+    @functools.wraps(clean)
+    def wrapper(self: Cleaner, anim: Animation) -> Animation:
+        out = clean(self, anim)
+        check_finite(anim.values, out.values, self.name)
+        return out
+
+    wrapper._finite_checked = True  # type: ignore[attr-defined]
+    return wrapper
 
 
 class StreamCleaner(Cleaner):

@@ -192,6 +192,14 @@ def tune(
     units = [(group_of(n) or "other") if per_group else "all" for n in names]
     unit_names = list(dict.fromkeys(units))
     unit_of = np.array([unit_names.index(u) for u in units])  # (M,)
+    scored = (~np.isnan(x).all(axis=-1, keepdims=True) & np.isfinite(y)).sum(axis=(0, 1))  # (M,)
+    for u, g in enumerate(unit_names):  # an MSE over no cells would claim 0.0
+        if not scored[unit_of == u].any():
+            where = "" if g == "all" else f" for the {g} channels"
+            raise FacecleanError(
+                f"nothing to tune on{where}: the truth has no finite value where the noisy "
+                "take has a frame (all tracking loss?)"
+            )
 
     d = len(keys)
     n1 = 16 if d == 1 else 8

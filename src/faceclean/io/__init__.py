@@ -18,6 +18,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.io import paths, source  # noqa: F401 (io.paths: the output policy)
 from faceclean.io.atomic import atomic_open
 
 # format name -> module; extensions that select it.
@@ -68,7 +69,7 @@ def detect(path: str | os.PathLike) -> str:
         )
     if len(candidates) == 1:
         return candidates[0]
-    with open(p, "rb") as f:
+    with source.open_binary(p) as f:
         head = f.read(4096)
     for fmt in candidates:
         if _module(fmt).sniff(head):
@@ -79,10 +80,7 @@ def detect(path: str | os.PathLike) -> str:
 def load(path: str | os.PathLike, fmt: str | None = None) -> Animation:
     """Read an animation file; raises FacecleanError with a one-line reason on bad input."""
     p = Path(path)
-    if not p.exists():
-        raise FacecleanError(f"no such file: {p}")
-    if p.is_dir():
-        raise FacecleanError(f"is a folder, not a file: {p}")
+    source.regular(p)  # no FIFO, device or folder: nothing blocks, nothing reads forever
     fmt = fmt or detect(p)
     try:
         anim = _module(fmt).read(p)
@@ -109,8 +107,13 @@ def checked(anim: Animation, label: str) -> Animation:
         raise FacecleanError(f"{label}: frame {bad[0]} has no finite time")
     if anim.values.dtype != np.float64 or anim.values.ndim != 2:
         raise FacecleanError(f"{label}: values are not a (frames, channels) table")
-    if not all(isinstance(n, str) for n in anim.names):
-        raise FacecleanError(f"{label}: channel names must be text")
+    for n in (*anim.names, *anim.meta.get("pose_names", ())):
+        if not isinstance(n, str):
+            raise FacecleanError(f"{label}: channel names must be text")
+        try:
+            n.encode("utf-8")
+        except UnicodeEncodeError:  # a lone surrogate (JSON "\ud800", a numpy str)
+            raise FacecleanError(f"{label}: channel name {n!r} is not valid Unicode") from None
     return anim
 
 

@@ -1,7 +1,9 @@
 """Atomic output: write to a temporary file beside the target, then rename.
 
-A failed or refused write leaves no file behind and never touches an existing one,
-so OUT == IN is safe (the input was read whole before the rename replaces it).
+A failed, refused or interrupted write (an exception, Ctrl-C, SIGTERM: the CLI turns it
+into an exception) leaves no file behind and never touches an existing one, so OUT == IN
+is safe (the input was read whole before the rename replaces it). What a path may name
+is decided by ``io.paths.target`` (no FIFO, device or folder; not another input).
 """
 
 from __future__ import annotations
@@ -14,17 +16,20 @@ from pathlib import Path
 from typing import IO
 
 from faceclean.errors import FacecleanError
+from faceclean.io import paths
 
 
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file for writing; on success it replaces ``path`` atomically."""
-    target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
+    given = Path(path)
+    folder = given.parent if str(given.parent) else Path(".")
     if not folder.is_dir():
         raise FacecleanError(f"output folder does not exist: {folder}")
-    if target.is_dir():
-        raise FacecleanError(f"output path is a folder: {target}")
+    if given.is_dir():
+        raise FacecleanError(f"output path is a folder: {given}")
+    target = paths.target(given)  # the real file (symlinks followed), checked
+    folder = target.parent
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
     try:
         kwargs = {"newline": ""} if "b" not in mode else {}
@@ -37,6 +42,7 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         else:
             os.chmod(tmp, 0o644)
         os.replace(tmp, target)
+        paths.written(target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)

@@ -37,6 +37,7 @@ import pygltflib
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.io import source as bounded
 
 _JSON, _BIN = 0x4E4F534A, 0x004E4942  # GLB chunk types
 # componentType -> (dtype, normalising divisor for integer outputs)
@@ -72,22 +73,42 @@ def read(path: str | os.PathLike) -> Animation:
     """Read the first morph-weight animation channel of a .gltf or .glb file."""
     p = Path(path)
     try:
-        return _read(p, p.read_bytes())
+        return _read(p, *parse(p))
     except (IndexError, KeyError, TypeError, AttributeError, ValueError) as e:
         raise FacecleanError(f"{p.name}: broken glTF ({type(e).__name__}: {e})") from None
 
 
-def _read(p: Path, raw: bytes) -> Animation:
+def parse(p: Path) -> tuple[bytes, dict, pygltflib.GLTF2, int | None, tuple[bytes, ...]]:
+    """A .gltf or .glb file -> (raw bytes, JSON, model, BIN chunk offset, buffers).
+
+    Read through io.source (a regular file, bounded); buffer URIs must stay in the
+    file's folder and data: URIs are bounded (``_buffer``). Also used for face meshes.
+    """
+    raw = bounded.read_bytes(p)
     glb = raw.startswith(b"glTF")
     text, bin_offset, bin_chunk = _split_glb(raw, p.name) if glb else (raw, None, None)
     try:
         doc = json.loads(text)
+        if not isinstance(doc, dict):
+            raise ValueError("the JSON is not an object")
         with warnings.catch_warnings():  # dataclasses_json warns on absent optional fields
             warnings.simplefilter("ignore")
             model = pygltflib.GLTF2.from_dict(doc)
-    except (UnicodeDecodeError, ValueError) as e:
+    except (UnicodeDecodeError, ValueError, RecursionError) as e:
         raise FacecleanError(f"{p.name}: not a glTF file ({e})") from None
-    buffers = tuple(_buffer(b, bin_chunk, p) for b in model.buffers)
+    buffers = tuple(_buffer(b, bin_chunk, p) for b in model.buffers or [])
+    return raw, doc, model, bin_offset, buffers
+
+
+def _read(
+    p: Path,
+    raw: bytes,
+    doc: dict,
+    model: pygltflib.GLTF2,
+    bin_offset: int | None,
+    buffers: tuple[bytes, ...],
+) -> Animation:
+    glb = raw.startswith(b"glTF")
 
     found = [
         (anim, ch)
@@ -217,26 +238,46 @@ def _buffer(buffer: pygltflib.Buffer, bin_chunk: bytes | None, path: Path) -> by
         if bin_chunk is None:
             raise FacecleanError(f"{path.name}: a buffer without URI and no GLB BIN chunk")
         return bin_chunk
-    if uri.startswith("data:"):
-        return base64.b64decode(uri.split(",", 1)[1])
+    if not isinstance(uri, str):
+        raise FacecleanError(f"{path.name}: a buffer URI is not text")
+    if uri.startswith("data:"):  # base64: 4 characters per 3 bytes
+        if len(uri) > bounded.MAX_FILE // 3 * 4 + 256:
+            raise FacecleanError(
+                f"{path.name}: a data: URI over the {bounded.size_text(bounded.MAX_FILE)} limit"
+            )
+        head, comma, body = uri.partition(",")
+        if not comma or not head.endswith(";base64"):
+            raise FacecleanError(f"{path.name}: a data: URI that is not base64")
+        try:
+            return base64.b64decode(body, validate=True)
+        except ValueError:
+            raise FacecleanError(f"{path.name}: a data: URI that is not base64") from None
     name = urllib.parse.unquote(uri)
-    if ":" in uri.split("/", 1)[0] or Path(name).is_absolute():  # a scheme or a root
+    if ":" in uri.split("/", 1)[0] or Path(name).is_absolute() or "\\" in name:
         raise FacecleanError(f"{path.name}: buffer URI {uri[:60]!r} is not a relative file path")
-    target = path.parent / name
-    if not target.is_file():
-        raise FacecleanError(f"{path.name}: buffer file {uri!r} not found beside it")
-    return target.read_bytes()
+    folder = path.parent.resolve()
+    target = (folder / name).resolve()  # symlinks followed: they must stay inside too
+    if not target.is_relative_to(folder):
+        raise FacecleanError(f"{path.name}: buffer URI {uri[:60]!r} leaves the file's folder")
+    if not target.exists():
+        raise FacecleanError(f"{path.name}: buffer file {uri[:60]!r} not found beside it")
+    return bounded.read_bytes(target, what="buffer file")
 
 
 def _read_accessor(model: pygltflib.GLTF2, buffers: tuple[bytes, ...], i: int) -> np.ndarray:
     """A SCALAR accessor as float64 (normalised integers mapped to [-1, 1] / [0, 1])."""
-    acc = model.accessors[i]
+    acc = model.accessors[count(i, "accessor index")]
     if acc.sparse is not None or acc.bufferView is None or acc.type != "SCALAR":
         raise FacecleanError(f"accessor {i}: only dense SCALAR accessors are supported")
-    if acc.componentType not in _COMPONENTS:
-        raise FacecleanError(f"accessor {i}: component type {acc.componentType} not supported")
+    if not isinstance(acc.componentType, int) or acc.componentType not in _COMPONENTS:
+        raise FacecleanError(f"accessor {i}: component type {acc.componentType!r} not supported")
     dtype, scale = _COMPONENTS[acc.componentType]
-    view = model.bufferViews[acc.bufferView]
+    view = model.bufferViews[count(acc.bufferView, "bufferView")]
+    for v, what in ((acc.count, "count"), (acc.byteOffset, "byteOffset"),
+                    (view.byteOffset, "byteOffset"), (view.byteStride, "byteStride"),
+                    (view.buffer, "buffer")):  # fmt: skip
+        if v is not None:
+            count(v, f"accessor {i}: {what}")
     start = (view.byteOffset or 0) + (acc.byteOffset or 0)
     stride = view.byteStride or np.dtype(dtype).itemsize
     data = buffers[view.buffer]
@@ -244,6 +285,13 @@ def _read_accessor(model: pygltflib.GLTF2, buffers: tuple[bytes, ...], i: int) -
         raise FacecleanError(f"accessor {i}: runs past the end of its buffer")
     raw = np.ndarray((acc.count,), dtype, buffer=data, offset=start, strides=(stride,))
     return _decode(raw, scale)
+
+
+def count(v: object, what: str) -> int:
+    """A glTF index, count, offset or stride: a non-negative integer, else one line."""
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise FacecleanError(f"{what} {v!r} is not a non-negative integer")
+    return v
 
 
 def _decode(raw: np.ndarray, scale: float | None) -> np.ndarray:

@@ -24,6 +24,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.io import source
 
 FORMAT = "faceclean-animation/1"
 
@@ -36,7 +37,7 @@ def read(path: str | os.PathLike) -> Animation:
     """Read a ``faceclean-animation/1`` JSON file."""
     p = Path(path)
     try:
-        doc = json.loads(p.read_bytes())
+        doc = json.loads(source.read_bytes(p))
     except json.JSONDecodeError as e:
         raise FacecleanError(f"{p.name}: not valid JSON ({e})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:

@@ -39,6 +39,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, canonical, pascal
 from faceclean.errors import FacecleanError
+from faceclean.io import source as bounded
 
 FPS = 60.0  # the timecode's frame rate, Hz
 DAY = 86400.0  # s
@@ -56,7 +57,8 @@ ANGLES: tuple[str, ...] = (
     "RightEyeYaw", "RightEyePitch", "RightEyeRoll",
 )  # fmt: skip
 
-_TIMECODE = re.compile(rb"^\s*(\d+):(\d+):(\d+)[:;.](\d+(?:\.\d*)?)\s*$")
+# HH:MM:SS:FF.fff, each field 1-2 digits (range-checked), at most 9 decimals of a frame
+_TIMECODE = re.compile(rb"^\s*(\d{1,2}):(\d{1,2}):(\d{1,2})[:;.](\d{1,2}(?:\.\d{0,9})?)\s*$")
 _BOM = b"\xef\xbb\xbf"
 
 
@@ -86,7 +88,10 @@ def timecode_seconds(text: bytes | str) -> float:
     if m is None:
         raise FacecleanError(f"bad timecode {raw.decode(errors='replace')!r}")
     h, mi, s = (int(g) for g in m.groups()[:3])
-    return 3600.0 * h + 60.0 * mi + s + float(m.group(4)) / FPS
+    ff = float(m.group(4))
+    if h > 23 or mi > 59 or s > 59 or ff >= FPS:  # a time of day: no 99:99:99:99.999
+        raise FacecleanError(f"bad timecode {raw.decode(errors='replace')!r} (not a time of day)")
+    return 3600.0 * h + 60.0 * mi + s + ff / FPS
 
 
 def timecode_text(seconds: float) -> str:
@@ -102,7 +107,7 @@ def timecode_text(seconds: float) -> str:
 def read(path: str | os.PathLike) -> Animation:
     """Read a Live Link Face CSV; missing frames become all-NaN rows."""
     p = Path(path)
-    data = p.read_bytes()
+    data = bounded.read_bytes(p)
     lines = tuple(data.splitlines(keepends=True))
     if not lines or not sniff(lines[0]):
         raise FacecleanError(f"{p.name}: not a Live Link Face CSV (no Timecode,BlendshapeCount)")
@@ -147,7 +152,9 @@ class Header:
 
 def parse_header(line: bytes, label: str) -> Header:
     """The first line -> Header; the first spelling of a blendshape wins, repeats pass."""
-    fields = tuple(h.strip().decode("utf-8") for h in _content(line).removeprefix(_BOM).split(b","))
+    raw = _content(line).removeprefix(_BOM).split(b",")
+    bounded.check_cells(raw, f"{label} line 1", bounded.MAX_NAME)
+    fields = tuple(h.strip().decode("utf-8") for h in raw)
     columns, names, pose_cols = [], [], []
     seen: set[str] = set()
     for j, h in enumerate(fields[2:], start=2):
@@ -174,6 +181,7 @@ def parse_rows(
         fields = _content(line).split(b",")
         if fields == [b""]:
             continue  # blank line: passthrough
+        bounded.check_cells(fields, f"{label} line {k + 1}")
         try:
             stamps.append(timecode_seconds(fields[0]))
         except FacecleanError as e:

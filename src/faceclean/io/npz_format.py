@@ -18,6 +18,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
 from faceclean.io.npz_safe import load_arrays
+from faceclean.io.source import MAX_UNPACKED
 
 FORMAT = "faceclean-animation/1"
 
@@ -29,7 +30,7 @@ def sniff(head: bytes) -> bool:
 def read(path: str | os.PathLike) -> Animation:
     """Read an ``.npz`` animation."""
     p = Path(path)
-    arrays = load_arrays(p)
+    arrays = load_arrays(p, MAX_UNPACKED)
     if "format" in arrays and str(arrays["format"]) != FORMAT:
         raise FacecleanError(f"{p.name}: format {str(arrays['format'])!r}, expected {FORMAT!r}")
     times = arrays.get("times", arrays.get("time"))
@@ -39,18 +40,44 @@ def read(path: str | os.PathLike) -> Animation:
         raise FacecleanError(f"{p.name}: needs 'times', 'values' and 'names' arrays")
     if np.ndim(times) != 1 or np.ndim(names) != 1 or names.dtype.kind not in "US":
         raise FacecleanError(f"{p.name}: 'times' and 'names' must be 1-D (names as text)")
-    values = np.asarray(values, dtype=np.float64)
+    times, values = _real(times, "times", p.name), _real(values, "values", p.name)
     if values.ndim != 2 or values.shape != (len(times), len(names)):
         raise FacecleanError(
             f"{p.name}: 'values' is {values.shape}, expected {len(times)} x {len(names)}"
         )
     meta: dict[str, Any] = {"format": "npz"}
     if "pose" in arrays:
-        meta["pose"] = arrays["pose"].astype(np.float64)
-        meta["pose_names"] = tuple(str(n) for n in arrays.get("pose_names", ()))
+        pose = _real(arrays["pose"], "pose", p.name)
+        pose_names = _text(arrays.get("pose_names", np.zeros(0, "U1")), "pose_names", p.name)
+        if pose.ndim != 2 or len(pose) != len(times) or pose.shape[1] != len(pose_names):
+            raise FacecleanError(
+                f"{p.name}: 'pose' is {pose.shape}, expected {len(times)} x "
+                f"{len(pose_names)} (one column per pose name)"
+            )
+        meta["pose"], meta["pose_names"] = pose, pose_names
     if "timecode_start" in arrays:
-        meta["timecode_start"] = float(arrays["timecode_start"])
-    return Animation(times, values, tuple(str(n) for n in names), meta)
+        start = _real(arrays["timecode_start"], "timecode_start", p.name)
+        if start.ndim != 0 or not np.isfinite(start):
+            raise FacecleanError(f"{p.name}: 'timecode_start' must be one finite number")
+        meta["timecode_start"] = float(start)
+    return Animation(times, values, _text(names, "names", p.name), meta)
+
+
+def _real(a: np.ndarray, key: str, label: str) -> np.ndarray:
+    """A numeric array as float64; complex, text and other kinds are refused."""
+    if a.dtype.kind not in "biuf":
+        raise FacecleanError(f"{label}: '{key}' holds {a.dtype} values, not real numbers")
+    return a.astype(np.float64)
+
+
+def _text(a: np.ndarray, key: str, label: str) -> tuple[str, ...]:
+    """A 1-D str or bytes (UTF-8) array as a tuple of str."""
+    if a.ndim != 1 or a.dtype.kind not in "US":
+        raise FacecleanError(f"{label}: '{key}' must be a 1-D array of text")
+    try:
+        return tuple(n.decode("utf-8") if isinstance(n, bytes) else str(n) for n in a.tolist())
+    except UnicodeDecodeError:
+        raise FacecleanError(f"{label}: '{key}' is not UTF-8 text") from None
 
 
 def write(anim: Animation, f: BinaryIO) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from faceclean.errors import FacecleanError
+from faceclean.io.source import regular
 
 MiB = 1 << 20
 _FAILURES = (
@@ -39,9 +40,7 @@ def load_arrays(
     ``max_bytes``: refuse a file larger than this, or one whose arrays unpack larger.
     """
     p = Path(path)
-    if not p.is_file():
-        raise FacecleanError(f"no such {what}: {p}")
-    size = p.stat().st_size
+    size = regular(p, what).st_size  # no FIFO, device or folder
     if max_bytes is not None and size > max_bytes:
         raise FacecleanError(f"{p.name}: {_size(size)}, over the {_size(max_bytes)} limit")
     try:

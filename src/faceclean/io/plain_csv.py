@@ -18,6 +18,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.io import source
 
 _BOM = b"\xef\xbb\xbf"
 
@@ -31,7 +32,7 @@ def sniff(head: bytes) -> bool:
 def read(path: str | os.PathLike) -> Animation:
     """Read a plain CSV; empty cells are NaN."""
     p = Path(path)
-    lines = p.read_bytes().removeprefix(_BOM).splitlines()
+    lines = source.read_bytes(p).removeprefix(_BOM).splitlines()
     if not lines or not sniff(lines[0]):
         raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
     t_col, names = parse_header(lines[0])
@@ -41,7 +42,9 @@ def read(path: str | os.PathLike) -> Animation:
 
 def parse_header(line: bytes) -> tuple[int, tuple[str, ...]]:
     """The header line (no BOM) -> (index of the time column, channel names)."""
-    header = [c.strip().strip(b'"').decode("utf-8") for c in line.split(b",")]
+    cells = line.split(b",")
+    source.check_cells(cells, "header", source.MAX_NAME)
+    header = [c.strip().strip(b'"').decode("utf-8") for c in cells]
     t_col = [h.lower() for h in header].index("time")
     return t_col, tuple(h for j, h in enumerate(header) if j != t_col)
 
@@ -53,6 +56,7 @@ def parse_rows(
     skipped; ``done`` rows were read before these (for the row numbers in errors)."""
     rows = [line.split(b",") for line in lines if line.strip()]
     for k, row in enumerate(rows, start=done):
+        source.check_cells(row, f"{label}: row {k + 1}")
         if len(row) != n_fields:
             raise FacecleanError(
                 f"{label}: row {k + 1} has {len(row)} fields, the header has {n_fields}"

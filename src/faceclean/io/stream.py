@@ -23,13 +23,12 @@ from typing import BinaryIO
 import numpy as np
 
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner
-from faceclean.io import livelink_csv, plain_csv
+from faceclean.filters.base import Cleaner, check_finite
+from faceclean.io import livelink_csv, plain_csv, source
 from faceclean.io.atomic import atomic_open
 
 BLOCK = 4096  # lines per block
 CHUNK = 1 << 20  # bytes per read
-MAX_LINE = 16 << 20  # bytes; a longer line is not a CSV row
 FORMATS = ("livelink", "csv")
 
 Progress = Callable[[int], None]  # called with the bytes consumed since the last call
@@ -48,7 +47,7 @@ def can_stream(cleaner: Cleaner, fmt_in: str, fmt_out: str) -> bool:
 def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
     """The channel names of a row-format file, from its header line alone."""
     p = Path(path)
-    with open(p, "rb") as f:
+    with source.open_binary(p) as f:
         first = next(iter_lines(f), b"")
     try:
         if fmt == "livelink":
@@ -79,7 +78,7 @@ def clean_file(
     p = Path(src)
     step = _livelink if fmt == "livelink" else _plain
     cleaner.reset()
-    with open(p, "rb") as f, atomic_open(dst, "wb") as out:
+    with source.open_binary(p) as f, atomic_open(dst, "wb") as out:
         try:
             return step(p.name, _counted(f, progress), out, cleaner)
         except UnicodeDecodeError as e:
@@ -93,8 +92,8 @@ def iter_lines(f: BinaryIO, chunk: int = CHUNK) -> Iterator[bytes]:
     while data := f.read(chunk):
         lines = (buf + data).splitlines(keepends=True)
         buf = b"" if lines[-1].endswith(b"\n") else lines.pop()  # "\r" may precede "\n"
-        if len(buf) > MAX_LINE:
-            raise FacecleanError(f"a line longer than {MAX_LINE >> 20} MiB: not a CSV file")
+        if len(buf) > source.MAX_LINE:
+            raise FacecleanError(f"a line longer than {source.MAX_LINE} bytes: not a CSV file")
         yield from lines
     if buf:
         yield from buf.splitlines(keepends=True)
@@ -124,6 +123,7 @@ def _step_rows(cleaner: Cleaner, times: np.ndarray, values: np.ndarray) -> np.nd
     valid = ~np.all(np.isnan(values), axis=1) if values.shape[1] else np.ones(len(values), bool)
     for i in np.flatnonzero(valid):
         out[i] = cleaner.step(values[i], times[i])
+    check_finite(values, out, cleaner.name)  # as Cleaner.clean: an erasing cleaner fails
     return out
 
 

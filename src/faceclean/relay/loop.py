@@ -142,6 +142,7 @@ class Relay:
         self.listen, self.send, self.cleaner, self.clock = listen, send, cleaner, clock
         self.recorder = recorder
         warm_up(cleaner)  # before the socket exists: nothing queues behind it
+        probe(cleaner)  # a cleaner that erases the face does not start
         self._decoders: bounds.Bounded[object, Decoder] = bounds.Bounded(bounds.MAX_SENDERS)
         self.encoder = send.encoder()
         self.stats = Stats()
@@ -323,6 +324,19 @@ class Relay:
         except OSError:
             self.stats.send_errors += 1
             return False
+
+
+def probe(cleaner: Stepper) -> None:
+    """FacecleanError when ``cleaner`` turns a plain face stream (1 s at 60 fps, every
+    weight moving in [0.2, 0.8]) into non-finite output: a cleaner that would erase every
+    frame does not start (filters/base.py ``check_finite``). The cleaner is reset after."""
+    from faceclean.filters.base import check_finite
+
+    t = np.arange(60) / 60.0  # s
+    x = 0.5 + 0.3 * np.sin(2 * np.pi * t[:, None] + np.arange(len(ARKIT52)))  # (60, 52)
+    y = np.array([cleaner.step(row, ti) for row, ti in zip(x, t, strict=True)])
+    cleaner.reset()
+    check_finite(x, y, getattr(cleaner, "name", None) or type(cleaner).__name__)
 
 
 def _same_socket(a: tuple, b: tuple) -> bool:

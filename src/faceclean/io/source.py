@@ -1,0 +1,100 @@
+"""The one bounded reader: every file faceclean reads goes through here first.
+
+An input must be a regular file (a symlink is followed): a FIFO, a device (``/dev/zero``),
+a socket or a folder is refused before it is opened, so nothing blocks on a FIFO without
+a writer and nothing reads without end. What is read is bounded, so memory stays in
+proportion to the input whatever its content:
+
+- a file read whole: at most ``MAX_FILE`` bytes (a Live Link or plain CSV cleaned by a
+  causal cleaner streams instead and has no size bound);
+- a CSV data cell (Live Link or plain): at most ``MAX_CELL`` bytes, a header cell
+  ``MAX_NAME``, a row at most ``MAX_FIELDS`` fields (the parsed table costs at most
+  8x the float64 values);
+- an npz animation unpacks to at most ``MAX_UNPACKED`` bytes (model files: 64 MiB,
+  ``npz_safe``); a glTF ``data:`` URI decodes to at most ``MAX_FILE`` bytes.
+
+Each refusal is one line naming the file and the bound.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+from typing import BinaryIO
+
+from faceclean.errors import FacecleanError
+from faceclean.io import paths
+
+MiB = 1 << 20
+MAX_FILE = 1024 * MiB  # bytes of a file read whole
+MAX_UNPACKED = 512 * MiB  # bytes an npz animation may unpack to
+MAX_CELL = 64  # bytes of one CSV data cell (a number needs at most ~25)
+MAX_NAME = 256  # bytes of one CSV header cell (a channel name)
+MAX_FIELDS = 4096  # fields of one CSV row
+MAX_LINE = (MAX_NAME + 1) * MAX_FIELDS  # bytes of one CSV line
+
+
+def regular(path: str | os.PathLike, what: str = "file") -> os.stat_result:
+    """The stat of ``path`` when it is a regular file (symlinks followed), else one line."""
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise FacecleanError(f"no such {what}: {p}") from None
+    except OSError as e:
+        raise FacecleanError(f"cannot read {p}: {e.strerror or e}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise FacecleanError(f"is a folder, not a file: {p}")
+    if not stat.S_ISREG(st.st_mode):
+        raise FacecleanError(f"{p}: {kind(st.st_mode)}, not a regular file")
+    paths.note_input(st)  # a command never overwrites what it reads (io.paths)
+    return st
+
+
+def kind(mode: int) -> str:
+    """What a non-regular file is, in words."""
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISDIR, "a folder"),
+    ):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def open_binary(path: str | os.PathLike, what: str = "file") -> BinaryIO:
+    """``path`` opened for reading, once ``regular`` accepts it."""
+    regular(path, what)
+    try:
+        return open(path, "rb")  # noqa: SIM115 (the caller closes it)
+    except OSError as e:
+        raise FacecleanError(f"cannot read {path}: {e.strerror or e}") from None
+
+
+def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file") -> bytes:
+    """The whole of a regular file, at most ``limit`` bytes (a larger one is refused)."""
+    p = Path(path)
+    size = regular(p, what).st_size
+    if size > limit:
+        raise FacecleanError(f"{p.name}: {size_text(size)}, over the {size_text(limit)} limit")
+    with open_binary(p, what) as f:
+        data = f.read(limit + 1)  # a file growing while read is still bounded
+    if len(data) > limit:
+        raise FacecleanError(f"{p.name}: over the {size_text(limit)} limit")
+    return data
+
+
+def check_cells(fields: list[bytes], label: str, limit: int = MAX_CELL) -> None:
+    """Refuse a CSV row with a field over ``limit`` bytes or more than MAX_FIELDS fields."""
+    if len(fields) > MAX_FIELDS:
+        raise FacecleanError(f"{label}: {len(fields)} fields (at most {MAX_FIELDS})")
+    if max(map(len, fields), default=0) > limit:
+        raise FacecleanError(f"{label}: a cell longer than {limit} bytes")
+
+
+def size_text(n: int) -> str:
+    return f"{n / MiB:.1f} MiB" if n >= MiB // 10 else f"{n} bytes"
