@@ -99,7 +99,7 @@ BAD_FILES = {
         b'"values": [[{"x": 1}]]}',
         "not a readable json",
     ),
-    "deeply nested json": ("d.json", b"[" * 100_000 + b"]" * 100_000, "not a readable json"),
+    "deeply nested json": ("d.json", b"[" * 100_000 + b"]" * 100_000, "nested too deep"),
     "time column only": ("c.csv", b"time\n0\n0.1\n", "no channels"),
 }
 

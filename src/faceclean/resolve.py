@@ -61,10 +61,9 @@ def parse_value(text: str) -> Any:
         return True
     if low in ("false", "no", "off"):
         return False
-    try:
-        return json.loads(t)
-    except (json.JSONDecodeError, RecursionError):
-        return t
+    from faceclean import strict_json
+
+    return strict_json.value(t)  # strict JSON (no NaN, no 1e400, no deep lists), else the text
 
 
 def parse_item(item: str) -> Item:

@@ -7,7 +7,6 @@ rules, and the value range after it); ``info calib.json`` describes a calibratio
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
 
 import numpy as np
@@ -74,7 +73,7 @@ def describe(anim) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from faceclean import io
+    from faceclean import io, strict_json
     from faceclean.adjust import Adjust, is_level_file
 
     if is_level_file(args.file):
@@ -90,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
             "after": {k: after[k] for k in ("min", "max", "outside_0_1")},
         }
     if args.json:
-        print(json.dumps(facts, indent=2))
+        print(strict_json.dumps(facts, indent=2))  # non-finite numbers: null, never Infinity
         return 0
     lines = [
         ("file", args.file),
@@ -118,11 +117,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _levels_file(args: argparse.Namespace) -> int:
     """``info calib.json``: the rules, then the measured neutral and top per channel."""
+    from faceclean import strict_json
     from faceclean.adjust import Adjust
 
     adjust = Adjust.load(args.file)
     if args.json:
-        print(json.dumps(adjust.to_dict(), indent=2))
+        print(strict_json.dumps(adjust.to_dict(), indent=2))
         return 0
     print(f"{'file':<12}{args.file}")
     print(f"{'format':<12}faceclean-adjust/1 (level mapping)")

@@ -20,13 +20,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import threading
 
-    from faceclean.errors import FacecleanError
+    from faceclean.errors import within
     from faceclean.relay import parse
-    from faceclean.relay.replay import load_frames, replay
+    from faceclean.relay.replay import MAX_SPEED, MIN_SPEED, load_frames, replay
 
     send = parse(args.send, "send")
-    if not args.speed > 0:
-        raise FacecleanError(f"--speed must be > 0 (got {args.speed})")
+    within(args.speed, "--speed", MIN_SPEED, MAX_SPEED)
     frames = load_frames(args.file)
     stop = threading.Event()
 

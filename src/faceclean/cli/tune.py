@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     for n, c in zip(args.noisy, args.truth, strict=True):
         noisy = io.load(n)
         pairs.append((noisy, tune.align(noisy, io.load(c))))
+    io.paths.target(args.output)  # refused now (e.g. it names the truth), not after tuning
     bar = tqdm(total=1 + tune.REFINE, desc="tuning", unit="pass", file=sys.stderr, leave=False)
 
     def progress(done: int, total: int) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
 from faceclean.errors import FacecleanError
+from faceclean.errors import seed as check_seed
 
 
 def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = False) -> Animation:
@@ -28,7 +29,7 @@ def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = Fal
         raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
     if not (np.isfinite(fps) and 1.0 <= fps <= 1000.0):
         raise FacecleanError(f"fps must be in [1, 1000], got {fps}")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     t = np.arange(max(int(round(seconds * fps)), 1) + 1) / fps  # (N,) s, 0..seconds
     x = np.zeros((len(t), 52))
     x += _resting(rng) + _idle(t, rng)

@@ -25,8 +25,11 @@ from scipy.signal import butter, lfilter
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
-from faceclean.errors import FacecleanError
+from faceclean.errors import FacecleanError, within
+from faceclean.errors import seed as check_seed
 from faceclean.timing import hold_last, resample, runs, stream_times
+
+MAX_STRENGTH = 100.0  # artefact scale bound (corrupt --strength)
 
 
 @dataclass(frozen=True)
@@ -155,8 +158,7 @@ def sample_params(
     (0 = nothing but the tracker's timing, 1 = the preset, 2 = twice the artefacts)."""
     if preset not in PRESETS:
         raise FacecleanError(f"unknown simulator preset {preset!r} (known: {', '.join(PRESETS)})")
-    if not np.isfinite(strength) or strength < 0:
-        raise FacecleanError(f"strength must be a number >= 0, got {strength}")
+    within(strength, "strength", 0.0, MAX_STRENGTH)  # 1e308 would overflow the draws
     values = {}
     for f in fields(Params):  # fixed field order: the draws do not depend on dict order
         if f.name in _OPTIONAL and f.name not in PRESETS[preset]:
@@ -183,7 +185,7 @@ def corrupt(
     both; tracking-loss gaps are all-NaN rows in ``noisy`` while ``truth`` keeps values;
     frames the source itself lacks are NaN in both. Same seed, same output.
     """
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     return apply(clean, sample_params(rng, preset, strength), rng)
 
 

@@ -24,9 +24,11 @@ def per_channel(
     Raises FacecleanError (one line) for a wrong length, a non-number or a value outside
     (low, high] (``open_low``) or [low, high].
     """
+    if isinstance(value, list | tuple) and any(isinstance(v, list | tuple | dict) for v in value):
+        raise FacecleanError(f"{what} must be a number or a flat list of numbers")
     try:
         a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError, RecursionError):  # 10**400: OverflowError
         raise FacecleanError(f"{what} must be a number or a list of numbers") from None
     if isinstance(value, bool) or a.dtype == bool:
         raise FacecleanError(f"{what} must be a number, not a boolean")

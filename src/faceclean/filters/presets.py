@@ -26,10 +26,12 @@ from typing import Any
 
 import numpy as np
 
+from faceclean import strict_json
 from faceclean.channels import ARKIT52, GROUPS, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters import METHODS, Cleaner, make
 from faceclean.io.atomic import atomic_write
+from faceclean.io.source import read_bytes
 from faceclean.settings import PRESETS
 
 FORMAT = "faceclean-preset/1"
@@ -61,10 +63,18 @@ def _numbers(d: Any, where: str) -> dict[str, float]:
     if not isinstance(d, dict):
         raise FacecleanError(f"{where} must be an object of name: number")
     for k, v in d.items():
-        ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        ok = isinstance(v, int | float) and not isinstance(v, bool) and _finite(v)
         if not ok:
-            raise FacecleanError(f"{where}.{k} must be a finite number (got {json.dumps(v)})")
+            got = strict_json.dumps(v)[:40] if strict_json.depth(v, 3) < 3 else "a nested value"
+            raise FacecleanError(f"{where}.{k} must be a finite number (got {got})")
     return dict(d)
+
+
+def _finite(v: float) -> bool:
+    try:
+        return math.isfinite(v) and abs(float(v)) < 1e300
+    except OverflowError:  # an int beyond float64
+        return False
 
 
 def validate(doc: Any, source: str = "preset") -> dict[str, Any]:
@@ -77,8 +87,10 @@ def validate(doc: Any, source: str = "preset") -> dict[str, Any]:
     if doc.get("format") != FORMAT:
         raise FacecleanError(f"{source}: format must be {FORMAT!r} (got {doc.get('format')!r})")
     method = doc.get("method")
-    if method not in METHODS:
-        raise FacecleanError(f"{source}: unknown method {method!r} (known: {', '.join(METHODS)})")
+    if not isinstance(method, str) or method not in METHODS:
+        raise FacecleanError(
+            f"{source}: unknown method {method!r:.60} (known: {', '.join(METHODS)})"
+        )
     params = _numbers(doc.get("params", {}), f"{source}: params")
     groups = doc.get("groups", {})
     if not isinstance(groups, dict):
@@ -95,11 +107,7 @@ def validate(doc: Any, source: str = "preset") -> dict[str, Any]:
 def read(preset: str | os.PathLike) -> dict[str, Any]:
     """Load and validate a preset (a path or a shipped name)."""
     p = locate(preset)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
-        raise FacecleanError(f"{p.name}: not valid JSON ({e})") from None
-    return validate(doc, p.name)
+    return validate(strict_json.loads(read_bytes(p, 1 << 20, "preset"), p.name), p.name)
 
 
 def expand(doc: Mapping[str, Any], names: Sequence[str]) -> dict[str, float | np.ndarray]:

@@ -107,7 +107,18 @@ def checked(anim: Animation, label: str) -> Animation:
         raise FacecleanError(f"{label}: frame {bad[0]} has no finite time")
     if anim.values.dtype != np.float64 or anim.values.ndim != 2:
         raise FacecleanError(f"{label}: values are not a (frames, channels) table")
-    for n in (*anim.names, *anim.meta.get("pose_names", ())):
+    pose, pose_names = anim.meta.get("pose"), tuple(anim.meta.get("pose_names", ()))
+    if pose is not None:  # passthrough columns: (N, P), one name per column
+        shape = np.shape(pose)
+        if len(shape) != 2 or shape[0] != anim.n_frames or shape[1] != len(pose_names):
+            raise FacecleanError(
+                f"{label}: 'pose' is {shape}, expected {anim.n_frames} rows x "
+                f"{len(pose_names)} (one column per pose name)"
+            )
+    start = anim.meta.get("timecode_start")
+    if start is not None and not 0.0 <= start < 86400.0:  # NaN compares False
+        raise FacecleanError(f"{label}: timecode_start {start!r} is not a time of day in s")
+    for n in (*anim.names, *pose_names):
         if not isinstance(n, str):
             raise FacecleanError(f"{label}: channel names must be text")
         try:

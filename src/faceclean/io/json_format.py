@@ -22,6 +22,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
+from faceclean import strict_json
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
 from faceclean.io import source
@@ -36,10 +37,7 @@ def sniff(head: bytes) -> bool:
 def read(path: str | os.PathLike) -> Animation:
     """Read a ``faceclean-animation/1`` JSON file."""
     p = Path(path)
-    try:
-        doc = json.loads(source.read_bytes(p))
-    except json.JSONDecodeError as e:
-        raise FacecleanError(f"{p.name}: not valid JSON ({e})") from None
+    doc = strict_json.loads(source.read_bytes(p), p.name, numbers=False)  # no NaN, Infinity
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise FacecleanError(f"{p.name}: not a {FORMAT} JSON file (see docs/FORMATS.md)")
     names = doc.get("channels")
@@ -61,7 +59,10 @@ def read(path: str | os.PathLike) -> Animation:
         meta["pose"] = np.array(doc["pose"], dtype=np.float64)
         meta["pose_names"] = tuple(doc.get("pose_names", ()))
     if "timecode_start" in doc:
-        meta["timecode_start"] = float(doc["timecode_start"])
+        start = doc["timecode_start"]
+        if isinstance(start, bool) or not isinstance(start, int | float):
+            raise FacecleanError(f"{p.name}: 'timecode_start' must be a number")
+        meta["timecode_start"] = float(start)
     return Animation(times, values, tuple(str(n) for n in names), meta)
 
 

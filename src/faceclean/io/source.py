@@ -81,11 +81,14 @@ def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file
     size = regular(p, what).st_size
     if size > limit:
         raise FacecleanError(f"{p.name}: {size_text(size)}, over the {size_text(limit)} limit")
-    with open_binary(p, what) as f:
-        data = f.read(limit + 1)  # a file growing while read is still bounded
-    if len(data) > limit:
+    parts, total = [], 0
+    with open_binary(p, what) as f:  # the stat size first, then on while it grows
+        while total <= limit and (part := f.read(min(size, limit) + 1 if not parts else MiB)):
+            parts.append(part)
+            total += len(part)
+    if total > limit:
         raise FacecleanError(f"{p.name}: over the {size_text(limit)} limit")
-    return data
+    return b"".join(parts) if len(parts) != 1 else parts[0]
 
 
 def check_cells(fields: list[bytes], label: str, limit: int = MAX_CELL) -> None:

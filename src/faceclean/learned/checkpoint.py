@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -111,12 +112,7 @@ class LSTMWeights:
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], label: str = "model") -> LSTMWeights:
         """Build from the checkpoint's key -> array mapping (see docs/ARCHITECTURE.md)."""
-        try:
-            config = json.loads(str(arrays["config"][()]))
-        except (KeyError, ValueError, TypeError) as e:
-            raise FacecleanError(f"{label}: no readable 'config' ({e})") from None
-        if not isinstance(config, dict) or config.get("format") != FORMAT:
-            raise FacecleanError(f"{label}: not a {FORMAT} checkpoint")
+        config = read_config(arrays, label, FORMAT, ("K", "hidden", "layers"))
 
         def get(key: str) -> np.ndarray:
             if key not in arrays:
@@ -164,6 +160,11 @@ class LSTMWeights:
             raise FacecleanError(f"{label}: needs at least one layer and K >= 1")
         if not np.all(w.feat_std > 0):
             raise FacecleanError(f"{label}: feat_std must be positive")
+        arrays_of = {"feat_mean": w.feat_mean, "out_scale": w.out_scale, "head.w": w.head_w}
+        arrays_of |= {"head.b": w.head_b, **{f"lstm.{i}": w.w_ih[i] for i in range(n_layers)}}
+        for key, a in arrays_of.items():
+            if not np.isfinite(a).all():
+                raise FacecleanError(f"{label}: {key} holds non-finite numbers")
         return w
 
     def fused(self, half_sigmoid: bool = False) -> Fused:
@@ -259,3 +260,48 @@ class LSTMWeights:
             head_w=u(R, H) * np.float32(gain),
             head_b=u(R) * np.float32(gain),
         )
+
+
+# Integer fields of a config and their ranges (a checkpoint is untrusted input).
+_INTS = {"K": (1, 8), "hidden": (1, 4096), "layers": (1, 64)}
+
+
+def read_config(
+    arrays: dict[str, np.ndarray], label: str, fmt: str, ints: Sequence[str] = ("K",)
+) -> dict[str, Any]:
+    """The checkpoint's JSON ``config``, checked: strict JSON object of format ``fmt``;
+    ``channels`` 1-4096 text names; the ``ints`` fields integers in range (``_INTS``);
+    ``value_range`` two finite numbers lo < hi; ``alpha``, ``feat_clip`` finite numbers.
+    One line (FacecleanError) for anything else, never an error later."""
+    from faceclean import strict_json
+
+    raw = arrays.get("config")
+    if raw is None or raw.dtype.kind not in "US" or raw.size != 1:
+        raise FacecleanError(f"{label}: no readable 'config' (a text array)")
+    config = strict_json.loads(str(raw.reshape(())[()]), f"{label}: config")
+    if not isinstance(config, dict) or config.get("format") != fmt:
+        raise FacecleanError(f"{label}: not a {fmt} checkpoint")
+    names = config.get("channels")
+    if not isinstance(names, list) or not 1 <= len(names) <= 4096:
+        raise FacecleanError(f"{label}: config 'channels' must list 1 to 4096 names")
+    for n in names:
+        if not isinstance(n, str) or not n.isprintable():
+            raise FacecleanError(f"{label}: config channel {str(n)[:40]!r} is not a name")
+    for key in ints:
+        v, (lo, hi) = config.get(key), _INTS[key]
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise FacecleanError(f"{label}: config {key!r} must be an integer in [{lo}, {hi}]")
+    vr = config.get("value_range", [0.0, 1.0])
+    ok = isinstance(vr, list) and len(vr) == 2 and all(_number(v) for v in vr)
+    if not ok or not vr[0] < vr[1]:
+        raise FacecleanError(f"{label}: config 'value_range' must be [low, high], low < high")
+    for key in ("alpha", "feat_clip"):
+        if key in config and not _number(config[key]):
+            raise FacecleanError(f"{label}: config {key!r} must be a finite number")
+    if not isinstance(config.get("output", "additive"), str):
+        raise FacecleanError(f"{label}: config 'output' must be a name")
+    return config
+
+
+def _number(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and abs(v) < 1e300

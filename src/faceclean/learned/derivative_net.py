@@ -36,9 +36,9 @@ Checkpoints are npz (``allow_pickle=False``) written by ``faceclean.neural.basel
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -50,6 +50,7 @@ from faceclean.errors import FacecleanError
 from faceclean.filters.base import State, StreamCleaner
 from faceclean.io.npz_safe import load_arrays
 from faceclean.learned import formats
+from faceclean.learned.checkpoint import read_config
 
 GROUP_NAMES = tuple(GROUPS)
 ALPHA_RATE = 60.0  # Hz; α_r is the paper's per-frame value at its 60 fps test rate
@@ -59,12 +60,8 @@ BIG = 1e30  # derivatives are clipped to +-BIG (a dt of 1e-9 s must not overflow
 def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], dict]:
     """(config, arrays) of a baseline checkpoint; FacecleanError if it is not one."""
     arrays = load_arrays(path, formats.MAX_MODEL_BYTES, "model file")  # no pickle, size-checked
-    try:
-        config = json.loads(str(arrays.pop("config")))
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as e:
-        raise FacecleanError(f"{path}: not a readable model file ({e})") from None
-    if config.get("format") != fmt:
-        raise FacecleanError(f"{path}: format {config.get('format')!r}, expected {fmt!r}")
+    config = read_config(arrays, Path(path).name, fmt)  # checked: one line, never later
+    arrays.pop("config")
     return config, arrays
 
 

@@ -20,10 +20,12 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.errors import FacecleanError
+from faceclean.errors import FacecleanError, within
 from faceclean.relay import livelink, vmc
 from faceclean.relay.frame import POSE_NAMES, Frame, Malformed
 from faceclean.relay.url import Endpoint
+
+MIN_SPEED, MAX_SPEED = 1e-3, 1e3  # --speed: playback rate bounds
 
 
 def frames_from_animation(anim: Animation) -> list[Frame]:
@@ -106,8 +108,7 @@ def replay(
     ``wait(deadline)`` blocks until ``clock()`` reaches ``deadline`` (default: waits on
     ``stop``, so setting it ends the replay at once). ``loop`` repeats until ``stop``.
     """
-    if not speed > 0:
-        raise FacecleanError(f"replay: --speed must be > 0 (got {speed})")
+    within(speed, "replay: --speed", MIN_SPEED, MAX_SPEED)  # 1e-300 would wait forever
     stop = stop or threading.Event()
     if wait is None:
 
