@@ -191,7 +191,7 @@ def test_sigterm_during_clean_leaves_no_temporary_file(tmp_path):
         time.sleep(0.005)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 143 and err.strip() == "faceclean: terminated"
+    assert proc.returncode == 143 and err.strip().splitlines()[-1] == "faceclean: terminated"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.csv"]
 
 
@@ -272,10 +272,9 @@ def test_absurd_timecodes_are_refused_by_both_readers(tmp_path, timecode, capsys
     # were refused by one reader and an internal error (or a time of inf) in the other
     src = livelink(tmp_path, timecode)
     assert main(["info", str(src)]) == 2
-    a = one_line(capsys, "bad timecode")
+    a = one_line(capsys, "ll.csv line 4: ")  # a bad timecode, or a cell over 64 bytes
     assert main(["clean", str(src), "-o", str(tmp_path / "o.csv"), "--method", "ema"]) == 2
-    b = one_line(capsys, "bad timecode")
-    assert a.split("bad timecode")[1] == b.split("bad timecode")[1]
+    assert one_line(capsys) == a  # the streaming reader says the same
 
 
 def test_a_huge_cell_is_refused_by_both_readers(tmp_path, capsys):
@@ -441,7 +440,7 @@ def test_string_component_type_in_a_glb_is_one_line(tmp_path, take, capsys):
     doc["accessors"][1]["componentType"] = "5126"
     src.write_text(json.dumps(doc))
     assert main(["clean", str(src), "-o", str(tmp_path / "o.glb"), "--method", "ema"]) == 2
-    one_line(capsys, "component type")
+    one_line(capsys, "componentType")
 
 
 # -- class 8: output that is not what it claims ---------------------------------------------
@@ -485,7 +484,7 @@ def test_library_never_imports_hypothesis():
         "import sys, importlib, pkgutil, faceclean\n"
         "sys.modules['hypothesis'] = None\n"
         "for m in pkgutil.walk_packages(faceclean.__path__, 'faceclean.'):\n"
-        "    if not m.name.startswith(('faceclean.neural', 'faceclean.evaluation.fuzz')):\n"
+        "    if m.name not in ('faceclean.__main__', 'faceclean.evaluation.fuzz'):\n"
         "        importlib.import_module(m.name)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}

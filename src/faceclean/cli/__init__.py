@@ -60,7 +60,7 @@ def parser() -> argparse.ArgumentParser:
 
 
 class Terminated(BaseException):
-    """SIGTERM, raised where the command is, so that atomic outputs clean up as on Ctrl-C."""
+    """SIGTERM or SIGHUP, raised where the command is: atomic outputs clean up as on Ctrl-C."""
 
 
 @contextlib.contextmanager
@@ -75,14 +75,15 @@ def _command() -> Iterator[None]:
         raise Terminated
 
     on_main = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGTERM, terminate) if on_main else None
+    caught = (signal.SIGTERM, signal.SIGHUP)
+    old = {s: signal.signal(s, terminate) for s in caught} if on_main else {}
     try:
         with paths.command(), np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             yield
     finally:
-        if on_main:
-            signal.signal(signal.SIGTERM, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 def main(argv: list[str] | None = None) -> int:

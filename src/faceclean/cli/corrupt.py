@@ -25,6 +25,8 @@ def run(args: argparse.Namespace) -> int:
 
     io.paths.distinct(args.output, args.truth_out)
     clean = io.load(args.input)
+    for out in filter(None, (args.output, args.truth_out)):  # both, before writing one
+        io.check_output(out, args.fmt, clean.meta.get("format"))
     noisy, truth = simulate.corrupt(clean, args.seed, args.preset, args.strength)
     io.save(noisy, args.output, fmt=args.fmt)
     if args.truth_out:

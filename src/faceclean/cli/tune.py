@@ -43,8 +43,10 @@ def run(args: argparse.Namespace) -> int:
     for n, c in zip(args.noisy, args.truth, strict=True):
         noisy = io.load(n)
         pairs.append((noisy, tune.align(noisy, io.load(c))))
-    io.paths.target(args.output)  # refused now (e.g. it names the truth), not after tuning
-    bar = tqdm(total=1 + tune.REFINE, desc="tuning", unit="pass", file=sys.stderr, leave=False)
+    io.check_output(args.output, "json")  # refused now (e.g. it names the truth), not after
+    bar = tqdm(
+        total=1 + tune.REFINE, desc="tuning", unit="pass", file=sys.stderr, leave=False, delay=1.0
+    )  # delay: a refusal in the first second prints no bar
 
     def progress(done: int, total: int) -> None:
         bar.update(done - bar.n)

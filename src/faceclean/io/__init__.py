@@ -146,11 +146,27 @@ def output_format(path: str | os.PathLike, source: str | None, fmt: str | None =
     return source if source in candidates else candidates[-1]
 
 
+def check_output(
+    path: str | os.PathLike, fmt: str | None = None, source: str | None = None
+) -> None:
+    """Refuse now what ``save(.., path)`` would refuse for its path (missing folder, a
+    folder, a FIFO or device, an input of this command, an unknown type): a command with
+    several outputs checks them all before writing the first."""
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise FacecleanError(f"output folder does not exist: {folder}")
+    if p.is_dir():
+        raise FacecleanError(f"output path is a folder: {p}")
+    paths.target(path)
+    _module(output_format(p, source, fmt))
+
+
 def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> None:
     """Write atomically; the format comes from ``fmt``, the extension, or the source format."""
     p = Path(path)
     module = _module(output_format(p, anim.meta.get("format"), fmt))
-    with atomic_open(p, "wb") as f:
+    with atomic_open(path, "wb") as f:  # the name as given: "out.csv/" is refused
         if getattr(module, "WRITE_NEEDS_PATH", False):  # glTF: .glb or .gltf by the name
             module.write(anim, f, path=p)
         else:

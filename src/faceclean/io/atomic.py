@@ -28,9 +28,9 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         raise FacecleanError(f"output folder does not exist: {folder}")
     if given.is_dir():
         raise FacecleanError(f"output path is a folder: {given}")
-    target = paths.target(given)  # the real file (symlinks followed), checked
+    target = paths.target(path)  # the real file (symlinks followed), checked
     folder = target.parent
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name[:100]}.", suffix=".tmp", dir=folder)
     try:
         kwargs = {"newline": ""} if "b" not in mode else {}
         with os.fdopen(fd, mode, **kwargs) as f:

@@ -124,6 +124,8 @@ def _read(
     m = len(mesh.primitives[0].targets or [])
     if m == 0:
         raise FacecleanError(f"{p.name}: the animated mesh has no morph targets")
+    for i in (sampler.input, sampler.output):  # the JSON as written (the writer uses it)
+        _raw_fields(doc, count(i, "accessor index"))
     times = _read_accessor(model, buffers, sampler.input)
     out = _read_accessor(model, buffers, sampler.output)
     k = 3 if sampler.interpolation == pygltflib.ANIM_CUBICSPLINE else 1
@@ -285,6 +287,19 @@ def _read_accessor(model: pygltflib.GLTF2, buffers: tuple[bytes, ...], i: int) -
         raise FacecleanError(f"accessor {i}: runs past the end of its buffer")
     raw = np.ndarray((acc.count,), dtype, buffer=data, offset=start, strides=(stride,))
     return _decode(raw, scale)
+
+
+def _raw_fields(doc: dict, i: int) -> None:
+    """The accessor ``i`` and its view in the document: integer fields are integers
+    (pygltflib converts ``"5126"`` on its model; the writer reads the document)."""
+    acc = doc["accessors"][i]
+    for key in ("componentType", "count", "bufferView", "byteOffset"):
+        if key in acc:
+            count(acc[key], f"accessor {i}: {key}")
+    view = doc["bufferViews"][acc["bufferView"]]
+    for key in ("buffer", "byteOffset", "byteLength", "byteStride"):
+        if key in view:
+            count(view[key], f"accessor {i}: bufferView {key}")
 
 
 def count(v: object, what: str) -> int:

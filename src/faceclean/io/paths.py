@@ -67,6 +67,8 @@ def written(path: str | os.PathLike) -> None:
 
 def target(path: str | os.PathLike) -> Path:
     """The real path an output to ``path`` writes, or FacecleanError (one line)."""
+    if os.fspath(path).endswith(("/", os.sep)):  # "out.csv/" names a folder, not a file
+        raise FacecleanError(f"output {os.fspath(path)} ends in a slash: name a file")
     p = Path(path)
     real = Path(os.path.realpath(p))
     try:
