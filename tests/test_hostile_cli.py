@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceclean import io
+from faceclean import filters, io
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
@@ -277,13 +277,24 @@ def test_absurd_timecodes_are_refused_by_both_readers(tmp_path, timecode, capsys
     assert one_line(capsys) == a  # the streaming reader says the same
 
 
-def test_a_huge_cell_is_refused_by_both_readers(tmp_path, capsys):
+def test_a_huge_cell_is_read_by_both_readers_at_its_number(tmp_path, capsys):
     # today: one 10 KB cell took 2.2 GB (info) and 3.9 GB (clean, the streaming path)
-    src = livelink(tmp_path, cell=b"0." + b"0" * 10_000 + b"1")
-    assert main(["info", str(src)]) == 2
-    one_line(capsys, "a cell longer than 64 bytes")
-    assert main(["clean", str(src), "-o", str(tmp_path / "o.csv"), "--method", "ema"]) == 2
-    one_line(capsys, "a cell longer than 64 bytes")
+    from faceclean.io import livelink_csv
+
+    src = livelink(tmp_path, cell=b"0." + b"0" * 10_000 + b"5")
+    table = livelink_csv.parse_rows(src.read_bytes().splitlines(True)[1:], 1, 4, "x")[3]
+    assert table.dtype.itemsize <= 64  # the cell table stays narrow
+    anim = io.load(src)
+    assert anim.values[2, 0] == float(b"0." + b"0" * 10_000 + b"5")
+    out, mem = tmp_path / "o.csv", tmp_path / "m.csv"
+    assert main(["clean", str(src), "-o", str(out), "--method", "ema"]) == 0  # streams
+    io.save(filters.make("ema", {}, names=anim.names).clean(anim), mem)  # in memory
+    assert out.read_bytes() == mem.read_bytes()
+    word = livelink(tmp_path, cell=b"x" * 10_000)
+    assert main(["info", str(word)]) == 2
+    a = one_line(capsys, "not a number")
+    assert main(["clean", str(word), "-o", str(out), "--method", "ema"]) == 2
+    assert one_line(capsys) == a
 
 
 def test_npz_that_unpacks_past_the_bound_is_refused(tmp_path, capsys):

@@ -1,10 +1,10 @@
 """Strict JSON, both ways: what faceclean reads from a user and what it prints or writes.
 
-Read (``loads``): RFC 8259 only. ``NaN``/``Infinity`` are refused, a number must be a
-finite float64 (``1e400`` and a 400-digit integer are refused, not overflowed), nesting
-deeper than the parser's recursion limit is refused; every refusal is one line
-(FacecleanError). Used for ``--set`` values, presets, model configs, JSON animations
-and glTF documents.
+Read (``loads``): RFC 8259 only. ``NaN``/``Infinity`` are refused (animation files:
+read as they are, see ``loads``), a number must be a finite float64 (``1e400`` and a
+400-digit integer are refused, not overflowed), nesting deeper than the parser's
+recursion limit is refused; every refusal is one line (FacecleanError). Used for
+``--set`` values, presets, model configs, JSON animations and glTF documents.
 
 Write (``dumps``): ``allow_nan=False`` after non-finite floats became ``null``
 (``info --json``); a writer that must not lose them refuses them itself (io.json_format).
@@ -41,12 +41,15 @@ def _int(text: str) -> int | float:
 def loads(text: str | bytes, label: str, *, numbers: bool = True) -> Any:
     """Parse strict JSON; FacecleanError ``<label>: not valid JSON (reason)`` otherwise.
 
-    ``numbers=False`` skips the per-number checks (fast, for animation files, whose
-    readers check their arrays with numpy); NaN and Infinity are refused either way.
+    ``numbers=False`` (animation files: their readers check the arrays with numpy, and a
+    NaN or infinite cell is read as it is) skips the per-number checks and accepts the
+    ``NaN``/``Infinity`` spellings Python writes; depth is bounded either way.
     """
     hooks: dict[str, Any] = {"parse_float": _float, "parse_int": _int} if numbers else {}
+    if numbers:
+        hooks["parse_constant"] = _constant
     try:
-        return json.loads(text, parse_constant=_constant, **hooks)
+        return json.loads(text, **hooks)
     except RecursionError:
         raise FacecleanError(f"{label}: not valid JSON (nested too deep)") from None
     except (ValueError, UnicodeDecodeError) as e:  # JSONDecodeError is a ValueError

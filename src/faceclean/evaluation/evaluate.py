@@ -95,11 +95,19 @@ def model_files(extra: Sequence[str | os.PathLike] = ()) -> list[Path]:
 
 def model_config(path: Path) -> dict[str, Any]:
     """A checkpoint's config JSON (without loading its weights into a cleaner)."""
+    from faceclean import strict_json
+    from faceclean.io.npz_safe import load_arrays
+    from faceclean.learned.checkpoint import MAX_MODEL_BYTES
+
+    z = load_arrays(path, MAX_MODEL_BYTES, "model file")  # bounded, no pickle
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return json.loads(str(z["config"][()]))
-    except (OSError, ValueError, KeyError) as e:
+        raw = str(z["config"][()])
+    except (ValueError, KeyError, IndexError) as e:
         raise FacecleanError(f"{path}: not a readable model file ({e})") from None
+    config = strict_json.loads(raw, f"{path}: config")
+    if not isinstance(config, dict):
+        raise FacecleanError(f"{path}: config is not a JSON object")
+    return config
 
 
 def pick_models(files: Sequence[Path], sources: Sequence[str]) -> dict[str, dict[str, Path]]:

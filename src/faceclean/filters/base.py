@@ -13,8 +13,9 @@ Time rules, applied per stream, in this order:
    glitch, not a weight: it counts as non-finite (so nothing overflows).
 3. First frame, or a pause longer than ``max_gap`` seconds: the state restarts from this
    frame and the output equals it (the face came back; nothing jumps or drifts).
-4. t not after the previous frame's time (duplicate or backwards timestamp): the last
-   output again, state unchanged. ``t == 0.0`` is a valid time.
+4. t not after the previous frame's time by more than ``MIN_DT`` (duplicate, backwards,
+   or a subnormal step that float32 kernels cannot resolve): the last output again,
+   state unchanged. ``t == 0.0`` is a valid time.
 5. Otherwise the cleaner advances by dt = t - t_prev > 0 seconds.
 
 Every ``clean`` (this class's and any subclass's own) ends in ``check_finite``: an output
@@ -37,6 +38,7 @@ from faceclean.errors import FacecleanError
 
 State = tuple[np.ndarray, ...]  # each (S, M)
 MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
+MIN_DT = 1e-12  # s; a step this small or smaller is a duplicate (rule 4)
 
 
 class Cleaner(ABC):
@@ -134,7 +136,7 @@ class StreamCleaner(Cleaner):
             x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
         dt = t - self._t  # NaN for streams not started
         start = ~missing & ~(dt <= self.max_gap)  # rule 3 (NaN dt starts)
-        advance = ~missing & (dt > 0) & ~start  # rule 4 holds the rest
+        advance = ~missing & (dt > MIN_DT) & ~start  # rule 4 holds the rest
 
         if advance.all():
             self._state, y = self._advance(self._state, x, dt[:, None])

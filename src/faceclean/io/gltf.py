@@ -35,6 +35,7 @@ from typing import Any, BinaryIO
 import numpy as np
 import pygltflib
 
+from faceclean import strict_json
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
 from faceclean.io import source as bounded
@@ -88,7 +89,7 @@ def parse(p: Path) -> tuple[bytes, dict, pygltflib.GLTF2, int | None, tuple[byte
     glb = raw.startswith(b"glTF")
     text, bin_offset, bin_chunk = _split_glb(raw, p.name) if glb else (raw, None, None)
     try:
-        doc = json.loads(text)
+        doc = strict_json.loads(text, p.name, numbers=False)  # depth bounded
         if not isinstance(doc, dict):
             raise ValueError("the JSON is not an object")
         with warnings.catch_warnings():  # dataclasses_json warns on absent optional fields

@@ -37,7 +37,7 @@ def sniff(head: bytes) -> bool:
 def read(path: str | os.PathLike) -> Animation:
     """Read a ``faceclean-animation/1`` JSON file."""
     p = Path(path)
-    doc = strict_json.loads(source.read_bytes(p), p.name, numbers=False)  # no NaN, Infinity
+    doc = strict_json.loads(source.read_bytes(p), p.name, numbers=False)  # depth bounded
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise FacecleanError(f"{p.name}: not a {FORMAT} JSON file (see docs/FORMATS.md)")
     names = doc.get("channels")

@@ -56,7 +56,7 @@ def parse_rows(
     skipped; ``done`` rows were read before these (for the row numbers in errors)."""
     rows = [line.split(b",") for line in lines if line.strip()]
     for k, row in enumerate(rows, start=done):
-        source.check_cells(row, f"{label}: row {k + 1}")
+        rows[k - done] = row = source.short_cells(row, f"{label}: row {k + 1}")
         if len(row) != n_fields:
             raise FacecleanError(
                 f"{label}: row {k + 1} has {len(row)} fields, the header has {n_fields}"

@@ -7,9 +7,11 @@ proportion to the input whatever its content:
 
 - a file read whole: at most ``MAX_FILE`` bytes (a Live Link or plain CSV cleaned by a
   causal cleaner streams instead and has no size bound);
-- a CSV data cell (Live Link or plain): at most ``MAX_CELL`` bytes, a header cell
-  ``MAX_NAME``, a row at most ``MAX_FIELDS`` fields (the parsed table costs at most
-  8x the float64 values);
+- a CSV data cell (Live Link or plain) longer than ``MAX_CELL`` bytes is parsed on its
+  own (it must be a number) and stands in the cell table as its shortest repr, so the
+  fixed-width table costs at most ~8x the float64 values whatever one cell holds (the
+  line's text, written back, keeps the cell as it was); a header cell is at most
+  ``MAX_NAME`` bytes, a row at most ``MAX_FIELDS`` fields;
 - an npz animation unpacks to at most ``MAX_UNPACKED`` bytes (model files: 64 MiB,
   ``npz_safe``); a glTF ``data:`` URI decodes to at most ``MAX_FILE`` bytes.
 
@@ -97,6 +99,25 @@ def check_cells(fields: list[bytes], label: str, limit: int = MAX_CELL) -> None:
         raise FacecleanError(f"{label}: {len(fields)} fields (at most {MAX_FIELDS})")
     if max(map(len, fields), default=0) > limit:
         raise FacecleanError(f"{label}: a cell longer than {limit} bytes")
+
+
+def short_cells(fields: list[bytes], label: str) -> list[bytes]:
+    """A CSV row's data cells with every cell over MAX_CELL bytes replaced by the shortest
+    text of the same float64 (a long cell that is not a number is refused)."""
+    if len(fields) > MAX_FIELDS:
+        raise FacecleanError(f"{label}: {len(fields)} fields (at most {MAX_FIELDS})")
+    if max(map(len, fields), default=0) <= MAX_CELL:
+        return fields
+    out = []
+    for cell in fields:
+        if len(cell) > MAX_CELL:
+            try:
+                cell = repr(float(cell)).encode()
+            except ValueError:
+                text = cell[:20].decode("utf-8", "replace")
+                raise FacecleanError(f"{label}: a value is not a number ({text!r}...)") from None
+        out.append(cell)
+    return out
 
 
 def size_text(n: int) -> str:

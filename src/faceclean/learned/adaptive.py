@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from faceclean import strict_json
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, group_of
 from faceclean.errors import FacecleanError
@@ -94,8 +95,9 @@ def group_matrix(names: Sequence[str]) -> np.ndarray:
 def is_adaptive(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a readable .npz whose config names this format."""
     try:
-        config = json.loads(str(load_arrays(path, max_bytes=MAX_MODEL_BYTES)["config"][()]))
-    except (FacecleanError, KeyError, ValueError, TypeError):
+        raw = load_arrays(path, max_bytes=MAX_MODEL_BYTES)["config"]
+        config = strict_json.loads(str(raw[()]), "config")
+    except (FacecleanError, KeyError, ValueError, TypeError, IndexError):
         return False
     return isinstance(config, dict) and config.get("format") == FORMAT
 
@@ -130,9 +132,10 @@ class AdaptiveWeights:
         p = Path(path)
         arrays = load_arrays(p, max_bytes=MAX_MODEL_BYTES, what="model file")
         try:
-            config = json.loads(str(arrays.pop("config")[()]))
-        except (KeyError, ValueError, TypeError):
+            raw = str(arrays.pop("config")[()])
+        except (KeyError, ValueError, TypeError, IndexError):
             raise FacecleanError(f"{p.name}: not a faceclean model (no readable config)") from None
+        config = strict_json.loads(raw, f"{p.name}: config")
         return cls.from_arrays(config, arrays, p.name)
 
     @classmethod

@@ -117,6 +117,8 @@ class LSTMWeights:
         def get(key: str) -> np.ndarray:
             if key not in arrays:
                 raise FacecleanError(f"{label}: missing array {key!r}")
+            if arrays[key].dtype.kind not in "iuf":  # text, complex, bool: not weights
+                raise FacecleanError(f"{label}: {key} holds {arrays[key].dtype} values")
             return np.asarray(arrays[key], dtype=np.float32)
 
         try:

@@ -31,7 +31,7 @@ from faceclean.animation import Animation
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import MAX_ABS, State, StreamCleaner
+from faceclean.filters.base import MAX_ABS, MIN_DT, State, StreamCleaner
 from faceclean.learned import jit
 from faceclean.learned.checkpoint import LSTMWeights
 from faceclean.learned.kernel import HEADS, Workspace, step_numpy
@@ -163,12 +163,12 @@ class Learned(StreamCleaner):
                 return self._generic_step(frame, t)
             tf = float(t)
             dt = tf - float(self._t[0])
-            if not (0.0 < dt <= self.max_gap):  # NaN fails too
+            if not (MIN_DT < dt <= self.max_gap):  # NaN fails too
                 return self._generic_step(frame, t)
             ws.dt[0, 0] = dt
         else:
             dt = np.subtract(t, self._t, out=ws.dt64)
-            if not (np.all(dt > 0.0) and np.all(dt <= self.max_gap)):
+            if not (np.all(dt > MIN_DT) and np.all(dt <= self.max_gap)):
                 return self._generic_step(frame, t)
             np.copyto(ws.dt[0], dt, casting="unsafe")
         if x.dtype.kind != "f":
@@ -203,7 +203,7 @@ class Learned(StreamCleaner):
         idx = np.flatnonzero(anim.valid)
         x, t = anim.values[idx], anim.times[idx]
         dt = np.diff(t, prepend=np.nan)  # s, to the previous valid frame
-        ok = np.isfinite(x).all(axis=1) & (dt > 0) & (dt <= self.max_gap)
+        ok = np.isfinite(x).all(axis=1) & (dt > MIN_DT) & (dt <= self.max_gap)
         k = 0
         while k < len(idx):
             if ok[k] and self._state is not None and self._t[0] == t[k - 1]:

@@ -62,6 +62,9 @@ def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], 
     arrays = load_arrays(path, formats.MAX_MODEL_BYTES, "model file")  # no pickle, size-checked
     config = read_config(arrays, Path(path).name, fmt)  # checked: one line, never later
     arrays.pop("config")
+    for key, a in arrays.items():
+        if a.dtype.kind not in "iuf" or not np.isfinite(a).all():
+            raise FacecleanError(f"{Path(path).name}: {key} is not an array of finite numbers")
     return config, arrays
 
 

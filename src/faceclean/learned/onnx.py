@@ -7,7 +7,6 @@ is interchangeable with the numpy runtime (``learned.cleaner.Learned``).
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from faceclean import strict_json
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
@@ -76,9 +76,15 @@ class OnnxLearned(StreamCleaner):
         if meta.get("faceclean.format") != STEP_FORMAT:
             raise FacecleanError(f"{label}: not a faceclean step graph ({STEP_FORMAT})")
         try:
-            self.channels = tuple(json.loads(meta["channels"]))
-            self.config = json.loads(meta["config"])
-            self.state_names = tuple(json.loads(meta["state"]))
+            channels, config, state = (
+                strict_json.loads(meta[k], f"{label}: {k}") for k in ("channels", "config", "state")
+            )
+            if not isinstance(channels, list) or not all(isinstance(c, str) for c in channels):
+                raise ValueError("channels must be a list of names")
+            if not isinstance(config, dict) or not isinstance(state, list):
+                raise ValueError("config must be an object and state a list")
+            self.channels, self.config = tuple(channels), config
+            self.state_names = tuple(str(s) for s in state)
         except (KeyError, ValueError) as e:
             raise FacecleanError(f"{label}: bad faceclean metadata ({e})") from None
         if not max_gap > 0:
