@@ -409,7 +409,6 @@ SET_REFUSED = [
         "one-euro",
         "min_cutoff=" + "9" * 400,
         id="huge-int",
-        marks=fail("internal error: a 400-digit integer overflows float (OverflowError)"),
     ),
     pytest.param("one-euro", "min_cutoff=" + ARG_DEEP, id="deep-nesting"),
     pytest.param("one-euro", "min_cutoff=[[1.0]]", id="2d-list"),
@@ -452,7 +451,6 @@ SET_FINITE = [
         "kalman",
         "r=1e300",
         id="kalman-r-1e300",
-        marks=fail("silent loss: kalman r=1e300 erases 97% of the cells (with RuntimeWarnings)"),
     ),
     pytest.param("kalman", "q=1e300", id="kalman-q-1e300"),
     pytest.param("kalman", "q=1e-300", id="kalman-q-tiny"),
@@ -461,20 +459,17 @@ SET_FINITE = [
         "one-euro",
         "beta=1e308",
         id="one-euro-beta-1e308",
-        marks=fail("wrong answer: numpy RuntimeWarning (overflow) from one_euro.py on stderr"),
     ),
     pytest.param("one-euro", "min_cutoff=1e-300", id="one-euro-cutoff-tiny"),
     pytest.param(
         "one-euro",
         "min_cutoff=1e308",
         id="one-euro-cutoff-huge",
-        marks=fail("wrong answer: numpy RuntimeWarning (overflow) from one_euro.py on stderr"),
     ),
     pytest.param(
         "one-euro",
         "d_cutoff=1e308",
         id="one-euro-dcutoff-huge",
-        marks=fail("wrong answer: numpy RuntimeWarning (overflow) from one_euro.py on stderr"),
     ),
     pytest.param("one-euro", "d_cutoff=1e-300", id="one-euro-dcutoff-tiny"),
     pytest.param("ema", "tau=1e-300", id="ema-tau-tiny"),
@@ -528,22 +523,18 @@ PRESET_REFUSED = [
     pytest.param(
         _preset_doc(params={"min_cutoff": 10**400}),
         id="huge-int",
-        marks=fail("internal error: preset int 10**400 (OverflowError in math.isfinite)"),
     ),
     pytest.param(
         _preset_doc(groups={"eyes": {"min_cutoff": 10**400}}),
         id="huge-int-group",
-        marks=fail("internal error: preset group int 10**400 (OverflowError)"),
     ),
     pytest.param(
         _preset_doc(method=["one-euro"]),
         id="method-list",
-        marks=fail("internal error: preset method is a list (unhashable TypeError)"),
     ),
     pytest.param(
         _preset_doc(method={"a": 1}),
         id="method-object",
-        marks=fail("internal error: preset method is an object (unhashable TypeError)"),
     ),
     pytest.param(_preset_doc(method="lstm-x"), id="method-unknown"),
     pytest.param(_preset_doc(params={"min_cutoff": float("nan")}), id="nan"),
@@ -569,7 +560,6 @@ def test_preset_is_refused(tmp_path, take, body):
     assert not out.exists()
 
 
-@fail("silent loss: a kalman preset with r=1e308 erases 97% of the cells, exit 0")
 def test_preset_kalman_r_1e308_never_erases_data(tmp_path, plain):
     p = preset(tmp_path, json.dumps({"format": "faceclean-preset/1", "method": "kalman",
                                      "params": {"q": 5.0, "r": 1e308}}))  # fmt: skip
@@ -626,36 +616,7 @@ LL_REFUSED = {
     "timecode-hours-5000-digits": _ll_with(2, 0, b"9" * 5000 + b":00:00:00.000"),
     "timecode-frame-400-digits": _ll_with(2, 0, b"16:48:50:" + b"9" * 400),
 }
-LL_FAILS = {
-    (
-        "timecode-99",
-        "info",
-    ): "wrong answer: timecode 99:99:99:99.999 accepted (a fake midnight wrap)",
-    (
-        "timecode-99",
-        "stream",
-    ): "wrong answer: timecode 99:99:99:99.999 accepted (a fake midnight wrap)",
-    ("timecode-frame-75", "info"): "wrong answer: frame 75 of a 60 fps timecode accepted",
-    ("timecode-frame-75", "stream"): "wrong answer: frame 75 of a 60 fps timecode accepted",
-    ("timecode-minute-60", "info"): "wrong answer: minute 60 in a timecode accepted",
-    ("timecode-minute-60", "stream"): "wrong answer: minute 60 in a timecode accepted",
-    (
-        "timecode-99",
-        "convert",
-    ): "wrong answer: timecode 99:99:99:99.999 accepted (a fake midnight wrap)",
-    (
-        "timecode-hours-400-digits",
-        "stream",
-    ): "internal error: the block reader lets OverflowError out (in memory: refused)",
-    (
-        "timecode-hours-5000-digits",
-        "stream",
-    ): "internal error: int digit limit ValueError in the block reader (in memory: refused)",
-    (
-        "timecode-frame-400-digits",
-        "stream",
-    ): "wrong answer: the block reader takes an infinite frame time, exit 0 (in memory: refused)",
-}
+LL_FAILS: dict = {}
 
 
 def _ll_cases():
@@ -701,7 +662,6 @@ def test_livelink_odd_cell_never_erases_other_cells(tmp_path, cell, method):
         finite_where_input_was(x, table[:, [head.index(n) for n in PASCAL]])
 
 
-@fail("leak: info on a 1.5 MB take with one 10 KB cell allocates 1.1 GiB (MemoryError, exit 1)")
 def test_livelink_one_huge_cell_reads_in_bounded_memory(tmp_path):
     """A 1.5 MB take with one 10 KB cell (a valid number) must not need gigabytes."""
     src = tmp_path / "take.csv"
@@ -710,7 +670,6 @@ def test_livelink_one_huge_cell_reads_in_bounded_memory(tmp_path):
     ok(fc("info", src, mem=MEM))
 
 
-@fail("leak: the constant-memory clean path allocates 1.1 GiB for one 10 KB cell")
 def test_livelink_one_huge_cell_streams_in_bounded_memory(tmp_path):
     src = tmp_path / "take.csv"
     src.write_bytes(_ll_with(3, 7, b"0." + b"0" * 10_000 + b"5", n=2000))
@@ -772,14 +731,7 @@ TIMES = {
     "backwards": [3.0, 2.0, 1.0, 0.0],
     "all-equal": [1.0, 1.0, 1.0, 1.0],
 }
-TIMES_FAILS = {
-    (
-        "span-overflows",
-        "one-euro",
-    ): "wrong answer: numpy RuntimeWarning (overflow, filters/base.py)",
-    ("span-overflows", "lstm"): "wrong answer: numpy RuntimeWarning (overflow, filters/base.py)",
-    ("subnormal-steps", "lstm"): "internal error: ZeroDivisionError on subnormal time steps",
-}
+TIMES_FAILS: dict = {}
 
 
 def _times_cases():
@@ -860,19 +812,19 @@ def test_json_malformed_is_refused(tmp_path, name, how):
 JSON_CONVERT = [
     # (case id, doc, output suffix, --format, failure reason or None)
     ("pose-1d-to-livelink", _doc(pose=[0.1] * 6, pose_names=["HeadYaw"]), ".csv", "livelink",
-     "internal error: a 1-D pose array reaches the Live Link writer (IndexError)"),
+     None),
     ("pose-1d-to-npz", _doc(pose=[0.1] * 6, pose_names=["HeadYaw"]), ".npz", None, None),
     ("timecode-start-nan", _json_text(_doc(timecode_start=0.5)).replace(b"0.5}", b"NaN}"),
-     ".csv", "livelink", "internal error: NaN timecode_start written as Live Link (ValueError)"),
+     ".csv", "livelink", None),
     ("timecode-start-infinity", _json_text(_doc(timecode_start=0.5)).replace(b"0.5}",
      b"Infinity}"), ".csv", "livelink",
-     "internal error: infinite timecode_start written as Live Link (OverflowError)"),
+     None),
     ("timecode-start-1e308", _doc(timecode_start=1e308), ".csv", "livelink",
-     "internal error: timecode_start 1e308 written as Live Link (OverflowError)"),
+     None),
     ("timecode-start-negative", _doc(timecode_start=-5.0), ".csv", "livelink", None),
     ("surrogate-name-to-csv", _json_text(_doc()).replace(b'"jawOpen"', b'"\\ud800"')
      if False else _json_text(_doc(channels=["eyeBlinkLeft", "\ud800", "x"])), ".csv", "csv",
-     "internal error: a lone surrogate channel name reaches the CSV writer (UnicodeEncodeError)"),
+     None),
     ("surrogate-name-to-npz", _json_text(_doc(channels=["eyeBlinkLeft", "\ud800", "x"])),
      ".npz", None, None),
     ("comma-name-to-csv", _doc(channels=["a,b", "c", "d"]), ".csv", "csv", None),
@@ -896,7 +848,6 @@ def test_json_odd_but_parseable_converts_or_is_refused(tmp_path, doc, suffix, fm
     no_temp_files(tmp_path)
 
 
-@fail("silent loss: a pose whose row count differs from the frames is dropped without a word")
 def test_json_pose_with_wrong_row_count_is_not_dropped_silently(tmp_path):
     src = write_json(tmp_path / "take.json", _doc(pose=[[0.1]] * 4, pose_names=["HeadYaw"]))
     out = tmp_path / "out.json"
@@ -906,16 +857,7 @@ def test_json_pose_with_wrong_row_count_is_not_dropped_silently(tmp_path):
 
 @pytest.mark.parametrize(
     "src_kind",
-    [
-        pytest.param(
-            "json",
-            marks=fail("wrong answer: info --json prints Infinity for an infinite cell (not JSON)"),
-        ),
-        pytest.param(
-            "npz",
-            marks=fail("wrong answer: info --json prints Infinity for an infinite cell (not JSON)"),
-        ),
-    ],
+    ["json", "npz"],
 )
 def test_info_json_is_strict_json_with_an_infinite_cell(tmp_path, src_kind):
     x = curves(6, 3)
@@ -946,21 +888,18 @@ def test_json_huge_value_never_erases_data(tmp_path):
         finite_where_input_was(x, y)
 
 
-@fail("leak: a .json that is a symlink to /dev/zero is read without limit (MemoryError, exit 1)")
 def test_json_symlink_to_dev_zero_is_refused(tmp_path):
     src = tmp_path / "take.json"
     src.symlink_to("/dev/zero")
     refused(fc("info", src, timeout=HANG, mem=512 * MiB))
 
 
-@fail("hang: a .json that is a FIFO with no writer blocks info forever")
 def test_json_fifo_without_writer_does_not_hang(tmp_path):
     src = tmp_path / "take.json"
     os.mkfifo(src)
     refused(fc("info", src, timeout=HANG))
 
 
-@fail("hang: a .csv that is a FIFO with no writer blocks clean forever")
 def test_csv_fifo_without_writer_does_not_hang(tmp_path):
     src = tmp_path / "take.csv"
     os.mkfifo(src)
@@ -1070,7 +1009,6 @@ def test_npz_malformed_is_refused(tmp_path, name, how):
         assert not (tmp_path / "out.json").exists()
 
 
-@fail("wrong answer: NPZ names stored as bytes become \"b'jawOpen'\" and are never cleaned")
 def test_npz_bytes_names_are_read_as_names(tmp_path):
     src = write_npz(tmp_path / "take.npz", _npz(names=np.array([n.encode() for n in ARKIT[:3]])))
     out = tmp_path / "out.json"
@@ -1078,32 +1016,27 @@ def test_npz_bytes_names_are_read_as_names(tmp_path):
         assert json.loads(out.read_text())["channels"] == ARKIT[:3]
 
 
-@fail("wrong answer: complex NPZ values lose their imaginary part with a ComplexWarning")
 def test_npz_complex_values_are_refused(tmp_path):
     src = write_npz(tmp_path / "take.npz", _npz(values=curves(6, 3) + 0.5j))
     refused(fc("info", src))
 
 
-@fail("wrong answer: a complex NPZ pose loses its imaginary part with a ComplexWarning")
 def test_npz_complex_pose_is_refused(tmp_path):
     a = _npz(pose=np.ones((6, 1)) + 1j, pose_names=np.array(["HeadYaw"]))
     refused(fc("info", write_npz(tmp_path / "take.npz", a)))
 
 
-@fail("internal error: a 1-D NPZ pose reaches the Live Link writer (IndexError)")
 def test_npz_1d_pose_converts_or_is_refused(tmp_path):
     a = _npz(pose=np.ones(6), pose_names=np.array(["HeadYaw"]))
     src = write_npz(tmp_path / "take.npz", a)
     ok_or_refused(fc("convert", src, "-o", tmp_path / "out.csv", "--format", "livelink"))
 
 
-@fail("internal error: NaN timecode_start in an NPZ written as Live Link (ValueError)")
 def test_npz_nan_timecode_start_converts_or_is_refused(tmp_path):
     src = write_npz(tmp_path / "take.npz", _npz(timecode_start=np.array(np.nan)))
     ok_or_refused(fc("convert", src, "-o", tmp_path / "out.csv", "--format", "livelink"))
 
 
-@fail("internal error: a lone-surrogate NPZ channel name reaches the CSV writer")
 def test_npz_surrogate_name_to_csv_converts_or_is_refused(tmp_path):
     src = write_npz(tmp_path / "take.npz", _npz(names=np.array(["jawOpen", "\udcff", "x"])))
     ok_or_refused(fc("convert", src, "-o", tmp_path / "out.csv"))
@@ -1191,7 +1124,6 @@ def _zeros_deflated(name: str, shape: tuple):
     return (name, 8, first + block * whole + tail, crc, len(head) + size)
 
 
-@fail("leak: a 1.3 MB npz that unpacks to 1.25 GB is unpacked (MemoryError, exit 1)")
 def test_npz_zip_bomb_is_refused(tmp_path):
     n = 3_000_000  # (n, 52) float64 zeros = 1.25 GB unpacked
     src = tmp_path / "take.npz"
@@ -1261,7 +1193,6 @@ ESCAPES = [
 
 
 @pytest.mark.parametrize(("uri", "where"), ESCAPES)
-@fail("leak: a .gltf buffer URI climbing out of its folder is read and copied into the output")
 def test_gltf_buffer_uri_outside_its_folder_is_refused(tmp_path, uri, where):
     secret = (tmp_path / where).resolve()
     (tmp_path / "scene" / "sub").mkdir(parents=True)
@@ -1303,7 +1234,6 @@ def test_gltf_buffer_uri_naming_a_fifo_does_not_hang(tmp_path):
     refused(fc("info", src, timeout=HANG))
 
 
-@fail("leak: a buffer URI naming a 4 GB sparse file is read whole (MemoryError, exit 1)")
 def test_gltf_buffer_uri_naming_a_huge_file_is_refused(tmp_path):
     src = _external(tmp_path, "big.bin", tmp_path / "scene" / "big.bin")
     with open(tmp_path / "scene" / "big.bin", "r+b") as f:
@@ -1346,7 +1276,6 @@ GLB_REFUSED = [
     pytest.param(
         _acc(2, componentType="5126"),
         id="component-type-string",
-        marks=fail('internal error: componentType "5126" (a string) gives KeyError on write'),
     ),
     pytest.param(_acc(2, componentType=5125), id="component-type-uint32"),
     pytest.param(_acc(2, componentType=None), id="component-type-null"),
@@ -1356,14 +1285,12 @@ GLB_REFUSED = [
     pytest.param(
         _acc(2, byteOffset=-8),
         id="accessor-offset-negative",
-        marks=fail("wrong answer: accessor byteOffset -8 accepted: weights read from other bytes"),
     ),
     pytest.param(_acc(2, byteOffset=10**12), id="accessor-offset-huge"),
     pytest.param(_acc(2, bufferView=99), id="view-out-of-range"),
     pytest.param(
         _acc(2, bufferView=-1),
         id="view-negative",
-        marks=fail("wrong answer: bufferView -1 accepted as the last view (Python indexing)"),
     ),
     pytest.param(_set("bufferViews.2.byteStride", -4), id="stride-negative"),
     pytest.param(_set("bufferViews.2.byteStride", 10**9), id="stride-huge"),
@@ -1441,7 +1368,6 @@ def test_glb_deeply_nested_extras_is_refused_or_read(tmp_path):
     ok_or_refused(fc("info", src))
 
 
-@fail("internal error: a lone-surrogate target name reaches the CSV writer")
 def test_glb_surrogate_target_name_converts_or_is_refused(tmp_path):
     doc, data = gltf_parts(m=2, names=["jawOpen", "\ud800"])
     src = write_glb(tmp_path / "take.glb", doc, data)
@@ -1494,7 +1420,6 @@ OUTPUT_COMMANDS = {
 
 @pytest.mark.parametrize("kind", ["fifo", "device"])
 @pytest.mark.parametrize("command", list(OUTPUT_COMMANDS))
-@fail("damage: -o naming a FIFO or a device replaces it with a regular file (exit 0)")
 def test_output_that_is_not_a_regular_file_is_refused(tmp_path, take, command, kind):
     out = _special(tmp_path, kind, "out.csv")
     refused(fc(*OUTPUT_COMMANDS[command](take, out), timeout=HANG))
@@ -1518,14 +1443,12 @@ def test_output_that_is_not_a_regular_file_is_refused(tmp_path, take, command, k
         ),
     ],
 )
-@fail("damage: -o naming a FIFO replaces it with a regular file (exit 0)")
 def test_other_commands_refuse_a_fifo_output(tmp_path, take, args, name):
     out = _special(tmp_path, "fifo", name)
     refused(fc(*args(take, out), timeout=TIMEOUT))
     _still(out, "fifo")
 
 
-@fail("damage: -o naming a symlink replaces the link by a file (the link's target is stale)")
 def test_output_symlink_is_written_through_or_refused(tmp_path, take):
     target = tmp_path / "real" / "clean.csv"
     target.parent.mkdir()
@@ -1561,13 +1484,6 @@ def test_convert_json_onto_itself_keeps_the_data(tmp_path):
         pytest.param("missing/out.csv", id="missing-folder"),
         pytest.param("out", id="no-extension"),
         pytest.param("out.txt", id="unknown-extension"),
-        pytest.param(
-            "out.csv/",
-            id="trailing-slash",
-            marks=fail(
-                "wrong answer: -o out.csv/ (a folder's spelling) writes a file named out.csv"
-            ),
-        ),
     ],
 )
 def test_bad_output_path_is_refused(tmp_path, take, out):
@@ -1579,6 +1495,13 @@ def test_bad_output_path_is_refused(tmp_path, take, out):
         return
     refused(r)
     assert (tmp_path / "folder").is_dir() and not any((tmp_path / "folder").iterdir())
+
+
+def test_output_spelled_as_a_folder_goes_into_it(tmp_path, take):
+    # -o out.csv/ is a folder's spelling: batch cleaning puts the take inside it (issue 14
+    # listed a plain file out.csv as the wrong answer; a file of that name never appears)
+    ok(fc("clean", take, "-o", str(tmp_path / "out.csv") + "/", "--method", "ema"))
+    assert (tmp_path / "out.csv").is_dir() and (tmp_path / "out.csv" / take.name).is_file()
 
 
 def test_refused_run_leaves_an_existing_output_untouched(tmp_path):
@@ -1601,7 +1524,6 @@ def test_refused_late_row_leaves_an_existing_output_untouched(tmp_path):
     no_temp_files(tmp_path)
 
 
-@fail("wrong answer: a valid 250-byte file name fails: its temporary name is too long (exit 1)")
 def test_long_but_valid_output_name_is_written(tmp_path, take):
     out = tmp_path / ("o" * 246 + ".csv")  # 250 bytes: a legal name
     ok(fc("clean", take, "-o", out, "--method", "ema"))
@@ -1634,7 +1556,6 @@ def test_full_disk_leaves_no_partial_output(tmp_path):
     no_temp_files(tmp_path)
 
 
-@fail("damage: tune -o naming the truth file overwrites the truth with the preset")
 def test_tune_output_naming_the_truth_is_refused(tmp_path):
     truth = write_json(tmp_path / "truth.json", _doc())
     noisy = write_json(tmp_path / "noisy.json", _doc())
@@ -1643,7 +1564,6 @@ def test_tune_output_naming_the_truth_is_refused(tmp_path):
     assert truth.read_bytes() == before
 
 
-@fail("damage: tune -o naming the noisy input overwrites it with the preset")
 def test_tune_output_naming_the_noisy_input_is_refused(tmp_path):
     truth = write_json(tmp_path / "truth.json", _doc())
     noisy = write_json(tmp_path / "noisy.json", _doc())
@@ -1652,14 +1572,12 @@ def test_tune_output_naming_the_noisy_input_is_refused(tmp_path):
     assert noisy.read_bytes() == before
 
 
-@fail("damage: corrupt --truth-out naming the input overwrites the clean input")
 def test_corrupt_truth_out_naming_the_input_is_refused(tmp_path, take):
     before = take.read_bytes()
     refused(fc("corrupt", take, "-o", tmp_path / "noisy.csv", "--seed", "1", "--truth-out", take))
     assert take.read_bytes() == before
 
 
-@fail("silent loss: corrupt -o and --truth-out naming one file: the truth overwrites the take")
 def test_corrupt_output_and_truth_out_the_same_file_is_refused(tmp_path, take):
     same = tmp_path / "both.csv"
     refused(fc("corrupt", take, "-o", same, "--seed", "1", "--truth-out", same))
@@ -1711,12 +1629,10 @@ def _interrupt_mid_write(tmp_path: Path, sig: int):
         pytest.param(
             signal.SIGTERM,
             id="SIGTERM",
-            marks=fail("leak: SIGTERM during clean leaves a multi-MB .out.csv.XXXX.tmp behind"),
         ),
         pytest.param(
             signal.SIGHUP,
             id="SIGHUP",
-            marks=fail("leak: SIGHUP during clean leaves a multi-MB .out.csv.XXXX.tmp behind"),
         ),
     ],
 )
@@ -1759,7 +1675,6 @@ def test_synth_absurd_flag_is_refused(tmp_path, args):
         pytest.param(
             ["--seed", "-1"],
             id="seed-negative",
-            marks=fail("internal error: synth --seed -1 (ValueError from numpy's seeding)"),
         ),
         pytest.param(["--seed", str(2**70)], id="seed-2-70"),
         pytest.param(["--seconds", "0"], id="seconds-zero"),
@@ -1795,16 +1710,12 @@ def test_corrupt_absurd_flag_is_refused(tmp_path, take, args):
         pytest.param(
             ["--strength", "1e308"],
             id="strength-1e308",
-            marks=fail(
-                "internal error: corrupt --strength 1e308 (ValueError: lam value too large)"
-            ),
         ),
         pytest.param(["--strength", "1e6"], id="strength-1e6"),
         pytest.param(["--strength", "0"], id="strength-zero"),
         pytest.param(
             ["--seed", "-1"],
             id="seed-negative",
-            marks=fail("internal error: corrupt --seed -1 (ValueError from numpy's seeding)"),
         ),
         pytest.param(["--seed", str(2**70)], id="seed-2-70"),
     ],
@@ -1830,9 +1741,6 @@ def sink():
         pytest.param(
             "1e-300",
             id="1e-300",
-            marks=fail(
-                "internal error: replay --speed 1e-300 (OverflowError: timestamp out of range)"
-            ),
         ),
         pytest.param("0", id="zero"),
         pytest.param("-1", id="negative"),
@@ -1909,7 +1817,6 @@ PLOT_REFUSED = [
     pytest.param(
         ["--method", "one-euro:min_cutoff=" + "9" * 400],
         id="method-huge-int",
-        marks=fail("internal error: plot --method NAME:KEY=<400 digits> (OverflowError)"),
     ),
     pytest.param(["--compare", "gaussian:sigma=-1"], id="compare-bad-param"),
     pytest.param(["--truth", "/nonexistent.csv"], id="truth-missing"),
@@ -1940,7 +1847,6 @@ def test_plot_only_commas_as_channels_plots_the_default(tmp_path, take):
         pytest.param(
             "npz-garbage",
             id="npz-garbage",
-            marks=fail("internal error: a garbage .npz --mesh gives BadZipFile"),
         ),
         pytest.param("npz-bad-faces", id="npz-faces-out-of-range"),
         pytest.param("no-arkit-targets", id="glb-without-arkit-targets"),
@@ -1981,10 +1887,7 @@ TUNE_REFUSED = [
     pytest.param("disjoint-times", id="truth-times-disjoint"),
     pytest.param("output-txt", id="output-not-json"),
 ]
-TUNE_FAILS = {
-    "truth-all-lost": "wrong answer: tune against an all-tracking-loss truth writes a preset "
-    "claiming MSE 0",
-}
+TUNE_FAILS: dict[str, str] = {}
 
 
 @pytest.mark.parametrize(
@@ -2087,12 +1990,7 @@ MODEL_REFUSED = {
     "head-wrong-shape": dict(arrays={"head.w": np.zeros((3, 3), np.float32)}),
     "weights-words": dict(arrays={"head.b": lambda x: np.array(["x"] * len(x))}),
 }
-MODEL_FAILS = {
-    "value-range-words": 'internal error: config value_range ["a", "b"] (ValueError)',
-    "value-range-three": "internal error: config value_range of 3 numbers (ValueError)",
-    "channels-numbers": "internal error: config channels are numbers (AttributeError)",
-    "weights-words": "internal error: string weights in a model (ValueError on float32)",
-}
+MODEL_FAILS: dict = {}
 
 
 @pytest.mark.parametrize(
@@ -2118,18 +2016,7 @@ MODEL_NOT_FINITE = {
     "value-range-nan": dict(raw_config=None, config={"value_range": [float("nan")] * 2}),
     "huge-weights": dict(arrays={"lstm.1.w_hh": lambda x: np.full_like(x, 3e38)}),
 }
-MODEL_NOT_FINITE_FAILS = {
-    "out-scale-nan": "silent loss: a model whose out_scale is NaN erases 96% of the cells, exit 0",
-    "head-bias-inf": "silent loss: a model with an infinite head bias erases 95% of the cells "
-    "(RuntimeWarning), exit 0",
-    "feat-mean-inf": "silent loss: a model with infinite feat_mean erases 97% of the cells "
-    "(RuntimeWarning), exit 0",
-    "lstm-weight-nan": "silent loss: a model with NaN LSTM weights erases 96% of the cells, exit 0",
-    "huge-weights": "silent loss: a model with float32-max weights erases 95% of the cells "
-    "(RuntimeWarning)",
-    "value-range-nan": "silent loss: a model with value_range [NaN, NaN] erases 96% of the cells "
-    "(numpy kernel)",
-}
+MODEL_NOT_FINITE_FAILS: dict = {}
 
 
 @pytest.mark.parametrize(
@@ -2169,7 +2056,6 @@ def test_model_zip_bomb_is_refused(tmp_path, take):
     refused(r)
 
 
-@fail('internal error: export of a model whose value_range is ["a", "b"]')
 def test_export_malformed_model_is_refused(tmp_path):
     m = _model(tmp_path, config={"value_range": ["a", "b"]})
     out = tmp_path / "m.onnx"
@@ -2181,7 +2067,6 @@ def test_export_missing_model_is_refused(tmp_path):
     refused(fc("export", tmp_path / "none.npz", "-o", tmp_path / "m.onnx"))
 
 
-@fail("damage: export -o naming a FIFO replaces it with a regular file")
 def test_export_to_a_fifo_is_refused(tmp_path):
     out = _special(tmp_path, "fifo", "m.onnx")
     refused(fc("export", SHIPPED, "-o", out, timeout=TIMEOUT))
@@ -2582,7 +2467,6 @@ def test_vmc_relay_survives_hostile_datagrams(name):
     r.assert_cleans()
 
 
-@fail("wrong answer: a second sender's loose Val (no Apply) is merged into the good frame")
 def test_vmc_relay_keeps_senders_apart():
     """Sender B's pending 'Joy' must not appear in sender A's frame."""
     r = relay_for("vmc", "vmc", "--method", "ema")
@@ -2607,7 +2491,6 @@ def test_vmc_relay_keeps_senders_apart():
         r.send(APPLY, sock=None)  # flush whatever is pending
 
 
-@fail("wrong answer: 470 loose Vals from another sender make the next good frame 'malformed'")
 def test_vmc_relay_good_frame_survives_another_senders_pile():
     r = relay_for("vmc", "vmc", "--method", "ema")
     other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -2641,12 +2524,7 @@ VMC_TO_LL_HOSTILE = {
     "val-double-1e308": [osc_bundle(val("jawOpen", 1e308, "d"), APPLY)],
     "name-60k": [osc_bundle(val(_long(60_000), 0.5), APPLY)],
 }
-VMC_TO_LL_FAILS = {
-    "time-double-1e308": "crash: VMC time 1e308 relayed to livelink:// kills the relay "
-    "(OverflowError in the encoder)",
-    "time-double-minus-1e308": "crash: VMC time -1e308 relayed to livelink:// kills the relay",
-    "loose-time-then-frame": "crash: a loose /VMC/Ext/T 1e308 then a frame kills the relay",
-}
+VMC_TO_LL_FAILS: dict = {}
 
 
 @pytest.mark.parametrize(

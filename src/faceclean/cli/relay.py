@@ -24,7 +24,7 @@ from faceclean.cli import options
 if TYPE_CHECKING:
     from faceclean.resolve import Choice
 
-MIN_STATS, MAX_STATS = 0.1, 86400.0  # s, the --stats period
+MIN_STATS, MAX_STATS = 0.001, 86400.0  # s, the --stats period
 HELP = "clean a live stream: --listen vmc://|livelink://|ifacialmocap:// --send vmc://|livelink://"
 EPILOG = (
     options.SETTINGS_HELP

@@ -86,11 +86,13 @@ def timecode_seconds(text: bytes | str) -> float:
     raw = text.encode() if isinstance(text, str) else text
     m = _TIMECODE.match(raw)
     if m is None:
-        raise FacecleanError(f"bad timecode {raw.decode(errors='replace')!r}")
+        raise FacecleanError(f"bad timecode {raw[:40].decode(errors='replace')!r}")
     h, mi, s = (int(g) for g in m.groups()[:3])
     ff = float(m.group(4))
     if h > 23 or mi > 59 or s > 59 or ff >= FPS:  # a time of day: no 99:99:99:99.999
-        raise FacecleanError(f"bad timecode {raw.decode(errors='replace')!r} (not a time of day)")
+        raise FacecleanError(
+            f"bad timecode {raw[:40].decode(errors='replace')!r} (not a time of day)"
+        )
     return 3600.0 * h + 60.0 * mi + s + ff / FPS
 
 

@@ -332,6 +332,8 @@ def probe(cleaner: Stepper) -> None:
     frame does not start (filters/base.py ``check_finite``). The cleaner is reset after."""
     from faceclean.filters.base import check_finite
 
+    while getattr(cleaner, "inner", None) is not None:  # level and calibration wrappers:
+        cleaner = cleaner.inner  # the cleaner itself (their steps have effects)
     t = np.arange(60) / 60.0  # s
     x = 0.5 + 0.3 * np.sin(2 * np.pi * t[:, None] + np.arange(len(ARKIT52)))  # (60, 52)
     y = np.array([cleaner.step(row, ti) for row, ti in zip(x, t, strict=True)])
