@@ -2641,7 +2641,6 @@ def _flood(r: Relay, packets) -> int:
     return r.rss() - before
 
 
-@fail("leak: Live Link packets with ever-new 40 KB subjects grow the relay by ~115 MiB")
 def test_livelink_relay_memory_is_bounded_under_new_subjects():
     r = relay_for("livelink", "livelink", "--method", "ema")
     t0 = round(r.t * 60) + 100
@@ -2652,7 +2651,6 @@ def test_livelink_relay_memory_is_bounded_under_new_subjects():
     r.assert_cleans()
 
 
-@fail("leak: VMC frames with ever-new 40 KB names grow the relay by ~115 MiB (name caches)")
 def test_vmc_relay_memory_is_bounded_under_new_names():
     r = relay_for("vmc", "vmc", "--method", "ema")
     t0 = r.t + 1.0
@@ -2667,7 +2665,6 @@ def test_vmc_relay_memory_is_bounded_under_new_names():
     r.assert_cleans()
 
 
-@fail("leak: iFacialMocap datagrams with ever-new 40 KB names grow the relay by ~115 MiB")
 def test_ifacialmocap_relay_memory_is_bounded_under_new_names():
     r = relay_for("ifacialmocap", "vmc", "--method", "ema")
     packets = (b"%06d" % k + _long(40_000) + b"-50|jawOpen-50" for k in range(1500))
@@ -2676,8 +2673,6 @@ def test_ifacialmocap_relay_memory_is_bounded_under_new_names():
     r.assert_cleans()
 
 
-@fail("wrong answer: a second sender stamping its frames 0.5 s ahead makes every good frame "
-      "'out of order' (one clock for all senders)")  # fmt: skip
 def test_vmc_relay_good_sender_is_not_silenced_by_another_sender():
     r = relay_for("vmc", "vmc", "--method", "ema")
     other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -2744,7 +2739,6 @@ def relay_refused(*args: str) -> None:
         pytest.param("vmc://127.0.0.1:{p}", "livelink://127.0.0.1:{p}", id="vmc-to-own-port"),
     ],
 )
-@fail("wrong answer: --listen equal to --send starts a relay that feeds itself (a storm)")
 def test_relay_listening_where_it_sends_is_refused(listen, send):
     p = _free_port()
     relay_refused("--listen", listen.format(p=p), "--send", send.format(p=p), "--method", "ema")
@@ -2791,7 +2785,6 @@ def test_relay_absurd_stats_interval_is_refused(value):
         pytest.param(
             ["--method", "one-euro", "--set", "beta=" + "9" * 400],
             id="set-huge-int",
-            marks=fail("internal error: relay --set beta=<400 digits> (OverflowError)"),
         ),
         pytest.param(["--method", "one-euro", "--model", "model.npz"], id="method-and-model"),
         pytest.param(["--model", "/nonexistent.npz"], id="model-missing"),
@@ -2824,7 +2817,6 @@ def test_relay_model_with_nan_scales_is_refused(tmp_path):
     relay_refused("--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9", "--model", str(m))
 
 
-@fail("internal error: relay --preset whose method is a list (unhashable TypeError)")
 def test_relay_broken_preset_is_refused(tmp_path):
     p = preset(tmp_path, _preset_doc(method=["one-euro"]))
     relay_refused(
