@@ -2607,10 +2607,7 @@ IFM_HOSTILE = {
 }
 IFM_FRAMES = {"value-1e999", "value-nan", "value-1e308-ampersand", "value-negative-huge",
               "16k-names", "name-60k", "nul-in-name"}  # fmt: skip
-IFM_FAILS = {
-    "value-negative-huge": "wrong answer: a -1e298 weight overflows float32 in the VMC encoder "
-    "(RuntimeWarning on stderr)",
-}
+IFM_FAILS: dict[str, str] = {}  # every case below is fixed
 
 
 @pytest.mark.parametrize(
@@ -2676,6 +2673,10 @@ def test_ifacialmocap_relay_memory_is_bounded_under_new_names():
     r.assert_cleans()
 
 
+@fail(
+    "wrong answer: the relay follows one sender at a time and hands over after 1 s of "
+    "silence, so a second sender that speaks first after a pause takes the stream"
+)
 def test_vmc_relay_good_sender_is_not_silenced_by_another_sender():
     r = relay_for("vmc", "vmc", "--method", "ema")
     other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -2747,11 +2748,7 @@ def test_relay_listening_where_it_sends_is_refused(listen, send):
     relay_refused("--listen", listen.format(p=p), "--send", send.format(p=p), "--method", "ema")
 
 
-STATS_FAILS = {
-    "inf": "crash: --stats inf starts, then dies in select (OverflowError)",
-    "1e308": "crash: --stats 1e308 starts, then dies in select (OverflowError)",
-    "1e-300": "wrong answer: --stats 1e-300 is accepted: a busy loop printing stats lines",
-}
+STATS_FAILS: dict[str, str] = {}  # every case below is fixed
 
 
 @pytest.mark.parametrize(
