@@ -89,6 +89,16 @@ def load_takes(folder: str | os.PathLike | None = None) -> list[Take]:
     return takes
 
 
+def holdout(
+    takes: Sequence[Take], val_sources: Sequence[str] = (), seed: int = 0
+) -> tuple[list[Take], list[Take]]:
+    """A training run's (train, val): whole ``val_sources`` held out, or, with none
+    given, 20 % of every source's takes (the trainers' rule)."""
+    if val_sources:
+        return split(takes, val_sources=val_sources)
+    return split(takes, val_fraction=0.2, seed=seed)
+
+
 def split(
     takes: Sequence[Take],
     val_sources: Sequence[str] = (),

@@ -237,10 +237,7 @@ def train(cfg: AdaptiveConfig, report: Report | None = None) -> dict[str, Any]:
     torch.set_num_threads(max(1, cfg.threads))
     torch.manual_seed(cfg.seed)
     takes = dataset.load_takes(cfg.data)
-    if cfg.val_sources:
-        train_takes, val_takes = dataset.split(takes, val_sources=cfg.val_sources)
-    else:
-        train_takes, val_takes = dataset.split(takes, val_fraction=0.2, seed=cfg.seed)
+    train_takes, val_takes = dataset.holdout(takes, cfg.val_sources, cfg.seed)
     val_streams = corrupted(val_takes, QUICK)
     facts = {
         "train": {**dataclasses.asdict(cfg), "val_sources": list(cfg.val_sources)},

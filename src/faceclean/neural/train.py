@@ -134,10 +134,7 @@ def train(cfg: Config, report: Report | None = None) -> dict[str, Any]:
 def _train(cfg: Config, report: Report, rank: int, world: int, device) -> dict[str, Any]:
     torch.manual_seed(cfg.seed)
     takes = dataset.load_takes(cfg.data)
-    if cfg.val_sources:
-        train_takes, val_takes = dataset.split(takes, val_sources=cfg.val_sources)
-    else:
-        train_takes, val_takes = dataset.split(takes, val_fraction=0.2, seed=cfg.seed)
+    train_takes, val_takes = dataset.holdout(takes, cfg.val_sources, cfg.seed)
     face = load_face(cfg.mesh)
     loss_fn = Loss(ARKIT52, face, cfg.weights)
     stream = EpochStream(
