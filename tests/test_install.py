@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_report import BROWSER_ARGS, CHROMIUM, Page, _browser_missing
+from headless import BROWSER_ARGS, CHROMIUM, Page, browser_missing
+from helpers import REPO
 
-ROOT = Path(__file__).resolve().parents[1]
-THREE = ROOT / "node_modules" / "three"
+THREE = REPO / "node_modules" / "three"
 INPUTS = ("pyproject.toml", "setup.py", "README.md", "MANIFEST.in", "package.json")
 INPUTS += ("package-lock.json",)
 
@@ -48,10 +48,10 @@ def installed(tmp_path_factory) -> tuple[Path, dict[str, str]]:
     tree = tmp / "tree"
     tree.mkdir()
     for name in INPUTS:
-        shutil.copy2(ROOT / name, tree / name)
+        shutil.copy2(REPO / name, tree / name)
     ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "vendor")
-    shutil.copytree(ROOT / "src", tree / "src", ignore=ignore)
-    build_env = dict(os.environ, FACECLEAN_NODE_MODULES=str(ROOT / "node_modules"))
+    shutil.copytree(REPO / "src", tree / "src", ignore=ignore)
+    build_env = dict(os.environ, FACECLEAN_NODE_MODULES=str(REPO / "node_modules"))
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
     _run([*pip, "wheel", ".", "--no-deps", "--no-build-isolation", "-w", str(tmp / "dist")],
          tree, build_env)  # fmt: skip
@@ -88,7 +88,7 @@ def test_the_installed_package_is_the_wheel_with_its_own_three(installed, tmp_pa
     assert Path(three) == site / "faceclean" / "report" / "vendor"
     for name in ("build/three.module.js", "build/three.core.js"):
         assert (Path(three) / "three" / name).read_bytes() == (THREE / name).read_bytes()
-    assert not list(ROOT.glob("src/faceclean/report/vendor"))  # never copied into src/
+    assert not list(REPO.glob("src/faceclean/report/vendor"))  # never copied into src/
 
 
 def test_the_report_from_the_wheel_embeds_the_pinned_three(report):
@@ -96,11 +96,11 @@ def test_the_report_from_the_wheel_embeds_the_pinned_three(report):
     imports = json.loads(re.search(r'<script type="importmap">(.*?)</script>', html, re.S)[1])
     core = imports["imports"]["three/core"].split(",", 1)[1]
     assert base64.b64decode(core) == (THREE / "build" / "three.core.js").read_bytes()
-    pinned = json.loads((ROOT / "package-lock.json").read_text())["packages"]
+    pinned = json.loads((REPO / "package-lock.json").read_text())["packages"]
     assert f"three.js {pinned['node_modules/three']['version']}" in html
 
 
-@pytest.mark.skipif(_browser_missing() is not None, reason=str(_browser_missing()))
+@pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
 def test_the_report_from_the_wheel_plays_in_chromium(report):
     from playwright.sync_api import sync_playwright
 
@@ -119,7 +119,7 @@ def test_make_demo_installs_three_js_too(tmp_path):
     if shutil.which("make") is None:
         pytest.skip("make is not installed")
     for name in ("Makefile", "pyproject.toml", "package.json", "package-lock.json"):
-        shutil.copy2(ROOT / name, tmp_path / name)
+        shutil.copy2(REPO / name, tmp_path / name)
     (tmp_path / ".venv" / "bin").mkdir(parents=True)
     stamp = tmp_path / ".venv" / ".installed"
     stamp.touch()

@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REPO, free_port
 
-REPO = Path(__file__).resolve().parents[1]
 MiB = 1 << 20
 MEM = 1024 * MiB  # address-space cap per run (a normal run needs well under half)
 TIMEOUT = 90.0  # s, per run, for cases that are not about time
@@ -2690,14 +2690,6 @@ def test_vmc_relay_good_sender_is_not_silenced_by_another_sender():
         other.close()
 
 
-def _free_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
-
-
 def relay_start(*args: str, timeout: float = HANG):
     """Start ``faceclean relay ARGS``: CompletedProcess when it exits by itself, or
     ``"started"`` when it printed its banner (then it is stopped)."""
@@ -2744,7 +2736,7 @@ def relay_refused(*args: str) -> None:
     ],
 )
 def test_relay_listening_where_it_sends_is_refused(listen, send):
-    p = _free_port()
+    p = free_port()
     relay_refused("--listen", listen.format(p=p), "--send", send.format(p=p), "--method", "ema")
 
 

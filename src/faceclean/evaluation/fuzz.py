@@ -9,7 +9,7 @@ file must come back byte for byte.
 
 Inputs come from hypothesis: arbitrary bytes, and real files or packets (``seeds``)
 mutated by a few byte-level edits (flips, cuts, repeats, splices of tokens that parsers
-care about). ``tests/test_fuzz.py`` runs a bounded number per target in ``make test``;
+care about). ``tests/evaluation/test_fuzz.py`` runs a bounded number per target in ``make test``;
 ``faceclean fuzz`` runs many more. hypothesis is a dev dependency, imported when used.
 """
 

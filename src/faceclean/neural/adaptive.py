@@ -4,7 +4,7 @@
 
 The torch model is the runtime's step, unrolled closed loop over 200-frame chunks
 (B, T, M): the same features, the same GRU, the same One Euro stage, so that a checkpoint
-runs identically in numpy (tests/test_adaptive.py checks parity). Frames the tracker
+runs identically in numpy (tests/learned/test_adaptive.py checks parity). Frames the tracker
 lost (``observed`` False) hold the output and the state, as the runtime's time rules do.
 
 Loss: mean squared error on the frames whose truth is known, plus ``w_acc`` times the

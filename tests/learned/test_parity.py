@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import shared
 
 from faceclean import Animation
 from faceclean.channels import ARKIT52
 from faceclean.learned import jit
 from faceclean.learned.cleaner import Learned
-from faceclean.settings import takes_dir
 
 torch = pytest.importorskip("torch")
 TOL = 2e-5
@@ -29,12 +29,9 @@ TAKE = "alexdjulin/apfel.csv"
 
 @pytest.fixture(scope="module")
 def take() -> Animation:
-    d = takes_dir()
-    if d is None or not (d / TAKE).is_file():
-        pytest.skip(f"shared data absent ({TAKE})")
     from faceclean import load
 
-    anim = load(d / TAKE)
+    anim = load(shared("arkit_takes", *TAKE.split("/")))
     values, present = anim.arkit()
     assert present.all()
     return Animation.from_arkit(anim.times, values)

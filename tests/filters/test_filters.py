@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import irregular, steps
 from scipy.ndimage import gaussian_filter1d
 from scipy.signal import savgol_filter
 
@@ -14,18 +15,10 @@ from faceclean.filters import make
 NAMES = ("eyeBlinkLeft", "jawOpen", "browInnerUp")
 
 
-def _irregular(n: int, fps: float = 60.0, seed: int = 0) -> np.ndarray:
-    return np.cumsum(np.random.default_rng(seed).uniform(0.5, 1.5, n) / fps)
-
-
 def _signal(t: np.ndarray, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     clean = 0.5 + 0.3 * np.sin(2 * np.pi * np.array([0.5, 1.0, 2.0]) * t[:, None])
     return clean + rng.normal(0, 0.03, (len(t), 3))
-
-
-def _steps(c, t, x):
-    return np.array([c.step(x[i], t[i]) for i in range(len(t))])
 
 
 def test_one_euro_hand_computation_on_three_frames():
@@ -72,25 +65,25 @@ def _kalman_textbook(t, z, q, r):
 
 
 def test_kalman_equals_textbook_per_channel():
-    t = _irregular(120, seed=1)
+    t = irregular(120, seed=1)
     x = _signal(t, seed=1)
     q = np.array([50.0, 300.0, 2000.0])
     r = np.array([0.01, 0.03, 0.05])
-    y = _steps(make("kalman", {"q": q, "r": r}, names=NAMES), t, x)
+    y = steps(make("kalman", {"q": q, "r": r}, names=NAMES), t, x)
     for j in range(3):
         np.testing.assert_allclose(y[:, j], _kalman_textbook(t, x[:, j], q[j], r[j]), atol=1e-10)
 
 
 def test_ema_gamma_form_is_per_frame_and_tau_form_is_per_second():
-    t = _irregular(50, seed=2)
+    t = irregular(50, seed=2)
     x = _signal(t, seed=2)
-    y = _steps(make("ema", {"gamma": 0.3}, names=NAMES), t, x)
+    y = steps(make("ema", {"gamma": 0.3}, names=NAMES), t, x)
     want = [x[0]]
     for n in range(1, 50):
         want.append(0.3 * x[n] + 0.7 * want[-1])  # whatever dt is
     np.testing.assert_allclose(y, np.array(want), rtol=1e-12)
 
-    y = _steps(make("ema", {"tau": 0.05}, names=NAMES), t, x)
+    y = steps(make("ema", {"tau": 0.05}, names=NAMES), t, x)
     want = [x[0]]
     for n in range(1, 50):
         a = 1 - np.exp(-(t[n] - t[n - 1]) / 0.05)
@@ -99,7 +92,7 @@ def test_ema_gamma_form_is_per_frame_and_tau_form_is_per_second():
 
 
 def test_per_channel_parameters_equal_separate_cleaners():
-    t = _irregular(80, seed=3)
+    t = irregular(80, seed=3)
     x = _signal(t, seed=3)
     for method, params in [
         ("ema", {"tau": [0.01, 0.05, 0.2]}),
@@ -116,7 +109,7 @@ def test_per_channel_parameters_equal_separate_cleaners():
 
 
 def test_gaussian_kernel_in_time_on_irregular_times():
-    t = _irregular(200, seed=4)
+    t = irregular(200, seed=4)
     t = np.delete(t, np.arange(60, 70))  # dropped frames
     x = _signal(t, seed=4)
     sigma = 0.04
@@ -136,7 +129,7 @@ def test_gaussian_sigma_frames_is_the_frame_filter_on_a_regular_grid():
 
 
 def test_savgol_is_a_local_polynomial_fit_in_time():
-    t = _irregular(150, seed=6)
+    t = irregular(150, seed=6)
     x = _signal(t, seed=6)
     c = make("savgol", {"window": 0.2, "polyorder": 2}, names=NAMES)
     y = c.clean(Animation(t, x, NAMES)).values

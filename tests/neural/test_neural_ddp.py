@@ -14,6 +14,8 @@ import pytest
 
 pytest.importorskip("torch")
 
+from helpers import free_port
+
 from faceclean.settings import takes_dir  # noqa: E402
 
 TORCHRUN = Path(sys.executable).with_name("torchrun")
@@ -46,12 +48,6 @@ SCRIPT = textwrap.dedent(
 )
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.skipif(takes_dir() is None, reason="shared data arkit_takes/ absent")
 @pytest.mark.skipif(not TORCHRUN.exists(), reason="torchrun not installed beside python")
 def test_two_process_training_keeps_ranks_identical(tmp_path):
@@ -61,7 +57,7 @@ def test_two_process_training_keeps_ranks_identical(tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(takes_dir().parent)}
     cmd = [
         str(TORCHRUN), "--nproc_per_node", "2", "--master_addr", "127.0.0.1",
-        "--master_port", str(_free_port()), str(script), str(out),
+        "--master_port", str(free_port(socket.SOCK_STREAM)), str(script), str(out),
     ]  # fmt: skip
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
     assert proc.returncode == 0, proc.stderr[-2000:]

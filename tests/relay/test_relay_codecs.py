@@ -7,6 +7,7 @@ import struct
 
 import numpy as np
 import pytest
+from helpers import shared
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pythonosc.osc_bundle import OscBundle
@@ -17,15 +18,11 @@ from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.relay import ifacialmocap, livelink, osc, parse, vmc
 from faceclean.relay.frame import Frame, Malformed
-from faceclean.settings import data_dir
 
 
 def recording():
-    d = data_dir()
-    if d is None or not (d / "raw_streams" / "llv_dao.gesichter").is_file():
-        pytest.skip("shared data (raw_streams/llv_dao.gesichter) not present")
-    ref = np.load(d / "raw_streams" / "llv_dao.npz")
-    return livelink.read_recording(d / "raw_streams" / "llv_dao.gesichter"), ref
+    ref = np.load(shared("raw_streams", "llv_dao.npz"))
+    return livelink.read_recording(shared("raw_streams", "llv_dao.gesichter")), ref
 
 
 # -- Live Link Face v6 ---------------------------------------------------------------------

@@ -4,21 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import REPO, shared
 
 from faceclean import io
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
 from faceclean.learned.adaptive import FORMAT, N_FEATURES, Adaptive, AdaptiveWeights
-from faceclean.settings import takes_dir
 
-REPO_MODELS = __import__("pathlib").Path(__file__).resolve().parents[1] / "benchmarks" / "models"
+REPO_MODELS = REPO / "benchmarks" / "models"
 
 
 def _take():
-    root = takes_dir()
-    if root is None:
-        pytest.skip("shared data folder absent")
-    return root / "jmtechart" / "MySlate_3_iPhone.csv"
+    return shared("arkit_takes", "jmtechart", "MySlate_3_iPhone.csv")
 
 
 def _weights(seed: int = 0, H: int = 6, E: int = 3) -> AdaptiveWeights:

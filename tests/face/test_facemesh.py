@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import arkit_weights
 
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
@@ -28,13 +29,6 @@ def glb(face, tmp_path_factory):
     path = tmp_path_factory.mktemp("mesh") / "face.glb"
     facemesh.save_glb(face, path)
     return path
-
-
-def _w(**channels: float) -> np.ndarray:
-    w = np.zeros(52)
-    for name, value in channels.items():
-        w[INDEX[name]] = value
-    return w
 
 
 def _moved(face, name: str) -> np.ndarray:
@@ -68,19 +62,21 @@ def test_blink_closes_the_eyelid(face):
     def opening(w):
         return _distance(face, "upper_lid_left", "lower_lid_left", w)
 
-    open_, half, shut = (opening(_w(eyeBlinkLeft=a)) for a in (0.0, 0.5, 1.0))
+    open_, half, shut = (opening(arkit_weights(eyeBlinkLeft=a)) for a in (0.0, 0.5, 1.0))
     assert open_ > 0.01  # m: an open eye
     assert shut < 0.15 * open_ and shut < half < open_
-    assert opening(_w(eyeWideLeft=1.0)) > open_ > opening(_w(eyeSquintLeft=1.0))
-    assert opening(_w(eyeBlinkRight=1.0)) == pytest.approx(open_)  # the other eye
+    assert (
+        opening(arkit_weights(eyeWideLeft=1.0)) > open_ > opening(arkit_weights(eyeSquintLeft=1.0))
+    )
+    assert opening(arkit_weights(eyeBlinkRight=1.0)) == pytest.approx(open_)  # the other eye
 
 
 def test_jaw_opens_the_mouth_and_smile_lifts_the_corners(face):
     def gap(w):
         return _distance(face, "upper_lip", "lower_lip", w)
 
-    assert gap(_w()) < 0.003 and gap(_w(jawOpen=1.0)) > 0.02  # m
-    assert gap(_w(jawOpen=1.0, mouthClose=1.0)) < gap(_w(jawOpen=1.0))
+    assert gap(arkit_weights()) < 0.003 and gap(arkit_weights(jawOpen=1.0)) > 0.02  # m
+    assert gap(arkit_weights(jawOpen=1.0, mouthClose=1.0)) < gap(arkit_weights(jawOpen=1.0))
     lower_lip = _moved(face, "mouthLowerDownLeft")
     jaw = face.deltas[INDEX["jawOpen"]]
     assert np.mean(jaw[lower_lip, 1]) < -0.01  # the lower lip drops by over 1 cm
@@ -114,9 +110,9 @@ def test_glb_is_usable_by_the_distance_loss_mesh_reader(glb):
     from faceclean.face.mesh import PAIR_NAMES, load_face
 
     loss_face = load_face(glb)
-    d0 = loss_face.distances(_w())
-    jaw = loss_face.distances(_w(jawOpen=1.0))
-    blink = loss_face.distances(_w(eyeBlinkLeft=1.0, eyeBlinkRight=1.0))
+    d0 = loss_face.distances(arkit_weights())
+    jaw = loss_face.distances(arkit_weights(jawOpen=1.0))
+    blink = loss_face.distances(arkit_weights(eyeBlinkLeft=1.0, eyeBlinkRight=1.0))
     middle, eye = PAIR_NAMES.index("lip_middle"), PAIR_NAMES.index("eyelid_left")
     assert jaw[middle] > d0[middle] + 0.3  # in mouth widths
     assert blink[eye] < 0.3 * d0[eye]

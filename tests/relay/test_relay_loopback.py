@@ -10,10 +10,10 @@ import socket
 import subprocess
 import sys
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REPO, first_take, shared
 from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
@@ -29,9 +29,7 @@ from faceclean.relay import Relay, livelink, parse
 from faceclean.relay.frame import Frame
 from faceclean.relay.replay import frames_from_animation, replay
 from faceclean.resolve import resolve
-from faceclean.settings import data_dir, takes_dir
 
-REPO = Path(__file__).resolve().parents[1]
 WAIT = 5.0  # s; the most any single event may take before the test gives up
 
 
@@ -128,12 +126,9 @@ def jitter(x: np.ndarray) -> float:
 
 def real_take(n: int = 600) -> np.ndarray:
     """(n, 52) values of a real 60 fps ARKit take."""
-    folder = takes_dir()
-    if folder is None or not (folder / "neurosync").is_dir():
-        pytest.skip("shared data (arkit_takes/neurosync) not present")
     from faceclean import load
 
-    values, _ = load(sorted((folder / "neurosync").glob("*.csv"))[0]).arkit()
+    values, _ = load(first_take("neurosync")).arkit()
     values = values[~np.isnan(values).all(axis=1)]
     return values[:n]
 
@@ -172,11 +167,8 @@ def test_vmc_stream_comes_out_cleaned_through_garbage():
 
 
 def test_recorded_livelink_packets_come_out_as_vmc_frames():
-    d = data_dir()
-    if d is None or not (d / "raw_streams" / "llv_dao.gesichter").is_file():
-        pytest.skip("shared data (raw_streams/llv_dao.gesichter) not present")
-    packets = livelink.read_recording(d / "raw_streams" / "llv_dao.gesichter")
-    ref = np.load(d / "raw_streams" / "llv_dao.npz")
+    packets = livelink.read_recording(shared("raw_streams", "llv_dao.gesichter"))
+    ref = np.load(shared("raw_streams", "llv_dao.npz"))
     with (
         vmc_peer() as peer,
         running("livelink://127.0.0.1:0", f"vmc://127.0.0.1:{peer.port}") as r,
@@ -424,14 +416,11 @@ def test_replay_paces_by_timestamps_with_an_injected_clock():
 
 
 def test_replay_command_streams_a_recording_as_livelink(capsys):
-    d = data_dir()
-    if d is None or not (d / "raw_streams" / "llv_dao.gesichter").is_file():
-        pytest.skip("shared data (raw_streams/llv_dao.gesichter) not present")
-    ref = np.load(d / "raw_streams" / "llv_dao.npz")
+    ref = np.load(shared("raw_streams", "llv_dao.npz"))
     with raw_receiver() as rx:
         rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         url = f"livelink://127.0.0.1:{rx.getsockname()[1]}"
-        path = str(d / "raw_streams" / "llv_dao.gesichter")
+        path = str(shared("raw_streams", "llv_dao.gesichter"))
         assert main(["replay", path, "--send", url, "--speed", "200"]) == 0
         frames = [livelink.decode(rx.recv(65536)) for _ in range(180)]
     assert "sent 180 packets" in capsys.readouterr().out

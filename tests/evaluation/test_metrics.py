@@ -4,16 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import irregular
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import metrics
-
-
-def _irregular(n: int, fps: float, seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    return np.cumsum(rng.uniform(0.6, 1.4, n) / fps)
 
 
 def _blinks(t: np.ndarray, centres: list[float], width: float = 0.05) -> np.ndarray:
@@ -29,7 +25,7 @@ def test_mse_known_value_and_nan_ignored():
 
 @pytest.mark.parametrize("delay_ms", [0.0, 33.0, 80.0, -20.0])
 def test_lag_of_shifted_sine(delay_ms):
-    t = _irregular(600, 60.0)  # ~10 s, irregular
+    t = irregular(600, 60.0, spread=(0.6, 1.4))  # ~10 s, irregular
     f = np.array([0.7, 1.3, 2.1])  # Hz
     truth = 0.5 + 0.4 * np.sin(2 * np.pi * f * t[:, None])
     pred = 0.5 + 0.4 * np.sin(2 * np.pi * f * (t[:, None] - delay_ms / 1000))
@@ -61,7 +57,7 @@ def test_blink_nan_without_blinks():
 
 
 def test_white_noise_raises_jitter_on_irregular_times():
-    t = _irregular(400, 60.0, seed=1)
+    t = irregular(400, 60.0, seed=1, spread=(0.6, 1.4))
     truth = 0.5 + 0.3 * np.sin(2 * np.pi * 1.0 * t)[:, None] * np.ones((1, 4))
     assert metrics.jitter_ratio(t, truth, truth) == pytest.approx(1.0)
     noisy = truth + np.random.default_rng(2).normal(0, 0.02, truth.shape)
@@ -70,7 +66,7 @@ def test_white_noise_raises_jitter_on_irregular_times():
 
 
 def test_second_derivative_exact_on_parabola_irregular():
-    t = _irregular(50, 30.0, seed=3)
+    t = irregular(50, 30.0, seed=3, spread=(0.6, 1.4))
     x = (3.0 * t**2 + t)[:, None]
     d2 = metrics._second_derivative(t, x)
     np.testing.assert_allclose(d2, 6.0, rtol=1e-6)

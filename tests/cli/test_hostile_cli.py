@@ -16,13 +16,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import REPO
 
 from faceclean import filters, io
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def one_line(capsys, *want: str) -> str:

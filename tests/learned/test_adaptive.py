@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import first_take
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
@@ -31,12 +32,8 @@ def _wobbly(seed: int = 0, n: int = 150) -> Animation:
 def real_pose() -> np.ndarray:
     """A real iPhone frame (52,), a third of the way into a neurosync take."""
     from faceclean.io import load
-    from faceclean.settings import takes_dir
 
-    root = takes_dir()
-    if root is None:
-        pytest.skip("shared data folder absent")
-    x, _ = load(sorted((root / "neurosync").glob("*.csv"))[0]).arkit()
+    x, _ = load(first_take("neurosync")).arkit()
     x = x[np.isfinite(x).all(1)]
     return x[len(x) // 3]
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import IMPORTERS, REPO
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
@@ -23,15 +24,13 @@ from faceclean.face import facemesh
 from faceclean.io import gltf_take, load, save
 from faceclean.settings import data_dir
 
-ROOT = Path(__file__).resolve().parents[1]
-IMPORTERS = ROOT / "tests" / "importers"
 MESH_NPZ = data_dir() / "meshes" / "arkit_reference_mesh.npz" if data_dir() else None
 
 
 def _node_missing(package: str) -> str | None:
     if shutil.which("node") is None:
         return "node is not installed (Debian package 'nodejs')"
-    if not (ROOT / "node_modules" / package / "package.json").is_file():
+    if not (REPO / "node_modules" / package / "package.json").is_file():
         return f"node_modules/{package} is absent: run `npm ci` (or `make venv`)"
     return None
 
@@ -177,7 +176,7 @@ def test_refusals_leave_no_output(tmp_path, capsys):
 def _node(script: str, path: Path) -> dict:
     done = subprocess.run(
         ["node", str(IMPORTERS / script), str(path)],
-        cwd=ROOT,
+        cwd=REPO,
         capture_output=True,
         text=True,
         timeout=120,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import arkit_weights
 
-from faceclean.channels import INDEX
 from faceclean.errors import FacecleanError
 from faceclean.face.mesh import PAIR_NAMES, load_face
 from faceclean.settings import data_dir
@@ -21,21 +21,14 @@ EYE_L, EYE_R = PAIR_NAMES.index("eyelid_left"), PAIR_NAMES.index("eyelid_right")
 CORNERS = PAIR_NAMES.index("mouth_corners")
 
 
-def _weights(**channels: float) -> np.ndarray:
-    w = np.zeros(52)
-    for name, value in channels.items():
-        w[INDEX[name]] = value
-    return w
-
-
 @needs_meshes
 @pytest.mark.parametrize("name", ["arkit_reference_mesh.npz", "ict_face_area.npz"])
 def test_pairs_measure_lips_and_eyelids(name):
     face = load_face(MESHES / name)
-    rest = face.distances(_weights())
-    jaw = face.distances(_weights(jawOpen=1.0))
-    blink_l = face.distances(_weights(eyeBlinkLeft=1.0))
-    blink_r = face.distances(_weights(eyeBlinkRight=1.0))
+    rest = face.distances(arkit_weights())
+    jaw = face.distances(arkit_weights(jawOpen=1.0))
+    blink_l = face.distances(arkit_weights(eyeBlinkLeft=1.0))
+    blink_r = face.distances(arkit_weights(eyeBlinkRight=1.0))
     assert np.all(jaw[LIPS] > rest[LIPS] + 0.5)  # lips part by over half a mouth width
     assert np.all(rest[LIPS] < 0.05)  # and meet in the neutral face
     assert rest[CORNERS] == pytest.approx(1.0)  # distances in mouth widths
@@ -113,7 +106,7 @@ def test_glb_with_morph_targets(tmp_path):
     assert sorted(map(sorted, face.pairs[LIPS].tolist())) == [[0, 1], [4, 5], [6, 7]]
     assert sorted(face.pairs[CORNERS].tolist()) == [2, 3]
     assert face.pairs[EYE_L].tolist() == [8, 9] and face.pairs[EYE_R].tolist() == [10, 11]
-    d = face.distances(np.stack([_weights(), _weights(jawOpen=1.0)]))
+    d = face.distances(np.stack([arkit_weights(), arkit_weights(jawOpen=1.0)]))
     assert d[1, 1] > d[0, 1] + 0.5
 
 
