@@ -47,7 +47,7 @@ from faceclean.animation import Animation
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, GROUPS, channel_key
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.base import MAX_ABS, State, StreamCleaner
 from faceclean.io.npz_safe import load_arrays
 from faceclean.learned import formats
 from faceclean.learned.checkpoint import read_config
@@ -192,9 +192,11 @@ class _DerivativeNet(StreamCleaner):
 
         The features depend on the input only, so a first pass records them, one batched
         prediction follows, and a second pass blends: the same numbers as stepping when the
-        model is exact row by row (trees; a matrix product is not, so FC steps).
+        model is exact row by row (trees; a matrix product is not, so FC steps). A lost or
+        absurd value in a kept frame takes the last output (filters.base rule 2), which the
+        first pass does not know: such clips step.
         """
-        if not self.batched:
+        if not self.batched or _fills(anim.values):
             return super().clean(anim)
         try:
             self._record = []
@@ -208,6 +210,14 @@ class _DerivativeNet(StreamCleaner):
         finally:
             self._record = self._pending = None
             self._ages = []
+
+
+def _fills(values: np.ndarray) -> bool:
+    """Whether rule 2 (filters.base) fills a value of (N, M) ``values`` from the output:
+    a non-finite or absurd value in a frame that has a good one."""
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(values) <= MAX_ABS)
+    return bool((bad.any(axis=1) & ~bad.all(axis=1)).any())
 
 
 class FullyConnected(_DerivativeNet):
