@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from contract_backends import BACKENDS, CLAUSES, Backend, Files
+from helpers import steps
 
 from faceclean import Animation
 from faceclean.channels import ARKIT52
@@ -81,10 +82,6 @@ def _noisy(n: int, seed: int = 0, fps: float = 60.0) -> tuple[np.ndarray, np.nda
     t = np.cumsum(rng.uniform(0.7, 1.3, n) / fps)
     x = np.clip(_curve(t, seed) + rng.normal(0, 0.02, (n, M)), 0.0, 1.0)
     return t, x
-
-
-def _steps(c, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    return np.array([c.step(x[i], t[i]) for i in range(len(t))])
 
 
 # --- the table itself ------------------------------------------------------------------
@@ -257,9 +254,9 @@ def test_causal(build):
     t, x = _noisy(150, seed=1)
     future = x.copy()
     future[100:] = np.clip(1.0 - future[100:], 0, 1)
-    y = _steps(cleaner, t, x)
+    y = steps(cleaner, t, x)
     cleaner.reset()
-    y2 = _steps(cleaner, t, future)
+    y2 = steps(cleaner, t, future)
     np.testing.assert_array_equal(y[:100], y2[:100])
     assert not np.allclose(y[100:], y2[100:])
 
@@ -269,10 +266,10 @@ def test_reset_forgets(build):
     cleaner = build()
     ta, xa = _noisy(80, seed=4)
     tb, xb = _noisy(80, seed=5)
-    _steps(cleaner, ta, xa)
+    steps(cleaner, ta, xa)
     cleaner.reset()
-    y = _steps(cleaner, tb, xb)
-    np.testing.assert_array_equal(y, _steps(build(), tb, xb))
+    y = steps(cleaner, tb, xb)
+    np.testing.assert_array_equal(y, steps(build(), tb, xb))
 
 
 @pytest.mark.clause("batch")
@@ -288,7 +285,7 @@ def test_batch_equals_reset_then_step(build):
     fresh.step(np.full(M, 0.3), 0.0)  # dirty state: clean() must reset it
     batch2 = fresh.clean(Animation(t, x, ARKIT52)).values
     cleaner.reset()
-    streamed = _steps(cleaner, t, x)
+    streamed = steps(cleaner, t, x)
     streamed[40] = np.nan  # clean() leaves missing frames NaN; step() holds
     np.testing.assert_array_equal(batch, streamed)
     np.testing.assert_array_equal(batch2, streamed)
@@ -325,7 +322,7 @@ def test_time_rules(build):
     want[[2, 9]] = 0.0
     np.testing.assert_array_equal(cleaner.step(first, t[0]), want)
     cleaner.reset()
-    y = _steps(cleaner, t[:20], x[:20])
+    y = steps(cleaner, t[:20], x[:20])
     last = y[-1]
     # Missing frame (all NaN, or t NaN): last output, state unchanged.
     np.testing.assert_array_equal(cleaner.step(nan, t[20]), last)
@@ -335,7 +332,7 @@ def test_time_rules(build):
     np.testing.assert_array_equal(cleaner.step(x[20], t[5]), last)
     held = cleaner.step(x[20], t[20])
     ref = build()
-    _steps(ref, t[:20], x[:20])
+    steps(ref, t[:20], x[:20])
     np.testing.assert_allclose(held, ref.step(x[20], t[20]), rtol=0, atol=1e-12)
     # A NaN channel takes its last output.
     part = x[21].copy()
@@ -352,16 +349,13 @@ RUNTIMES = [b for b in BACKENDS if b.method == "lstm"]  # kernels, ONNX, the fac
 
 
 @pytest.fixture(scope="module")
-def real_take() -> Animation:
+def real_take(takes_root) -> Animation:
     """The shortest take of settings.takes_dir() with all 52 ARKit channels, at most
     600 frames of it (tracking-loss rows kept)."""
     from faceclean import load
     from faceclean.evaluation.dataset import SUFFIXES
-    from faceclean.settings import takes_dir
 
-    root = takes_dir()
-    if root is None:
-        pytest.skip("shared data absent (settings.takes_dir() is None)")
+    root = takes_root
     paths = [p for p in root.rglob("*") if p.suffix.lower() in SUFFIXES and p.is_file()]
     for p in sorted(paths, key=lambda p: (p.stat().st_size, str(p))):
         anim = load(p)
