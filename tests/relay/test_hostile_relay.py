@@ -21,8 +21,9 @@ from faceclean.relay.frame import Frame, Malformed
 
 
 @contextlib.contextmanager
-def relay_to(send_scheme: str = "vmc", listen_scheme: str = "vmc"):
-    """(relay, receiver socket, sender factory): a relay that is not running; call drain()."""
+def relay_to(send_scheme: str = "vmc", listen_scheme: str = "vmc", clock=None):
+    """(relay, receiver socket, sender factory): a relay that is not running; call drain().
+    ``clock`` (s) replaces time.monotonic for arrival times."""
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     rx.setblocking(False)
@@ -30,6 +31,7 @@ def relay_to(send_scheme: str = "vmc", listen_scheme: str = "vmc"):
         parse(f"{listen_scheme}://127.0.0.1:0"),
         parse(f"{send_scheme}://127.0.0.1:{rx.getsockname()[1]}", "send"),
         filters.make("ema"),
+        **({} if clock is None else {"clock": clock}),
     )
     senders: list[socket.socket] = []
 
@@ -174,6 +176,65 @@ def test_a_second_sender_neither_mixes_values_in_nor_takes_over():
         frames = [vmc.Decoder().feed(p) for p in received(rx)]
     assert len(frames) == 21 and relay.stats.foreign == 20
     assert all(f.names == ("jawOpen",) and f.values[0] == 0.0 for f in frames)
+
+
+class Clock:
+    """Arrival time s that the test moves on (the relay reads it per face frame)."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _stamped(value: float, t: float) -> bytes:
+    return vmc.Encoder(stamp=True).encode(Frame(("jawOpen",), np.full(1, value), t))
+
+
+def test_a_stray_frame_after_a_silence_never_takes_the_stream():
+    clock = Clock()
+    with relay_to(clock=clock) as (relay, rx, sender):
+        good, other = sender(), sender()
+        for i in range(10):
+            good.send(_stamped(0.0, i / 60))
+            drain(relay)
+            clock.now += 1 / 60
+        clock.now += 5.0  # the good sender pauses far longer than HANDOVER
+        other.send(_stamped(1.0, 50.0))  # one frame from elsewhere
+        drain(relay)
+        clock.now += 0.5
+        good.send(_stamped(0.0, 10 / 60))  # it resumes: still the face followed
+        drain(relay)
+        frames = [vmc.Decoder().feed(p) for p in received(rx)]
+    assert relay.stats.foreign == 1 and len(frames) == 11
+    assert all(f.values[0] == 0.0 for f in frames)
+
+
+def test_a_tracker_restarted_on_a_new_port_takes_over_after_the_silence():
+    from faceclean.relay.loop import CLAIM, HANDOVER
+
+    clock = Clock()
+    with relay_to(clock=clock) as (relay, rx, sender):
+        old, new = sender(), sender()
+        old.send(_stamped(0.0, 0.0))
+        drain(relay)
+        assert len(received(rx)) == 1
+        last_old = clock.now
+        clock.now += 0.5  # the app restarts: the new port streams at 60 fps from here
+        taken, frames = None, []
+        for i in range(120):
+            new.send(_stamped(1.0, i / 60))
+            drain(relay)
+            got = [vmc.Decoder().feed(p) for p in received(rx)]
+            if taken is None and got:
+                taken = clock.now
+            frames += got
+            clock.now += 1 / 60
+    assert taken is not None and taken - last_old >= HANDOVER
+    assert taken - last_old < HANDOVER + CLAIM  # it streamed long enough during the silence
+    assert relay.stats.foreign == round((taken - last_old - 0.5) * 60)
+    assert len(frames) + relay.stats.foreign == 120 and all(f.values[0] == 1.0 for f in frames)
 
 
 def test_own_output_looping_back_is_dropped():

@@ -3,11 +3,14 @@
 Per wake-up the socket is drained without blocking; of the face frames it held, only the
 newest is cleaned and sent (never a queue: a relay that falls behind skips, it does not
 lag). It follows one sender's face: another sender's face frames are taken only after the
-followed one has been silent for ``HANDOVER`` s. Datagrams that carry only passthrough
-messages are forwarded as they come (VMC output). Ordering: a frame whose time is not
-after the last one sent is dropped (out of order or duplicate); a backwards jump over
-``RESTART`` seconds is a new stream (the sender restarted) and restarts the cleaner.
-Frames without a timestamp take their arrival time (``time.monotonic``). A long silence
+followed one has been silent for ``HANDOVER`` s *and* the other has streamed for ``CLAIM``
+s (frames under ``CLAIM`` s apart), so a stray frame never takes the stream, while a
+tracker restarted on a new port takes over within about a second. Datagrams that carry
+only passthrough messages are forwarded as they come (VMC output). Ordering: a frame
+whose time is not after the last one sent is dropped (out of order or duplicate); a
+backwards jump over ``RESTART`` seconds is a new stream (the sender restarted) and
+restarts the cleaner. Frames without a timestamp, and the handover, take their arrival
+time (``clock``, time.monotonic by default). A long silence
 restarts the cleaner through its own ``max_gap`` rule (filters/base.py), so the face does
 not jump or drift when it returns. The loop sends only to the ``send`` endpoint, never
 back to a sender. Decoder state is kept per source address and every sender-driven cache
@@ -46,6 +49,7 @@ MAX_DRAIN = 256  # datagrams read per wake-up before the newest frame is process
 WINDOW = 8192  # latency samples kept for the percentiles
 RCVBUF = 1 << 20  # bytes asked for the receive buffer (the kernel may cap it)
 HANDOVER = 1.0  # s the followed sender must be silent before another sender's face is taken
+CLAIM = 0.25  # s another sender must stream (frames under CLAIM s apart) to take over
 
 
 class Stepper(Protocol):
@@ -151,7 +155,8 @@ class Relay:
         self._last_t: float | None = None  # s, time of the last frame sent
         self._packet_clock: bool | None = None  # the stream's frames carry their time
         self._source: object = None  # address of the sender whose face is followed
-        self._source_seen = -float("inf")  # time.monotonic() of its last face frame
+        self._source_seen = -float("inf")  # clock() of its last face frame
+        self._claim: tuple[object, float, float] | None = None  # (sender, since, last) s
         self._stopping = False
         family, addr = listen.sockaddr()
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -254,8 +259,8 @@ class Relay:
                     self.stats.passthrough += 1
                     self._send(self.encoder.encode(frame))
                 continue
-            heard = time.monotonic()
-            if sender != self._source and heard - self._source_seen < HANDOVER:
+            heard = self.clock()
+            if sender != self._source and not self._takes_over(sender, heard):
                 self.stats.foreign += 1  # one face at a time: another sender is not mixed in
                 continue
             self._source, self._source_seen = sender, heard
@@ -277,6 +282,18 @@ class Relay:
             best, best_t = (frame, t, received), t
         if best is not None:
             self._process(*best)
+
+    def _takes_over(self, sender: object, heard: float) -> bool:
+        """Whether a face frame from a sender other than the followed one takes the stream:
+        the first sender does; later, only one that has streamed CLAIM s while the followed
+        one has been silent HANDOVER s. One claim is tracked at a time (bounded state)."""
+        if self._source is None:
+            return True
+        c = self._claim
+        streaming = c is not None and c[0] == sender and heard - c[2] < CLAIM
+        since = c[1] if streaming else heard
+        self._claim = (sender, since, heard)
+        return heard - self._source_seen >= HANDOVER and heard - since >= CLAIM
 
     def _reset(self) -> None:
         self.cleaner.reset()
