@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.relay import bounds
 from faceclean.relay.frame import Frame, Malformed
@@ -92,9 +93,8 @@ class Encoder:
     def _columns(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
         cols = self._index.get(names)
         if cols is None:  # (source columns, ARKit positions), cached per name tuple
-            pos = {n: i for i, n in enumerate(ARKIT52)}
-            pairs = [(j, pos[c]) for j, n in enumerate(names) if (c := canonical(n)) in pos]
-            cols = (np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int))
+            arkit = ChannelMap(ARKIT52, names)
+            cols = (arkit.cols, arkit.have)
             self._index.put(names, cols)
         return cols
 

@@ -36,7 +36,8 @@ from typing import Protocol
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.relay import bounds
 from faceclean.relay.frame import Decoder, Frame, Malformed
@@ -303,9 +304,8 @@ class Relay:
     def _cols(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
         cols = self._columns.get(names)
         if cols is None:  # (frame columns, ARKit positions), cached per name tuple
-            pos = {n: i for i, n in enumerate(ARKIT52)}
-            pairs = [(j, pos[c]) for j, n in enumerate(names) if (c := canonical(n)) in pos]
-            cols = (np.array([p[0] for p in pairs], int), np.array([p[1] for p in pairs], int))
+            arkit = ChannelMap(ARKIT52, names)
+            cols = (arkit.cols, arkit.have)
             self._columns.put(names, cols)
         return cols
 
