@@ -385,7 +385,7 @@ def test_nonfinite_config_json_is_refused(tmp_path, take, capsys):
 
 
 def test_truncated_mesh_is_one_line(tmp_path, take, capsys):
-    from faceclean.face import facemesh
+    from faceclean.face import mesh as facemesh
 
     good = tmp_path / "face.glb"
     facemesh.save_glb(facemesh.stylised(), good)

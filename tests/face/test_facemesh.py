@@ -9,7 +9,7 @@ from helpers import arkit_weights
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
-from faceclean.face import facemesh
+from faceclean.face import mesh as facemesh
 from faceclean.settings import data_dir
 
 MESHES = data_dir() / "meshes" if data_dir() is not None else None
@@ -107,7 +107,7 @@ def test_glb_round_trips_through_pygltflib(face, glb):
 
 
 def test_glb_is_usable_by_the_distance_loss_mesh_reader(glb):
-    from faceclean.face.mesh import PAIR_NAMES, load_face
+    from faceclean.face.pairs import PAIR_NAMES, load_face
 
     loss_face = load_face(glb)
     d0 = loss_face.distances(arkit_weights())

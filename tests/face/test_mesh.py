@@ -7,7 +7,7 @@ import pytest
 from helpers import arkit_weights
 
 from faceclean.errors import FacecleanError
-from faceclean.face.mesh import PAIR_NAMES, load_face
+from faceclean.face.pairs import PAIR_NAMES, load_face
 from faceclean.settings import data_dir
 
 DATA = data_dir()
@@ -37,16 +37,16 @@ def test_pairs_measure_lips_and_eyelids(name):
     assert blink_r[EYE_R] < 0.3 * rest[EYE_R]
     assert np.allclose(blink_l[LIPS], rest[LIPS], atol=1e-3)
     # the thirds sit on either side of the middle, symmetric about it
-    x = face.neutral[face.pairs[LIPS]].mean(axis=1)[:, 0]
+    x = face.mesh.vertices[face.pairs[LIPS]].mean(axis=1)[:, 0]
     assert x[0] < x[1] < x[2] or x[0] > x[1] > x[2]
-    width = np.linalg.norm(np.subtract(*face.neutral[face.pairs[CORNERS]]))
+    width = np.linalg.norm(np.subtract(*face.mesh.vertices[face.pairs[CORNERS]]))
     assert abs(abs(x[0] - x[1]) - width / 6) < width / 24
 
 
 @needs_meshes
 def test_default_mesh_and_given_pairs():
     face = load_face()
-    assert face.deltas.shape == (52, 1220, 3) and face.neutral.shape == (1220, 3)
+    assert face.mesh.deltas.shape == (52, 1220, 3) and face.mesh.vertices.shape == (1220, 3)
     mine = face.pairs.copy()
     mine[0] = [0, 1]
     assert np.array_equal(load_face(pairs=mine).pairs, mine)
@@ -124,3 +124,24 @@ def test_bad_mesh_files(tmp_path):
     (tmp_path / "bad.glb").write_bytes(b"glTF garbage")
     with pytest.raises(FacecleanError):
         load_face(tmp_path / "bad.glb")
+
+
+@pytest.mark.parametrize("source", ["stylised", "arkit_reference_mesh.npz", "ict_face_area.npz"])
+def test_loss_pairs_of_a_glb_face_equal_those_of_its_source(tmp_path, source):
+    """One mesh type: the loss reads what the viewer reads and the GLB writer writes."""
+    from faceclean.face import mesh
+    from faceclean.face.pairs import loss_face
+
+    if source == "stylised":
+        face, first = mesh.stylised(), loss_face(mesh.stylised())
+    else:
+        if MESHES is None or not (MESHES / source).is_file():
+            pytest.skip("shared data meshes/ absent")
+        face, first = mesh.load(MESHES / source), load_face(MESHES / source)
+    glb = tmp_path / "face.glb"
+    mesh.save_glb(face, glb)
+    again = load_face(glb)
+    assert np.array_equal(again.pairs, first.pairs) and again.scale == first.scale
+    w = np.random.default_rng(0).uniform(0, 1, (8, 52))
+    assert np.array_equal(again.distances(w), first.distances(w))
+    assert np.array_equal(again.mesh.deltas, first.mesh.deltas)

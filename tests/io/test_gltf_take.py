@@ -20,7 +20,7 @@ from helpers import IMPORTERS, REPO
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
-from faceclean.face import facemesh
+from faceclean.face import mesh as facemesh
 from faceclean.io import gltf_take, load, save
 from faceclean.settings import data_dir
 

@@ -8,7 +8,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from faceclean.channels import ARKIT52, INDEX  # noqa: E402
-from faceclean.face.mesh import Face  # noqa: E402
+from faceclean.face.mesh import FaceMesh  # noqa: E402
+from faceclean.face.pairs import LossFace  # noqa: E402
 from faceclean.neural import checkpoint  # noqa: E402
 from faceclean.neural.losses import Loss, Weights  # noqa: E402
 from faceclean.neural.model import LSTMCleaner  # noqa: E402
@@ -25,7 +26,7 @@ def _one_thread():
     torch.set_num_threads(before)
 
 
-def _face() -> Face:
+def _face() -> LossFace:
     """A toy face: pair 0 opens with jawOpen, pair 4 closes with eyeBlinkLeft."""
     neutral = np.zeros((12, 3))
     neutral[1::2, 1] = 0.01  # every pair (2i, 2i+1) starts 1 cm apart
@@ -33,7 +34,8 @@ def _face() -> Face:
     deltas = np.zeros((52, 12, 3))
     deltas[INDEX["jawOpen"], 0, 1] = -0.03
     deltas[INDEX["eyeBlinkLeft"], 9, 1] = -0.01
-    return Face(neutral, deltas, np.arange(12).reshape(6, 2), scale=0.04)
+    mesh = FaceMesh(neutral, np.zeros((0, 3), np.uint32), deltas)
+    return LossFace(mesh, np.arange(12).reshape(6, 2), scale=0.04)
 
 
 def _batch(B=4, T=60, fps=60.0, seed=0, M=52):

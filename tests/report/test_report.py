@@ -19,7 +19,7 @@ from faceclean.channels import INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import comparison
-from faceclean.face import facemesh
+from faceclean.face import mesh as facemesh
 from faceclean.io import save
 from faceclean.report import build, payload
 from faceclean.settings import data_dir

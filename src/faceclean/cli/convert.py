@@ -44,12 +44,12 @@ def run(args: argparse.Namespace) -> int:
         )
         return 0
 
-    from faceclean.face import facemesh
+    from faceclean.face import mesh as face_mesh
     from faceclean.io import gltf_take
     from faceclean.io.atomic import atomic_open
 
     suffix = Path(args.output).suffix.lower()
-    mesh = facemesh.load(args.mesh) if args.mesh is not None else facemesh.stylised()
+    mesh = face_mesh.load(args.mesh) if args.mesh is not None else face_mesh.stylised()
     with atomic_open(args.output, "wb") as f:
         counts = gltf_take.write(anim, f, args.output, mesh, name=Path(args.input).stem)
     kept = anim.n_frames - counts["lost"] - counts["unordered"]

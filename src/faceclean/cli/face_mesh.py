@@ -16,12 +16,12 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean.errors import FacecleanError
-    from faceclean.face import facemesh
+    from faceclean.face import mesh
 
     if Path(args.output).suffix.lower() != ".glb":
         raise FacecleanError(f"{args.output}: the face mesh is written as .glb")
-    face = facemesh.stylised()
-    facemesh.save_glb(face, args.output)
+    face = mesh.stylised()
+    mesh.save_glb(face, args.output)
     print(
         f"wrote {args.output}: {len(face.vertices)} vertices, {len(face.faces)} triangles, "
         f"{int(face.present.sum())} ARKit morph targets"

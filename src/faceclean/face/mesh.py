@@ -1,215 +1,196 @@
-"""Face meshes with ARKit blendshapes, and the 6 vertex pairs of the distance loss.
+"""The face mesh: the stylised face, a user's mesh (npz or glTF/GLB), GLB export.
 
-A face is its neutral vertices (V, 3), one delta per ARKit channel (52, V, 3) in
-canonical order (zeros where the mesh lacks the shape) and 6 vertex pairs whose
-distances the loss compares (SPEC section 2). Vertices for weights w (..., 52):
-``v = neutral + w @ deltas``.
+A :class:`FaceMesh` is a triangle mesh with one morph target per ARKit channel, in
+canonical order (zeros where the mesh lacks a shape), and optional vertex colours.
+Vertices for weights w (52,): ``v = vertices + tensordot(w, deltas, 1)``. The one type the
+report's viewer, the glTF writer (:mod:`faceclean.io.gltf_take`) and the distance loss
+(:mod:`faceclean.face.pairs`) use.
 
-The pairs are picked by a rule that needs only the shapes, never vertex numbers:
-
-- lip opening at 1/3, 1/2 and 2/3 of the way from the right to the left mouth corner:
-  of the vertex pairs closer than 3 % of the mesh's bounding-box diagonal in the neutral
-  face, with both vertices within 1/48 of the mouth width of that fraction (1/24, then
-  1/12, on coarse meshes), keep those that ``jawOpen`` = 1 pulls apart at least half as
-  much as the best; take the closest in the neutral face (where the lips meet);
-- mouth corners: the vertex ``mouthSmileRight`` moves most, and ``mouthSmileLeft``'s;
-- eyelid opening, per side: the upper-lid vertex ``eyeBlink*`` moves most, and the
-  lower-lid vertex (one that blink moves less than half as much) nearest to where the
-  upper lid lands when the eye is closed.
-
-Distances are reported in mouth widths (the neutral corner-to-corner distance), so a
-mesh in metres and one in centimetres give the same numbers.
+GLB files carry the targets on the first primitive of the first mesh that has them, with
+their ARKit names in ``mesh.extras.targetNames`` (the convention Blender and three.js
+read); node transforms are ignored (the viewer frames the mesh by its bounding box).
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+import struct
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from faceclean.channels import ARKIT52, INDEX, canonical
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.settings import data_dir
-
-PAIR_NAMES = (
-    "lip_right_third",
-    "lip_middle",
-    "lip_left_third",
-    "mouth_corners",
-    "eyelid_left",
-    "eyelid_right",
-)
-NEIGHBOUR = 0.03  # lip pairs: neutral distance below this share of the mesh diagonal
-BANDS = (1 / 48, 1 / 24, 1 / 12)  # lip pairs: +- share of the mouth width around 1/3, 1/2, 2/3
+from faceclean.io.atomic import atomic_write
 
 
-@dataclass(frozen=True)
-class Face:
-    """A face mesh, its ARKit deltas, and the 6 loss pairs (see the module docstring)."""
+@dataclass(eq=False)
+class FaceMesh:
+    """A face mesh with ARKit morph targets."""
 
-    neutral: np.ndarray  # (V, 3) mesh units
-    deltas: np.ndarray  # (52, V, 3) mesh units per unit weight
-    pairs: np.ndarray  # (6, 2) vertex indices, in PAIR_NAMES order
-    scale: float  # mesh units per mouth width
+    vertices: np.ndarray  # (V, 3) float32, mesh units (m for ours)
+    faces: np.ndarray  # (F, 3) uint32 vertex indices
+    deltas: np.ndarray  # (52, V, 3) float32, canonical ARKit order
+    colors: np.ndarray | None = None  # (V, 3) float32 linear RGB in [0, 1], or None
+    name: str = "face"
+    landmarks: dict[str, int] = field(default_factory=dict)  # named vertex indices
 
-    def distances(self, weights: np.ndarray) -> np.ndarray:
-        """(..., 6) pair distances in mouth widths for weights (..., 52)."""
-        w = np.asarray(weights, dtype=np.float64)
-        v0 = self.neutral[self.pairs]  # (6, 2, 3)
-        dv = self.deltas[:, self.pairs]  # (52, 6, 2, 3)
-        p = v0 + np.tensordot(w, dv, axes=(-1, 0))  # (..., 6, 2, 3)
-        return np.linalg.norm(p[..., 0, :] - p[..., 1, :], axis=-1) / self.scale
+    @property
+    def present(self) -> np.ndarray:
+        """(52,) bool: channels whose target moves at least one vertex."""
+        return np.any(self.deltas != 0, axis=(1, 2))
 
-
-def default_mesh() -> Path:
-    """The ARKit reference mesh in the shared data folder."""
-    d = data_dir()
-    path = d / "meshes" / "arkit_reference_mesh.npz" if d is not None else None
-    if path is None or not path.is_file():
-        raise FacecleanError("no face mesh: the shared data folder lacks meshes/ (give --mesh)")
-    return path
+    def pose(self, weights: np.ndarray) -> np.ndarray:
+        """(V, 3) vertices for weights (52,)."""
+        w = np.asarray(weights, dtype=np.float64).reshape(len(ARKIT52))
+        return self.vertices + np.tensordot(w, self.deltas, axes=1)
 
 
-def load_face(path: str | os.PathLike | None = None, pairs: np.ndarray | None = None) -> Face:
-    """A :class:`Face` from an npz or GLB mesh (default: the ARKit reference mesh).
+def stylised() -> FaceMesh:
+    """faceclean's own stylised face, 52 targets, coloured (see faceclean.face.parts)."""
+    from faceclean.face import parts
 
-    ``pairs`` (6, 2) vertex indices replace the rule's choice.
-    """
-    p = Path(path) if path is not None else default_mesh()
-    if not p.is_file():
-        raise FacecleanError(f"no such mesh file: {p}")
-    if p.suffix.lower() == ".npz":
-        neutral, deltas = _read_npz(p)
-    elif p.suffix.lower() in (".glb", ".gltf"):
-        neutral, deltas = _read_gltf(p)
+    neutral, faces, colors, deltas = parts.build()
+    linear = np.asarray(colors, np.float64) ** 2.2  # sRGB-looking palette -> linear (glTF)
+    return FaceMesh(
+        neutral.astype(np.float32),
+        faces.astype(np.uint32),
+        deltas.astype(np.float32),
+        linear.astype(np.float32),
+        "faceclean stylised face",
+        parts.landmarks(),
+    )
+
+
+def load(path: str | os.PathLike) -> FaceMesh:
+    """A face mesh from an npz (``neutral_vertices``, ``faces``/``triangles``, deltas and
+    names as in ../shared/data/meshes) or a GLB/glTF with ARKit-named morph targets."""
+    from faceclean.io.source import regular
+
+    p = Path(path)
+    regular(p, "mesh file")
+    suffix = p.suffix.lower()
+    if suffix == ".npz":
+        mesh = _read_npz(p)
+    elif suffix in (".glb", ".gltf"):
+        mesh = _read_gltf(p)
     else:
-        raise FacecleanError(f"{p.name}: a face mesh must be .npz or .glb")
-    for name in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthSmileRight"):
-        if not np.any(deltas[INDEX[name]]):
-            raise FacecleanError(f"{p.name}: the mesh has no {name} shape")
-    if pairs is None:
-        pairs = select_pairs(neutral, deltas)
-    pairs = np.asarray(pairs, dtype=np.int64)
-    if pairs.shape != (6, 2) or pairs.min() < 0 or pairs.max() >= len(neutral):
-        raise FacecleanError(f"vertex pairs must be 6 pairs of indices below {len(neutral)}")
-    corners = pairs[PAIR_NAMES.index("mouth_corners")]
-    scale = float(np.linalg.norm(neutral[corners[0]] - neutral[corners[1]]))
-    if not scale > 0:
-        raise FacecleanError("the mouth corners coincide: give other vertex pairs")
-    return Face(neutral, deltas, pairs, scale)
+        raise FacecleanError(f"{p.name}: a face mesh must be .npz, .glb or .gltf")
+    if not mesh.present.any():
+        raise FacecleanError(f"{p.name}: no morph target has an ARKit name")
+    if len(mesh.faces) == 0 or int(mesh.faces.max()) >= len(mesh.vertices):
+        raise FacecleanError(f"{p.name}: triangle indices do not match the vertices")
+    if not (np.isfinite(mesh.vertices).all() and np.isfinite(mesh.deltas).all()):
+        raise FacecleanError(f"{p.name}: non-finite vertex positions")
+    return mesh
 
 
-def select_pairs(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-    """(6, 2) vertex pairs by the rule of the module docstring."""
-
-    def most_moved(name: str) -> int:
-        return int(np.argmax(np.linalg.norm(deltas[INDEX[name]], axis=1)))
-
-    right, left = most_moved("mouthSmileRight"), most_moved("mouthSmileLeft")
-    axis = neutral[left] - neutral[right]
-    width2 = float(axis @ axis)
-    if width2 <= 0:
-        raise FacecleanError("mesh: the mouth corners coincide")
-    diagonal = float(np.linalg.norm(neutral.max(0) - neutral.min(0)))
-    near = np.array(sorted(cKDTree(neutral).query_pairs(NEIGHBOUR * diagonal)), dtype=np.int64)
-    if len(near) == 0:
-        raise FacecleanError("mesh: no vertex pairs near each other")
-    jaw = deltas[INDEX["jawOpen"]]
-    a, b = near[:, 0], near[:, 1]
-    rest = np.linalg.norm(neutral[a] - neutral[b], axis=1)  # (P,) neutral distance
-    gain = np.linalg.norm(neutral[a] + jaw[a] - neutral[b] - jaw[b], axis=1) - rest
-    s = (neutral - neutral[right]) @ axis / width2  # (V,) 0 right corner .. 1 left corner
-    lips = []
-    for f in (1 / 3, 1 / 2, 2 / 3):
-        for band in BANDS:  # the narrowest band the mesh's resolution allows
-            inside = (np.abs(s[a] - f) <= band) & (np.abs(s[b] - f) <= band) & (gain > 0)
-            if inside.any():
-                break
-        else:
-            raise FacecleanError(f"mesh: no lip vertices at {f:.2f} of the mouth width")
-        k = np.flatnonzero(inside & (gain >= 0.5 * gain[inside].max()))
-        k = k[np.argmin(rest[k])]  # the lips meet at the seam: the closest good opener
-        lips.append(near[k])
-    out = [*lips, np.array([right, left])]
-    for side in ("Left", "Right"):
-        blink = deltas[INDEX["eyeBlink" + side]]
-        moved = np.linalg.norm(blink, axis=1)  # (V,)
-        upper = int(np.argmax(moved))
-        landed = neutral[upper] + blink[upper]
-        still = np.flatnonzero(moved < 0.5 * moved[upper])
-        lower = still[np.argmin(np.linalg.norm(neutral[still] + blink[still] - landed, axis=1))]
-        out.append(np.array([upper, lower]))
-    return np.stack(out)
-
-
-def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(neutral, deltas) from the reference layout, ICT's ``arkit_*`` view, or any npz
-    with ``neutral_vertices`` + ``blendshape_deltas`` + ``names``."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            keys = set(z.files)
-            neutral = z["neutral_vertices"]
-            if {"arkit_deltas", "arkit_names"} <= keys:
-                deltas, names = z["arkit_deltas"], z["arkit_names"]
-            else:
-                deltas, names = z["blendshape_deltas"], z["names"]
-    except (KeyError, ValueError, OSError, EOFError) as e:
-        raise FacecleanError(f"{path.name}: not a face mesh npz ({e})") from None
-    return _canonical(path.name, neutral, deltas, [str(n) for n in names])
-
-
-def _canonical(
-    label: str, neutral: np.ndarray, deltas: np.ndarray, names: list[str]
-) -> tuple[np.ndarray, np.ndarray]:
-    neutral = np.asarray(neutral, dtype=np.float64)
-    deltas = np.asarray(deltas, dtype=np.float64)
-    if neutral.ndim != 2 or neutral.shape[1] != 3 or deltas.shape[1:] != neutral.shape:
-        raise FacecleanError(f"{label}: vertices {neutral.shape} and deltas {deltas.shape}")
+def _arkit_deltas(label: str, vertices: np.ndarray, deltas, names) -> np.ndarray:
+    """(52, V, 3) from targets in any order and spelling (unknown names dropped)."""
     if len(names) != len(deltas):
-        raise FacecleanError(f"{label}: {len(names)} names for {len(deltas)} shapes")
-    out = np.zeros((len(ARKIT52), *neutral.shape))
-    for j, n in enumerate(names):
-        c = canonical(n)
-        if c is not None:
-            out[INDEX[c]] = deltas[j]
-    if not (np.all(np.isfinite(neutral)) and np.all(np.isfinite(out))):
-        raise FacecleanError(f"{label}: non-finite vertex positions")
-    return neutral, out
+        raise FacecleanError(f"{label}: {len(names)} target names for {len(deltas)} targets")
+    cols = ChannelMap(ARKIT52, [str(n) for n in names])
+    out = np.zeros((len(ARKIT52), *vertices.shape), np.float32)
+    out[cols.have] = np.asarray(deltas, np.float32)[cols.cols]
+    return out
 
 
-def _read_gltf(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(neutral, deltas) of the first mesh with ARKit-named morph targets in a GLB/glTF."""
-    import pygltflib
+def _read_npz(path: Path) -> FaceMesh:
+    from faceclean.io.npz_safe import load_arrays
+    from faceclean.io.source import MAX_UNPACKED
 
+    z = load_arrays(path, MAX_UNPACKED, "face mesh npz")  # truncated, foreign: one line
     try:
-        gltf = pygltflib.GLTF2().load(str(path))
-    except Exception as e:  # pygltflib raises many kinds on a bad file
+        vertices = np.asarray(z["neutral_vertices"], np.float32)
+        faces = z["faces"] if "faces" in z else z["triangles"]
+        if {"arkit_deltas", "arkit_names"} <= set(z):
+            deltas, names = z["arkit_deltas"], z["arkit_names"]
+        else:
+            deltas, names = z["blendshape_deltas"], z["names"]
+        deltas = np.asarray(deltas, np.float32)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or deltas.shape[1:] != vertices.shape:
+            raise ValueError(f"vertices {vertices.shape}, deltas {deltas.shape}")
+        if faces.dtype.kind not in "iu" or names.ndim != 1:
+            raise ValueError("faces must be integers and names a list")
+        faces = np.asarray(faces).reshape(-1, 3).astype(np.uint32)
+    except (KeyError, ValueError, TypeError) as e:
+        raise FacecleanError(f"{path.name}: not a face mesh npz ({e})") from None
+    out = _arkit_deltas(path.name, vertices, deltas, list(names))
+    return FaceMesh(vertices, faces, out, None, path.stem)
+
+
+def _read_gltf(path: Path) -> FaceMesh:
+    """The first mesh whose first primitive has morph targets named in extras.targetNames."""
+    from faceclean.io.gltf_container import accessor, parse
+
+    try:  # bounded, buffer URIs confined to the file's folder
+        _, _, gltf, _, buffers = parse(path)
+    except (IndexError, KeyError, TypeError, AttributeError, ValueError) as e:
         raise FacecleanError(f"{path.name}: not a readable glTF file ({e})") from None
-    for mesh in gltf.meshes or []:
-        names = (mesh.extras or {}).get("targetNames") if isinstance(mesh.extras, dict) else None
-        prim = mesh.primitives[0] if mesh.primitives else None
-        if not names or prim is None or not prim.targets:
-            continue
-        neutral = _accessor(gltf, prim.attributes.POSITION)
-        deltas = np.stack([_accessor(gltf, t["POSITION"]) for t in prim.targets])
-        return _canonical(path.name, neutral, deltas, [str(n) for n in names])
+    try:
+        for mesh in gltf.meshes or []:
+            extras = mesh.extras if isinstance(mesh.extras, dict) else {}
+            names = extras.get("targetNames")
+            prim = mesh.primitives[0] if mesh.primitives else None
+            if not names or prim is None or not prim.targets:
+                continue
+            vertices = accessor(gltf, buffers, _attr(prim.attributes, "POSITION"))
+            if vertices.shape[1] != 3:
+                raise FacecleanError("POSITION is not VEC3")
+            vertices = vertices.astype(np.float32)
+            if prim.indices is None:
+                faces = np.arange(len(vertices), dtype=np.uint32).reshape(-1, 3)
+            else:
+                faces = accessor(gltf, buffers, prim.indices).reshape(-1, 3).astype(np.uint32)
+            deltas = np.stack([accessor(gltf, buffers, t["POSITION"]) for t in prim.targets])
+            colors = None
+            if _attr(prim.attributes, "COLOR_0") is not None:
+                colors = accessor(gltf, buffers, _attr(prim.attributes, "COLOR_0"))[:, :3]
+                colors = colors.astype(np.float32)
+            out = _arkit_deltas(path.name, vertices, deltas, names)
+            marks = {str(k): int(v) for k, v in (extras.get("landmarks") or {}).items()}
+            return FaceMesh(vertices, faces, out, colors, mesh.name or path.stem, marks)
+    except FacecleanError as e:  # the accessor reader's line, named after the file
+        raise FacecleanError(f"{path.name}: {e}") from None
+    except (KeyError, IndexError, ValueError, TypeError, AttributeError) as e:
+        raise FacecleanError(f"{path.name}: unreadable mesh data ({e})") from None
     raise FacecleanError(f"{path.name}: no mesh with named morph targets (extras.targetNames)")
 
 
-def _accessor(gltf, index: int) -> np.ndarray:
-    """(count, 3) float vertices of a VEC3 FLOAT accessor (dense)."""
-    acc = gltf.accessors[index]
-    if acc.type != "VEC3" or acc.componentType != 5126 or acc.bufferView is None:
-        raise FacecleanError("mesh: only dense float VEC3 positions are supported")
-    view = gltf.bufferViews[acc.bufferView]
-    data = gltf.binary_blob() if gltf.buffers[view.buffer].uri is None else None
-    if data is None:
-        data = gltf.get_data_from_buffer_uri(gltf.buffers[view.buffer].uri)
-    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-    stride = view.byteStride or 12
-    raw = np.frombuffer(data, dtype=np.uint8, count=stride * (acc.count - 1) + 12, offset=start)
-    rows = np.lib.stride_tricks.as_strided(raw, (acc.count, 12), (stride, 1))
-    return rows.copy().view("<f4").reshape(acc.count, 3).astype(np.float64)
+def _attr(attributes: object, name: str) -> int | None:
+    """A primitive attribute's accessor index (pygltflib gives an object or a dict)."""
+    if isinstance(attributes, dict):
+        return attributes.get(name)
+    return getattr(attributes, name, None)
+
+
+def normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit area-weighted vertex normals."""
+    tri = vertices[faces.astype(np.int64)]
+    fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(n, faces[:, k].astype(np.int64), fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 0.0, 1.0])
+
+
+def to_glb(mesh: FaceMesh) -> bytes:
+    """The mesh as GLB bytes: positions, normals, colours, indices and 52 dense morph
+    targets named in ``mesh.extras.targetNames`` (weights 0), no animation; the layout of
+    :mod:`faceclean.io.gltf_take`, which also writes animated ones."""
+    from faceclean.io import gltf_take
+    from faceclean.io.gltf_container import glb
+
+    doc, data, _ = gltf_take.document(mesh)
+    return glb(doc, data)
+
+
+def save_glb(mesh: FaceMesh, path: str | os.PathLike) -> None:
+    """Write the mesh as a GLB file, atomically."""
+    data = to_glb(mesh)
+    if data[:4] != b"glTF" or struct.unpack_from("<I", data, 8)[0] != len(data):
+        raise FacecleanError("internal: malformed GLB")  # pragma: no cover
+    atomic_write(path, data)

@@ -42,7 +42,7 @@ from faceclean.face.rig import (
 LID_GRID = (17, 9)  # eyelid vertices: across the eye x from the far edge to the rim
 LIP_GRID = (49, 12)  # lip vertices: corner to corner x around the tube
 
-# sRGB-looking palette (faceclean.face.facemesh makes it linear for glTF and three.js).
+# sRGB-looking palette (faceclean.face.mesh makes it linear for glTF and three.js).
 SKIN, HAIR, LIP = (0.93, 0.74, 0.63), (0.24, 0.16, 0.11), (0.78, 0.38, 0.40)
 LID, LASH, WHITE = (0.90, 0.68, 0.58), (0.10, 0.07, 0.06), (0.96, 0.96, 0.94)
 IRIS, PUPIL, BROW = (0.22, 0.46, 0.62), (0.03, 0.03, 0.04), (0.30, 0.20, 0.13)

@@ -22,12 +22,8 @@ chunk. An animation read from a glTF file must keep its keyframe times; any othe
 
 from __future__ import annotations
 
-import base64
 import json
 import os
-import struct
-import urllib.parse
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -35,20 +31,18 @@ from typing import Any, BinaryIO
 import numpy as np
 import pygltflib
 
-from faceclean import strict_json
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
-from faceclean.io import source as bounded
+from faceclean.io.gltf_container import COMPONENTS, accessor, count, data_uri, decode, glb, parse
 
-_JSON, _BIN = 0x4E4F534A, 0x004E4942  # GLB chunk types
-# componentType -> (dtype, normalising divisor for integer outputs)
-_COMPONENTS: dict[int, tuple[str, float | None]] = {
-    pygltflib.FLOAT: ("<f4", None),
-    pygltflib.BYTE: ("<i1", 127.0),
-    pygltflib.UNSIGNED_BYTE: ("<u1", 255.0),
-    pygltflib.SHORT: ("<i2", 32767.0),
-    pygltflib.UNSIGNED_SHORT: ("<u2", 65535.0),
-}
+# componentTypes a weights output may have: float, or normalised integers (glTF 2.0)
+WEIGHT_TYPES = (
+    pygltflib.FLOAT,
+    pygltflib.BYTE,
+    pygltflib.UNSIGNED_BYTE,
+    pygltflib.SHORT,
+    pygltflib.UNSIGNED_SHORT,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,28 +73,6 @@ def read(path: str | os.PathLike) -> Animation:
         raise FacecleanError(f"{p.name}: broken glTF ({type(e).__name__}: {e})") from None
 
 
-def parse(p: Path) -> tuple[bytes, dict, pygltflib.GLTF2, int | None, tuple[bytes, ...]]:
-    """A .gltf or .glb file -> (raw bytes, JSON, model, BIN chunk offset, buffers).
-
-    Read through io.source (a regular file, bounded); buffer URIs must stay in the
-    file's folder and data: URIs are bounded (``_buffer``). Also used for face meshes.
-    """
-    raw = bounded.read_bytes(p)
-    glb = raw.startswith(b"glTF")
-    text, bin_offset, bin_chunk = _split_glb(raw, p.name) if glb else (raw, None, None)
-    try:
-        doc = strict_json.loads(text, f"{p.name}: not a glTF file:", numbers=False)
-        if not isinstance(doc, dict):
-            raise ValueError("the JSON is not an object")
-        with warnings.catch_warnings():  # dataclasses_json warns on absent optional fields
-            warnings.simplefilter("ignore")
-            model = pygltflib.GLTF2.from_dict(doc)
-    except (UnicodeDecodeError, ValueError, RecursionError) as e:
-        raise FacecleanError(f"{p.name}: not a glTF file ({e})") from None
-    buffers = tuple(_buffer(b, bin_chunk, p) for b in model.buffers or [])
-    return raw, doc, model, bin_offset, buffers
-
-
 def _read(
     p: Path,
     raw: bytes,
@@ -127,8 +99,8 @@ def _read(
         raise FacecleanError(f"{p.name}: the animated mesh has no morph targets")
     for i in (sampler.input, sampler.output):  # the JSON as written (the writer uses it)
         _raw_fields(doc, count(i, "accessor index"))
-    times = _read_accessor(model, buffers, sampler.input)
-    out = _read_accessor(model, buffers, sampler.output)
+    times = _scalars(model, buffers, sampler.input)
+    out = _scalars(model, buffers, sampler.output)
     k = 3 if sampler.interpolation == pygltflib.ANIM_CUBICSPLINE else 1
     if out.size != len(times) * k * m:
         raise FacecleanError(
@@ -174,7 +146,7 @@ def write(anim: Animation, f: BinaryIO, path: str | os.PathLike | None = None) -
     doc = json.loads(json.dumps(src.doc))  # a deep copy we may edit
     acc = doc["accessors"][src.accessor]
     view = doc["bufferViews"][acc["bufferView"]]
-    dtype, scale = _COMPONENTS[acc["componentType"]]
+    dtype, scale = COMPONENTS[acc["componentType"]]
     encoded = _encode(keys.ravel(), dtype, scale)
     buffer_i = view["buffer"]
     data = bytearray(src.buffers[buffer_i])
@@ -187,7 +159,7 @@ def write(anim: Animation, f: BinaryIO, path: str | os.PathLike | None = None) -
             data[start + n * stride : start + n * stride + len(item)] = item
     json_changed = False
     if "min" in acc or "max" in acc:
-        decoded = _decode(encoded, scale)
+        decoded = decode(encoded, scale)
         acc["min"], acc["max"] = [float(decoded.min())], [float(decoded.max())]
         json_changed = (acc["min"], acc["max"]) != (
             src.doc["accessors"][src.accessor].get("min"),
@@ -208,86 +180,18 @@ def write(anim: Animation, f: BinaryIO, path: str | os.PathLike | None = None) -
     else:
         for i, b in enumerate(doc.get("buffers", [])):
             if i == buffer_i or "uri" not in b:  # changed, or the GLB's BIN chunk
-                payload = bytes(data) if i == buffer_i else src.buffers[i]
-                b["uri"] = "data:application/octet-stream;base64," + base64.b64encode(
-                    payload
-                ).decode("ascii")
+                b["uri"] = data_uri(bytes(data) if i == buffer_i else src.buffers[i])
         f.write((json.dumps(doc, indent=2) + "\n").encode("utf-8"))
 
 
-def _split_glb(raw: bytes, name: str) -> tuple[bytes, int | None, bytes | None]:
-    """GLB -> (JSON chunk, file offset of the BIN data, BIN data)."""
-    if len(raw) < 20:
-        raise FacecleanError(f"{name}: truncated GLB")
-    _, version, length = struct.unpack_from("<4sII", raw, 0)
-    if version != 2:
-        raise FacecleanError(f"{name}: GLB version {version}, only 2 is supported")
-    pos, text, bin_offset, bin_data = 12, None, None, None
-    while pos + 8 <= min(length, len(raw)):
-        size, kind = struct.unpack_from("<II", raw, pos)
-        if kind == _JSON and text is None:
-            text = raw[pos + 8 : pos + 8 + size]
-        elif kind == _BIN and bin_offset is None:
-            bin_offset, bin_data = pos + 8, raw[pos + 8 : pos + 8 + size]
-        pos += 8 + size
-    if text is None:
-        raise FacecleanError(f"{name}: GLB without a JSON chunk")
-    return text, bin_offset, bin_data
-
-
-def _buffer(buffer: pygltflib.Buffer, bin_chunk: bytes | None, path: Path) -> bytes:
-    uri = buffer.uri
-    if uri is None:
-        if bin_chunk is None:
-            raise FacecleanError(f"{path.name}: a buffer without URI and no GLB BIN chunk")
-        return bin_chunk
-    if not isinstance(uri, str):
-        raise FacecleanError(f"{path.name}: a buffer URI is not text")
-    if uri.startswith("data:"):  # base64: 4 characters per 3 bytes
-        if len(uri) > bounded.MAX_FILE // 3 * 4 + 256:
-            raise FacecleanError(
-                f"{path.name}: a data: URI over the {bounded.size_text(bounded.MAX_FILE)} limit"
-            )
-        head, comma, body = uri.partition(",")
-        if not comma or not head.endswith(";base64"):
-            raise FacecleanError(f"{path.name}: a data: URI that is not base64")
-        try:
-            return base64.b64decode(body, validate=True)
-        except ValueError:
-            raise FacecleanError(f"{path.name}: a data: URI that is not base64") from None
-    name = urllib.parse.unquote(uri)
-    if ":" in uri.split("/", 1)[0] or Path(name).is_absolute() or "\\" in name:
-        raise FacecleanError(f"{path.name}: buffer URI {uri[:60]!r} is not a relative file path")
-    folder = path.parent.resolve()
-    target = (folder / name).resolve()  # symlinks followed: they must stay inside too
-    if not target.is_relative_to(folder):
-        raise FacecleanError(f"{path.name}: buffer URI {uri[:60]!r} leaves the file's folder")
-    if not target.exists():
-        raise FacecleanError(f"{path.name}: buffer file {uri[:60]!r} not found beside it")
-    return bounded.read_bytes(target, what="buffer file")
-
-
-def _read_accessor(model: pygltflib.GLTF2, buffers: tuple[bytes, ...], i: int) -> np.ndarray:
-    """A SCALAR accessor as float64 (normalised integers mapped to [-1, 1] / [0, 1])."""
+def _scalars(model: pygltflib.GLTF2, buffers: tuple[bytes, ...], i: object) -> np.ndarray:
+    """(count,) float64 of a dense SCALAR accessor (normalised integers to [-1, 1] / [0, 1])."""
     acc = model.accessors[count(i, "accessor index")]
     if acc.sparse is not None or acc.bufferView is None or acc.type != "SCALAR":
         raise FacecleanError(f"accessor {i}: only dense SCALAR accessors are supported")
-    if not isinstance(acc.componentType, int) or acc.componentType not in _COMPONENTS:
+    if acc.componentType not in WEIGHT_TYPES:
         raise FacecleanError(f"accessor {i}: component type {acc.componentType!r} not supported")
-    dtype, scale = _COMPONENTS[acc.componentType]
-    view = model.bufferViews[count(acc.bufferView, "bufferView")]
-    for v, what in ((acc.count, "count"), (acc.byteOffset, "byteOffset"),
-                    (view.byteOffset, "byteOffset"), (view.byteStride, "byteStride"),
-                    (view.buffer, "buffer")):  # fmt: skip
-        if v is not None:
-            count(v, f"accessor {i}: {what}")
-    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-    stride = view.byteStride or np.dtype(dtype).itemsize
-    data = buffers[view.buffer]
-    if start + stride * (acc.count - 1) + np.dtype(dtype).itemsize > len(data):
-        raise FacecleanError(f"accessor {i}: runs past the end of its buffer")
-    raw = np.ndarray((acc.count,), dtype, buffer=data, offset=start, strides=(stride,))
-    return _decode(raw, scale)
+    return accessor(model, buffers, i, normalized=True)[:, 0]
 
 
 def _raw_fields(doc: dict, i: int) -> None:
@@ -301,18 +205,6 @@ def _raw_fields(doc: dict, i: int) -> None:
     for key in ("buffer", "byteOffset", "byteLength", "byteStride"):
         if key in view:
             count(view[key], f"accessor {i}: bufferView {key}")
-
-
-def count(v: object, what: str) -> int:
-    """A glTF index, count, offset or stride: a non-negative integer, else one line."""
-    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-        raise FacecleanError(f"{what} {v!r} is not a non-negative integer")
-    return v
-
-
-def _decode(raw: np.ndarray, scale: float | None) -> np.ndarray:
-    a = raw.astype(np.float64)
-    return a if scale is None else np.maximum(a / scale, -1.0)  # glTF normalised ints
 
 
 def _encode(values: np.ndarray, dtype: str, scale: float | None) -> np.ndarray:
@@ -342,13 +234,5 @@ def _glb(doc: dict[str, Any], buffers: list[bytes], changed: int) -> bytes:
         if i == 0:
             b.pop("uri", None)
         elif i == changed or "uri" not in b:
-            b["uri"] = "data:application/octet-stream;base64," + base64.b64encode(
-                buffers[i]
-            ).decode("ascii")
-    text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
-    text += b" " * (-len(text) % 4)
-    chunks = struct.pack("<II", len(text), _JSON) + text
-    if buffers:
-        data = buffers[0] + b"\0" * (-len(buffers[0]) % 4)
-        chunks += struct.pack("<II", len(data), _BIN) + data
-    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
+            b["uri"] = data_uri(buffers[i])
+    return glb(doc, buffers[0] if buffers else None)

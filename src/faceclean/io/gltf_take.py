@@ -23,10 +23,8 @@ Weights are written as they are (no clamping); channels that are not ARKIT blend
 
 from __future__ import annotations
 
-import base64
 import json
 import os
-import struct
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -35,9 +33,9 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.face.facemesh import FaceMesh
+from faceclean.face.mesh import FaceMesh
+from faceclean.io.gltf_container import data_uri, glb
 
-_JSON, _BIN = 0x4E4F534A, 0x004E4942  # GLB chunk types
 _FLOAT, _UINT = 5126, 5125  # glTF componentType
 _ARRAY, _ELEMENTS = 34962, 34963  # bufferView targets
 
@@ -114,7 +112,7 @@ class _Blob:
 def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
     """(glTF JSON dict, binary buffer bytes, keyframe counts or None) for ``mesh``, animated
     by ``anim`` when given."""
-    from faceclean.face.facemesh import normals
+    from faceclean.face.mesh import normals
 
     blob = _Blob()
     v = np.ascontiguousarray(mesh.vertices, "<f4")
@@ -176,18 +174,13 @@ def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
     return doc, bytes(blob.data), counts
 
 
-def encode(doc: dict[str, Any], data: bytes, glb: bool) -> bytes:
+def encode(doc: dict[str, Any], data: bytes, binary: bool) -> bytes:
     """GLB bytes (JSON and BIN chunks), or .gltf JSON with the buffer as a data URI."""
     doc = dict(doc, buffers=[dict(doc["buffers"][0])])
-    if not glb:
-        uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
-        doc["buffers"][0]["uri"] = uri
-        return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
-    text = json.dumps(doc, separators=(",", ":")).encode("utf-8")
-    text += b" " * (-len(text) % 4)
-    data += b"\0" * (-len(data) % 4)
-    chunks = struct.pack("<II", len(text), _JSON) + text + struct.pack("<II", len(data), _BIN)
-    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks) + len(data)) + chunks + data
+    if binary:
+        return glb(doc, data)
+    doc["buffers"][0]["uri"] = data_uri(data)
+    return (json.dumps(doc, indent=1) + "\n").encode("utf-8")
 
 
 def write(
@@ -200,11 +193,11 @@ def write(
     """Write ``anim`` on ``mesh`` (the stylised face by default); GLB unless ``path`` ends
     in ``.gltf``. Returns the keyframe counts (see :func:`keyframes`)."""
     if mesh is None:
-        from faceclean.face.facemesh import stylised
+        from faceclean.face.mesh import stylised
 
         mesh = stylised()
     p = Path(path) if path is not None else None
     label = name or (p.stem if p is not None else "take")
     doc, data, counts = document(mesh, anim, label)
-    f.write(encode(doc, data, glb=p is None or p.suffix.lower() != ".gltf"))
+    f.write(encode(doc, data, binary=p is None or p.suffix.lower() != ".gltf"))
     return counts

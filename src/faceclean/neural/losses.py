@@ -5,7 +5,7 @@
 - L_MSE = mean (x_gt - x̂)^2 over valid frames and channels;
 - L_der = sum_k mean (x_gt^(k) - x̂^(k))^2, forward derivatives (Eq. 1), 1/s^k;
 - L_dis = mean |D_gt - D̂| + α_dis |D_i - D̂| over the 6 lip/eyelid distances of a face
-  mesh deformed by the weights (faceclean.face.mesh; distances in mouth widths);
+  mesh deformed by the weights (faceclean.face.pairs; distances in mouth widths);
 - L_acc (ours) = mean (x_gt'' - x̂'')^2, second time-derivatives on the real,
   irregular times, 1/s^2: the paper's terms reward amplitude and leave most jitter in.
 
@@ -24,7 +24,7 @@ from torch import Tensor
 
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
-from faceclean.face.mesh import Face
+from faceclean.face.pairs import LossFace
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,9 @@ class Weights:
 class Loss:
     """Callable loss for a model's channels; the mesh's pair vertices are precomputed."""
 
-    def __init__(self, channels: Sequence[str], face: Face | None, weights: Weights = Weights()):
+    def __init__(
+        self, channels: Sequence[str], face: LossFace | None, weights: Weights = Weights()
+    ):
         self.w = weights
         self.mesh: tuple[Tensor, Tensor, float] | None = None
         if face is not None and weights.dis > 0:
@@ -48,8 +50,8 @@ class Loss:
             dv = np.zeros((len(channels), 6, 2, 3))  # (M, 6, 2, 3) mesh units per weight
             for m, j in enumerate(idx):
                 if j >= 0:
-                    dv[m] = face.deltas[j][face.pairs]
-            v0 = torch.tensor(face.neutral[face.pairs], dtype=torch.float32)  # (6, 2, 3)
+                    dv[m] = face.mesh.deltas[j][face.pairs]
+            v0 = torch.tensor(face.mesh.vertices[face.pairs], dtype=torch.float32)  # (6, 2, 3)
             self.mesh = (v0, torch.tensor(dv, dtype=torch.float32), face.scale)
 
     def distances(self, x: Tensor) -> Tensor:

@@ -30,7 +30,7 @@ import torch
 
 from faceclean.channels import ARKIT52
 from faceclean.evaluation import dataset
-from faceclean.face.mesh import load_face
+from faceclean.face.pairs import load_face
 from faceclean.neural import checkpoint, distributed
 from faceclean.neural.data import EpochStream
 from faceclean.neural.losses import Loss, Weights

@@ -20,7 +20,7 @@ from pathlib import Path
 import faceclean
 from faceclean.errors import FacecleanError
 from faceclean.evaluation.comparison import Comparison, untruthed
-from faceclean.face.facemesh import FaceMesh
+from faceclean.face.mesh import FaceMesh
 from faceclean.io.atomic import atomic_write
 from faceclean.report import payload
 
@@ -150,9 +150,9 @@ def _json_script(obj) -> str:
 
 def render(comp: Comparison, face: FaceMesh | None = None, source: str = "input") -> str:
     """The report as one HTML string."""
-    from faceclean.face import facemesh
+    from faceclean.face.mesh import stylised
 
-    face = face if face is not None else facemesh.stylised()
+    face = face if face is not None else stylised()
     imports, three_version = import_map()
     data = payload.animation(comp)
     data["mesh"] = payload.mesh(face)

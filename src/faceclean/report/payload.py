@@ -17,7 +17,7 @@ import numpy as np
 
 from faceclean.channels import GROUPS, INDEX, channel_key
 from faceclean.evaluation.comparison import Comparison, change
-from faceclean.face.facemesh import FaceMesh
+from faceclean.face.mesh import FaceMesh
 
 SCALE = 1000  # stored weight units per unit weight
 MAX_VALUES = 1_600_000  # numbers in all series together, past which frames are decimated
