@@ -1,1 +1,2 @@
-"""Face meshes: the loss's vertices, the viewer's GLB, our stylised face."""
+"""Faces: the one FaceMesh (mesh.py) for the viewer, glTF and the loss's vertex pairs
+(pairs.py); our stylised face (rig.py, parts.py)."""
