@@ -1,4 +1,4 @@
-"""Face meshes and the 6 vertex pairs of the distance loss."""
+"""The stylised face: 52 ARKit shapes that do what their names say; GLB export and reading."""
 
 from __future__ import annotations
 
@@ -6,142 +6,142 @@ import numpy as np
 import pytest
 from helpers import arkit_weights
 
+from faceclean.channels import ARKIT52, INDEX
+from faceclean.cli import main
 from faceclean.errors import FacecleanError
-from faceclean.face.pairs import PAIR_NAMES, load_face
+from faceclean.face import mesh as facemesh
 from faceclean.settings import data_dir
 
-DATA = data_dir()
-MESHES = DATA / "meshes" if DATA is not None else None
+MESHES = data_dir() / "meshes" if data_dir() is not None else None
 needs_meshes = pytest.mark.skipif(
     MESHES is None or not (MESHES / "arkit_reference_mesh.npz").is_file(),
-    reason="shared data meshes/ absent",
+    reason="../shared/data/meshes is absent",
 )
-LIPS = [PAIR_NAMES.index(n) for n in ("lip_right_third", "lip_middle", "lip_left_third")]
-EYE_L, EYE_R = PAIR_NAMES.index("eyelid_left"), PAIR_NAMES.index("eyelid_right")
-CORNERS = PAIR_NAMES.index("mouth_corners")
 
 
-@needs_meshes
-@pytest.mark.parametrize("name", ["arkit_reference_mesh.npz", "ict_face_area.npz"])
-def test_pairs_measure_lips_and_eyelids(name):
-    face = load_face(MESHES / name)
-    rest = face.distances(arkit_weights())
-    jaw = face.distances(arkit_weights(jawOpen=1.0))
-    blink_l = face.distances(arkit_weights(eyeBlinkLeft=1.0))
-    blink_r = face.distances(arkit_weights(eyeBlinkRight=1.0))
-    assert np.all(jaw[LIPS] > rest[LIPS] + 0.5)  # lips part by over half a mouth width
-    assert np.all(rest[LIPS] < 0.05)  # and meet in the neutral face
-    assert rest[CORNERS] == pytest.approx(1.0)  # distances in mouth widths
-    assert blink_l[EYE_L] < 0.3 * rest[EYE_L]  # a blink closes its own eye ...
-    assert blink_l[EYE_R] == pytest.approx(rest[EYE_R], abs=1e-3)  # ... not the other
-    assert blink_r[EYE_R] < 0.3 * rest[EYE_R]
-    assert np.allclose(blink_l[LIPS], rest[LIPS], atol=1e-3)
-    # the thirds sit on either side of the middle, symmetric about it
-    x = face.mesh.vertices[face.pairs[LIPS]].mean(axis=1)[:, 0]
-    assert x[0] < x[1] < x[2] or x[0] > x[1] > x[2]
-    width = np.linalg.norm(np.subtract(*face.mesh.vertices[face.pairs[CORNERS]]))
-    assert abs(abs(x[0] - x[1]) - width / 6) < width / 24
+@pytest.fixture(scope="module")
+def face() -> facemesh.FaceMesh:
+    return facemesh.stylised()
 
 
-@needs_meshes
-def test_default_mesh_and_given_pairs():
-    face = load_face()
-    assert face.mesh.deltas.shape == (52, 1220, 3) and face.mesh.vertices.shape == (1220, 3)
-    mine = face.pairs.copy()
-    mine[0] = [0, 1]
-    assert np.array_equal(load_face(pairs=mine).pairs, mine)
-    with pytest.raises(FacecleanError):
-        load_face(pairs=[[0, 10**6]] * 6)
+@pytest.fixture(scope="module")
+def glb(face, tmp_path_factory):
+    path = tmp_path_factory.mktemp("mesh") / "face.glb"
+    facemesh.save_glb(face, path)
+    return path
 
 
-def test_glb_with_morph_targets(tmp_path):
-    """A tiny synthetic face as GLB: two lips, two eyelids per side, two mouth corners."""
-    pygltflib = pytest.importorskip("pygltflib")
-    neutral = np.array(
-        [[0, 0, 0], [0, 0.001, 0], [-0.02, 0, 0], [0.02, 0, 0],  # lips, corners
-         [-0.02 / 3, 0, 0], [-0.02 / 3, 0.001, 0], [0.02 / 3, 0, 0], [0.02 / 3, 0.001, 0],
-         [0.03, 0.05, 0], [0.03, 0.04, 0], [-0.03, 0.05, 0], [-0.03, 0.04, 0]],  # eyes
-        np.float32,
-    )  # fmt: skip
-    shapes = {
-        "jawOpen": {0: [0, -0.03, 0], 4: [0, -0.02, 0], 6: [0, -0.02, 0]},
-        "eyeBlinkLeft": {8: [0, -0.01, 0]},
-        "eyeBlinkRight": {10: [0, -0.01, 0]},
-        "mouthSmileLeft": {3: [0.005, 0.005, 0]},
-        "mouthSmileRight": {2: [-0.005, 0.005, 0]},
-    }
-    blobs = [neutral.tobytes()]
-    for moves in shapes.values():
-        d = np.zeros_like(neutral)
-        for i, v in moves.items():
-            d[i] = v
-        blobs.append(d.tobytes())
-    n = len(neutral)
-    g = pygltflib.GLTF2(
-        buffers=[pygltflib.Buffer(byteLength=12 * n * len(blobs))],
-        bufferViews=[
-            pygltflib.BufferView(buffer=0, byteOffset=12 * n * i, byteLength=12 * n)
-            for i in range(len(blobs))
-        ],
-        accessors=[
-            pygltflib.Accessor(bufferView=i, componentType=5126, count=n, type="VEC3")
-            for i in range(len(blobs))
-        ],
-        meshes=[
-            pygltflib.Mesh(
-                primitives=[
-                    pygltflib.Primitive(
-                        attributes=pygltflib.Attributes(POSITION=0),
-                        targets=[{"POSITION": i} for i in range(1, len(blobs))],
-                    )
-                ],
-                extras={"targetNames": [k[0].upper() + k[1:] for k in shapes]},  # any case
-            )
-        ],
+def _moved(face, name: str) -> np.ndarray:
+    """Indices of the vertices a shape moves by more than 0.5 mm."""
+    return np.flatnonzero(np.linalg.norm(face.deltas[INDEX[name]], axis=1) > 5e-4)
+
+
+def test_every_arkit_channel_has_a_target(face):
+    assert face.deltas.shape == (52, len(face.vertices), 3)
+    assert face.present.all()
+    assert np.isfinite(face.vertices).all() and np.isfinite(face.deltas).all()
+    assert face.faces.max() < len(face.vertices)
+    assert face.colors.shape == face.vertices.shape and 0 <= face.colors.min() <= 1
+
+
+def test_left_shapes_move_the_faces_left_side(face):
+    # ARKit's Left is the face's own left, +x (the viewer's right).
+    for name in ("eyeBlinkLeft", "mouthSmileLeft", "browOuterUpLeft", "cheekSquintLeft"):
+        moved = _moved(face, name)
+        assert len(moved) and np.all(face.vertices[moved, 0] > 0), name
+        mirror = _moved(face, name.replace("Left", "Right"))
+        assert np.all(face.vertices[mirror, 0] < 0), name
+
+
+def _distance(face, a: str, b: str, w: np.ndarray) -> float:
+    v = face.pose(w)
+    return float(np.linalg.norm(v[face.landmarks[a]] - v[face.landmarks[b]]))
+
+
+def test_blink_closes_the_eyelid(face):
+    def opening(w):
+        return _distance(face, "upper_lid_left", "lower_lid_left", w)
+
+    open_, half, shut = (opening(arkit_weights(eyeBlinkLeft=a)) for a in (0.0, 0.5, 1.0))
+    assert open_ > 0.01  # m: an open eye
+    assert shut < 0.15 * open_ and shut < half < open_
+    assert (
+        opening(arkit_weights(eyeWideLeft=1.0)) > open_ > opening(arkit_weights(eyeSquintLeft=1.0))
     )
-    g.set_binary_blob(b"".join(blobs))
-    path = tmp_path / "face.glb"
-    g.save_binary(str(path))
-    face = load_face(path)
-    assert sorted(map(sorted, face.pairs[LIPS].tolist())) == [[0, 1], [4, 5], [6, 7]]
-    assert sorted(face.pairs[CORNERS].tolist()) == [2, 3]
-    assert face.pairs[EYE_L].tolist() == [8, 9] and face.pairs[EYE_R].tolist() == [10, 11]
-    d = face.distances(np.stack([arkit_weights(), arkit_weights(jawOpen=1.0)]))
-    assert d[1, 1] > d[0, 1] + 0.5
+    assert opening(arkit_weights(eyeBlinkRight=1.0)) == pytest.approx(open_)  # the other eye
 
 
-@pytest.mark.filterwarnings("ignore::UserWarning")  # pygltflib warns on the bad header
-def test_bad_mesh_files(tmp_path):
-    junk = tmp_path / "junk.npz"
-    junk.write_bytes(b"nope")
-    with pytest.raises(FacecleanError):
-        load_face(junk)
-    np.savez(tmp_path / "empty.npz", x=np.zeros(3))
-    with pytest.raises(FacecleanError, match="not a face mesh"):
-        load_face(tmp_path / "empty.npz")
+def test_jaw_opens_the_mouth_and_smile_lifts_the_corners(face):
+    def gap(w):
+        return _distance(face, "upper_lip", "lower_lip", w)
+
+    assert gap(arkit_weights()) < 0.003 and gap(arkit_weights(jawOpen=1.0)) > 0.02  # m
+    assert gap(arkit_weights(jawOpen=1.0, mouthClose=1.0)) < gap(arkit_weights(jawOpen=1.0))
+    lower_lip = _moved(face, "mouthLowerDownLeft")
+    jaw = face.deltas[INDEX["jawOpen"]]
+    assert np.mean(jaw[lower_lip, 1]) < -0.01  # the lower lip drops by over 1 cm
+    upper_lip = np.setdiff1d(_moved(face, "mouthUpperUpLeft"), _moved(face, "jawOpen"))
+    assert len(upper_lip) and np.abs(jaw[upper_lip]).max() < 1e-3  # the upper lip stays
+    smile = face.deltas[INDEX["mouthSmileLeft"]]
+    corner = _moved(face, "mouthSmileLeft")
+    assert smile[corner, 1].max() > 0.005  # the corner rises
+    brow = face.deltas[INDEX["browInnerUp"]]
+    assert brow[:, 1].max() > 0.008
+
+
+def test_glb_round_trips_through_pygltflib(face, glb):
+    import pygltflib
+
+    gltf = pygltflib.GLTF2().load(str(glb))
+    mesh = gltf.meshes[0]
+    assert mesh.extras["targetNames"] == list(ARKIT52)
+    assert len(mesh.primitives[0].targets) == 52 and len(mesh.weights) == 52
+    pos = gltf.accessors[mesh.primitives[0].attributes.POSITION]
+    assert pos.count == len(face.vertices) and len(pos.min) == 3
+    back = facemesh.load(glb)
+    assert np.array_equal(back.vertices, face.vertices)
+    assert np.array_equal(back.faces, face.faces)
+    assert np.array_equal(back.deltas, face.deltas)
+    assert np.allclose(back.colors, face.colors)
+    assert back.landmarks == face.landmarks
+
+
+def test_glb_is_usable_by_the_distance_loss_mesh_reader(glb):
+    from faceclean.face.pairs import PAIR_NAMES, load_face
+
+    loss_face = load_face(glb)
+    d0 = loss_face.distances(arkit_weights())
+    jaw = loss_face.distances(arkit_weights(jawOpen=1.0))
+    blink = loss_face.distances(arkit_weights(eyeBlinkLeft=1.0, eyeBlinkRight=1.0))
+    middle, eye = PAIR_NAMES.index("lip_middle"), PAIR_NAMES.index("eyelid_left")
+    assert jaw[middle] > d0[middle] + 0.3  # in mouth widths
+    assert blink[eye] < 0.3 * d0[eye]
+
+
+@needs_meshes
+def test_reads_the_shared_npz_meshes():
+    ref = facemesh.load(MESHES / "arkit_reference_mesh.npz")
+    assert ref.vertices.shape == (1220, 3) and ref.faces.shape == (2304, 3)
+    assert ref.present.sum() == 51 and not ref.present[INDEX["tongueOut"]]
+    assert ref.colors is None
+
+
+def test_bad_mesh_files_are_one_line_errors(tmp_path):
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(b"not a glb at all")
+    with pytest.raises(FacecleanError, match="bad.glb"):
+        facemesh.load(bad)
     with pytest.raises(FacecleanError, match="no such"):
-        load_face(tmp_path / "absent.glb")
-    (tmp_path / "bad.glb").write_bytes(b"glTF garbage")
-    with pytest.raises(FacecleanError):
-        load_face(tmp_path / "bad.glb")
+        facemesh.load(tmp_path / "absent.npz")
+    np.savez(tmp_path / "empty.npz", x=np.zeros(3))
+    with pytest.raises(FacecleanError, match="empty.npz"):
+        facemesh.load(tmp_path / "empty.npz")
 
 
-@pytest.mark.parametrize("source", ["stylised", "arkit_reference_mesh.npz", "ict_face_area.npz"])
-def test_loss_pairs_of_a_glb_face_equal_those_of_its_source(tmp_path, source):
-    """One mesh type: the loss reads what the viewer reads and the GLB writer writes."""
-    from faceclean.face import mesh
-    from faceclean.face.pairs import loss_face
-
-    if source == "stylised":
-        face, first = mesh.stylised(), loss_face(mesh.stylised())
-    else:
-        if MESHES is None or not (MESHES / source).is_file():
-            pytest.skip("shared data meshes/ absent")
-        face, first = mesh.load(MESHES / source), load_face(MESHES / source)
-    glb = tmp_path / "face.glb"
-    mesh.save_glb(face, glb)
-    again = load_face(glb)
-    assert np.array_equal(again.pairs, first.pairs) and again.scale == first.scale
-    w = np.random.default_rng(0).uniform(0, 1, (8, 52))
-    assert np.array_equal(again.distances(w), first.distances(w))
-    assert np.array_equal(again.mesh.deltas, first.mesh.deltas)
+def test_cli_face_mesh(tmp_path, capsys):
+    out = tmp_path / "face.glb"
+    assert main(["face-mesh", "-o", str(out)]) == 0
+    assert out.read_bytes()[:4] == b"glTF"
+    assert "52 ARKit morph targets" in capsys.readouterr().out
+    assert main(["face-mesh", "-o", str(tmp_path / "face.obj")]) == 2
+    assert not (tmp_path / "face.obj").exists()
