@@ -3,6 +3,7 @@ relative MSE of 1, learned rows only on the source their model never saw, and th
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -147,3 +148,22 @@ def test_the_second_artefact_model_drives_the_verdict(results):
     assert not any(x.startswith("| simulate") for x in lines)
     assert ok == all("**no**" not in x for x in lines)
     assert report.targets(results, "LSTM") == []  # no LSTM model here
+
+
+def test_the_trainers_validation_draws_the_results_streams(data, results):
+    """One harness: for the same (condition, take, seed), the stream the trainers validate
+    on (harness.streams) is the one RESULTS scores: fold "one"'s raw-input figures."""
+    from faceclean.evaluation import dataset, degrade, harness, metrics
+
+    assert tuple(harness.CONDITIONS) == degrade.CONDITIONS  # one naming for both models
+    val = [
+        dataclasses.replace(t, animation=harness.head(t.animation, evaluate.QUICK_SECONDS))
+        for t in dataset.load_takes(data)
+        if t.source == "one"
+    ]
+    for s in harness.streams(val, list(harness.CONDITIONS), seed=5):
+        noisy, truth = (a.with_values(a.arkit()[0]) for a in (s.noisy, s.truth))
+        want = metrics.summary(noisy, truth) | {"frames": float(truth.n_frames)}
+        rows = results["per_take"]["Raw input"][f"simulate {s.condition}"]
+        [got] = [sc for source, _, sc in rows if source == "one"]
+        np.testing.assert_equal(got, want)

@@ -134,11 +134,10 @@ def test_fine_tuning_never_writes_a_worse_model(tmp_path):
         synthetic_minutes=0.0, resume=str(start), preset="mixed", batch=4,
     )  # fmt: skip
     record = train(cfg)
-    from faceclean.evaluation import dataset
-    from faceclean.neural.validate import QUICK, corrupted
+    from faceclean.evaluation import dataset, harness
 
     _, val = dataset.split(dataset.load_takes(), val_sources=("jmtechart",))
-    streams = corrupted(val, QUICK)
+    streams = harness.streams(val)
     assert score(AdaptiveWeights.load(out), streams) <= score(AdaptiveWeights.load(start), streams)
     assert record.get("start") or record["score"] <= score(AdaptiveWeights.load(start), streams)
 

@@ -114,7 +114,7 @@ def test_train_on_real_takes_writes_and_resumes(tmp_path):
     )  # fmt: skip
     events = []
     best = train(cfg, events.append)
-    assert best["epoch"] == 0 and set(best["val"]) == {"iphone60", "webcam"}
+    assert best["epoch"] == 0 and set(best["val"]) == {"60 fps", "webcam"}
     assert {"start", "batch", "epoch", "stop"} <= {e["event"] for e in events}
     config, _ = checkpoint.read(out)
     assert config["val_sources"] == ["jmtechart"] and "jmtechart" not in config["train_sources"]

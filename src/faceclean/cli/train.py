@@ -156,9 +156,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> str:
-    from faceclean.evaluation import dataset
+    from faceclean.evaluation import dataset, harness
     from faceclean.neural import checkpoint
-    from faceclean.neural.validate import CONDITIONS, corrupted, evaluate, table
+    from faceclean.neural.validate import evaluate, table
 
     model = checkpoint.load(args.report)
     takes = dataset.load_takes(args.data)
@@ -166,7 +166,7 @@ def _report(args: argparse.Namespace) -> str:
         _, val = dataset.split(takes, val_sources=args.val_sources)
     else:
         _, val = dataset.split(takes, val_fraction=0.2, seed=args.seed)
-    results = evaluate(model, corrupted(val, list(CONDITIONS)), lag=True)
+    results = evaluate(model, harness.streams(val, list(harness.CONDITIONS)), lag=True)
     names = sorted({t.source for t in val})
     return f"{args.report} on {', '.join(names)} ({len(val)} takes)\n\n{table(results)}"
 

@@ -7,7 +7,8 @@ Protocol (SPEC section 5, issues 4 and 11):
 - Artefact models (``ARTEFACTS``): "simulate", faceclean's own simulator (the one the
   learned models train with), and "degrade", a second model written independently of it
   (evaluation/degrade.py) that no training ever uses. Every table reports both.
-- Conditions: each validation take corrupted with a fixed seed at 30, 60 and 120 fps
+- Conditions (evaluation/harness.py, the trainers' validation draws the same way): each
+  validation take corrupted with a fixed seed at 30, 60 and 120 fps
   (simulate: the "iphone" preset with the rate replaced; degrade: its conditions; the
   artefact draw is the same at every rate) and on "webcam" timing (24-30 fps, irregular
   timestamps, dropped frames, heavier noise). Results are keyed "<artefacts> <condition>".
@@ -39,18 +40,18 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import dataset, degrade, harm, metrics, simulate
+from faceclean.evaluation import dataset, harm, metrics
+from faceclean.evaluation.harness import (
+    ARTEFACTS,
+    CONDITIONS,
+    SEED,
+    corrupted,
+    head,
+    run_streams,
+)
 from faceclean.filters import Cleaner, make
 from faceclean.learned import formats
 
-SEED = 2020
-CONDITIONS: dict[str, tuple[str, float | None]] = {  # name -> (preset, fps or preset's)
-    "30 fps": ("iphone", 30.0),
-    "60 fps": ("iphone", 60.0),
-    "120 fps": ("iphone", 120.0),
-    "webcam": ("webcam", None),
-}
-ARTEFACTS = ("degrade", "simulate")  # the independent model first: it decides
 TUNE_SECONDS = 20.0  # s of each training take used to tune the classical filters
 QUICK_SECONDS = 6.0  # s of each take in --quick mode
 METRICS = ("mse", "rel_mse", "jitter_ratio", "lag_ms", "blink_closure")
@@ -127,53 +128,14 @@ def pick_models(files: Sequence[Path], sources: Sequence[str]) -> dict[str, dict
     return picked
 
 
-def corrupted(
-    takes: Sequence[dataset.Take],
-    condition: str,
-    seed: int,
-    seconds: float | None = None,
-    artefacts: str = "simulate",
-) -> list[tuple[Animation, Animation]]:
-    """(noisy, truth) ARKit-52 pairs of every take under ``condition`` by the artefact
-    model ``artefacts`` ("simulate" or "degrade"); seeded per take."""
-    if artefacts not in ARTEFACTS:
-        raise FacecleanError(f"unknown artefact model {artefacts!r} (known: {ARTEFACTS})")
-    preset, fps = CONDITIONS[condition]
-    pairs = []
-    for i, take in enumerate(takes):
-        clean = take.animation
-        if seconds is not None:
-            clean = _head(clean, seconds)
-        if artefacts == "degrade":
-            noisy, truth = degrade.degrade(clean, seed=seed * 1000 + i, condition=condition)
-        else:
-            rng = np.random.default_rng([seed, i])
-            params = simulate.sample_params(rng, preset)
-            if fps is not None:
-                params = dataclasses.replace(params, fps=fps)
-            noisy, truth = simulate.apply(clean, params, rng)
-        pairs.append((noisy.with_values(noisy.arkit()[0]), truth.with_values(truth.arkit()[0])))
-    return pairs
+def _arkit(pairs: Sequence[tuple[Animation, Animation]]) -> list[tuple[Animation, Animation]]:
+    """The harness's (noisy, truth) pairs with (N, 52) ARKit-52 values.
 
-
-def _head(anim: Animation, seconds: float) -> Animation:
-    keep = anim.times <= anim.times[0] + seconds
-    return Animation(anim.times[keep], anim.values[keep], anim.names, dict(anim.meta))
-
-
-def run_streams(cleaner: Cleaner, inputs: Sequence[Animation]) -> list[np.ndarray]:
-    """Clean every take; causal cleaners step all takes at once as streams (S, M)."""
-    if cleaner.offline:
-        return [cleaner.clean(a).values for a in inputs]
-    n, s, m = max(a.n_frames for a in inputs), len(inputs), inputs[0].n_channels
-    t = np.full((n, s), np.nan)  # past a take's end: missing frames (held, ignored)
-    x = np.full((n, s, m), np.nan)
-    for j, a in enumerate(inputs):
-        t[: a.n_frames, j], x[: a.n_frames, j] = a.times, a.values
-    cleaner.reset()
-    y = np.stack([cleaner.step(x[i], t[i]) for i in range(n)])  # (N, S, M)
-    y[np.isnan(x).all(axis=-1)] = np.nan  # missing frames stay missing (as clean() does)
-    return [y[: a.n_frames, j] for j, a in enumerate(inputs)]
+    The names stay the take's own, as every RESULTS figure so far was computed: a take
+    not in ARKit-52 order (Live Link Face's JawRight before JawLeft, MouthRight before
+    MouthLeft) has those 4 columns labelled mirrored, which the learned rows see; naming
+    them ARKIT52 moves those rows, so it waits for a rerun of ``make eval``."""
+    return [(a.with_values(a.arkit()[0]), b.with_values(b.arkit()[0])) for a, b in pairs]
 
 
 def _scores(outs: Sequence[np.ndarray], pairs) -> list[dict[str, float]]:
@@ -216,14 +178,14 @@ def evaluate(
             cond = f"{artefacts} {cond0}"
             if progress:
                 progress(f"fold {source}, {cond}")
-            pairs = corrupted(val, cond0, seed, seconds, artefacts)
+            pairs = _arkit(corrupted(val, cond0, seed, seconds, artefacts))
             inputs = [noisy for noisy, _ in pairs]
             names = inputs[0].names
             record("Raw input", cond, source, val, _scores([a.values for a in inputs], pairs))
             for label, method, params, _ in FIXED_ROWS:
                 outs = run_streams(make(method, params, names=names), inputs)
                 record(label, cond, source, val, _scores(outs, pairs))
-            tune_pairs = corrupted(train, cond0, seed + 1, tune_seconds, artefacts)
+            tune_pairs = _arkit(corrupted(train, cond0, seed + 1, tune_seconds, artefacts))
             for label, method in TUNED_ROWS:
                 result = tune.tune(method, tune_pairs)
                 tuned_params.setdefault(label, {}).setdefault(cond, {})[source] = result.params
@@ -277,7 +239,7 @@ def _harm(
     """The do-no-harm table: shipped presets and defaults on every take; fold models on
     the source they never saw."""
     if seconds is not None:
-        takes = [dataclasses.replace(t, animation=_head(t.animation, seconds)) for t in takes]
+        takes = [dataclasses.replace(t, animation=head(t.animation, seconds)) for t in takes]
     from faceclean.settings import MODELS
 
     rows: dict[str, Any] = {

@@ -14,9 +14,10 @@ real, irregular times.
 Every epoch draws fresh augmented chunks corrupted by faceclean.simulate's ``mixed``
 preset (``wide`` on request; never the evaluation's second artefact model). After every
 epoch the numpy runtime runs over whole validation takes (held-out sources, simulator,
-fixed seeds); the best epoch is written to ``out`` and never one worse than the starting model when
-resuming (``--resume`` scores it first); ``out`` minus ``.npz`` plus ``.last.npz`` keeps
-the latest weights, Adam's moments and the epoch for ``--resume`` of an interrupted run.
+fixed seeds: evaluation/harness.py's streams); the best epoch is written to ``out`` and
+never one worse than the starting model when resuming (``--resume`` scores it first);
+``out`` minus ``.npz`` plus ``.last.npz`` keeps the latest weights, Adam's moments and
+the epoch for ``--resume`` of an interrupted run.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import torch
 from torch import Tensor
 
 from faceclean.channels import ARKIT52
-from faceclean.evaluation import dataset, metrics
+from faceclean.evaluation import dataset, harness, metrics
 from faceclean.filters import make
 from faceclean.learned.adaptive import (
     A_MAX,
@@ -216,7 +217,7 @@ def loss(y: Tensor, truth: Tensor, t: Tensor, valid: Tensor, w_acc: float) -> Te
     return mse + w_acc * acc
 
 
-def score(w: AdaptiveWeights, streams: Sequence[tuple[str, str, Any, Any]]) -> float:
+def score(w: AdaptiveWeights, streams: Sequence[harness.Stream]) -> float:
     """Validation score: MSE of the numpy runtime over whole streams, relative to the raw
     input's, averaged over conditions (lower is better; 1 = no better than raw)."""
     by_cond: dict[str, list[float]] = {}
@@ -231,14 +232,12 @@ def score(w: AdaptiveWeights, streams: Sequence[tuple[str, str, Any, Any]]) -> f
 
 def train(cfg: AdaptiveConfig, report: Report | None = None) -> dict[str, Any]:
     """Train; returns the best record. ``report`` gets "start", "epoch" and "stop" events."""
-    from faceclean.neural.validate import QUICK, corrupted
-
     report = report or (lambda _e: None)
     torch.set_num_threads(max(1, cfg.threads))
     torch.manual_seed(cfg.seed)
     takes = dataset.load_takes(cfg.data)
     train_takes, val_takes = dataset.holdout(takes, cfg.val_sources, cfg.seed)
-    val_streams = corrupted(val_takes, QUICK)
+    val_streams = harness.streams(val_takes)
     facts = {
         "train": {**dataclasses.asdict(cfg), "val_sources": list(cfg.val_sources)},
         "train_sources": sorted({t.source for t in train_takes}),

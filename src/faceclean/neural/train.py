@@ -3,14 +3,15 @@
     faceclean train --val-sources neurosync --epochs 40 --out model.npz
     torchrun --nproc_per_node 2 -m faceclean.neural.train --epochs 40 --out model.npz
 
-Every epoch draws fresh augmented, corrupted chunks (faceclean.evaluation.dataset); the model
-unrolls closed loop over each chunk from x̂[0] = x[0] and gradients flow through it all.
-Adam (lr 1e-3), gradient clipping, seeded. After every epoch the model runs over whole
-validation takes (sources never trained on); the best by validation loss is written to
-``out``, and ``out`` minus ``.npz`` plus ``.last.npz`` keeps the latest weights with the
-optimizer state for ``--resume``. Training stops early after ``patience`` epochs
-without improvement. Under torchrun (WORLD_SIZE > 1) it is data-parallel: DDP with gloo
-on CPU, NCCL with CUDA; rank 0 validates and writes.
+Every epoch draws fresh augmented, corrupted chunks (faceclean.evaluation.dataset); the
+model unrolls closed loop over each chunk from x̂[0] = x[0] and gradients flow through
+it all. Adam (lr 1e-3), gradient clipping, seeded. After every epoch the model runs over
+whole validation takes (sources never trained on; evaluation/harness.py's streams); the
+best by validation loss is written to ``out``, and ``out`` minus ``.npz`` plus
+``.last.npz`` keeps the latest weights with the optimizer state for ``--resume``.
+Training stops early after ``patience`` epochs without improvement. Under torchrun
+(WORLD_SIZE > 1) it is data-parallel: DDP with gloo on CPU, NCCL with CUDA; rank 0
+validates and writes.
 """
 
 from __future__ import annotations
@@ -29,13 +30,13 @@ import numpy as np
 import torch
 
 from faceclean.channels import ARKIT52
-from faceclean.evaluation import dataset
+from faceclean.evaluation import dataset, harness
 from faceclean.face.pairs import load_face
 from faceclean.neural import checkpoint, distributed
 from faceclean.neural.data import EpochStream
 from faceclean.neural.losses import Loss, Weights
 from faceclean.neural.model import LSTMCleaner
-from faceclean.neural.validate import QUICK, corrupted, evaluate
+from faceclean.neural.validate import evaluate
 
 Report = Callable[[dict[str, Any]], None]
 
@@ -167,7 +168,7 @@ def _train(cfg: Config, report: Report, rank: int, world: int, device) -> dict[s
     net = distributed.wrap(model, device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     checkpoint.load_optimizer(model, opt, optim_arrays)
-    val_streams = corrupted(val_takes, QUICK) if rank == 0 and val_takes else []
+    val_streams = harness.streams(val_takes) if rank == 0 and val_takes else []
     start_model = None
     if cfg.resume and start_epoch == 0 and rank == 0 and val_streams:
         # Fine-tuning: the starting model is the bar; never write a model worse than it.

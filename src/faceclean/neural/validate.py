@@ -1,13 +1,13 @@
 """Validation of the recurrent cleaner on whole takes it never trained on.
 
-Every take is corrupted by the simulator with a fixed seed under each condition, the
-model runs closed loop over the whole stream (no chunking, as at run time), and the
-SPEC section 5 measures compare it, and the raw input, with the truth.
+The streams are the evaluation harness's (evaluation/harness.py ``streams``: the RESULTS
+conditions and seeding), the model runs closed loop over the whole stream (no chunking,
+as at run time), and the SPEC section 5 measures compare it, and the raw input, with the
+truth.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -15,37 +15,10 @@ import torch
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.evaluation import metrics, simulate
-from faceclean.evaluation.dataset import Take
+from faceclean.evaluation import metrics
+from faceclean.evaluation.harness import Stream, pad, unpad
 from faceclean.neural.losses import Loss
 from faceclean.neural.model import LSTMCleaner
-
-# condition -> (simulator preset, fps or None for the preset's own draw)
-CONDITIONS: dict[str, tuple[str, float | None]] = {
-    "iphone60": ("iphone", 60.0),
-    "iphone30": ("iphone", 30.0),
-    "iphone120": ("iphone", 120.0),
-    "webcam": ("webcam", None),
-}
-QUICK = ("iphone60", "webcam")  # watched every epoch
-
-
-def corrupted(
-    takes: Sequence[Take], conditions: Sequence[str], seed: int = 7
-) -> list[tuple[str, str, Animation, Animation]]:
-    """(condition, take name, noisy, truth) for every take and condition, fixed seeds."""
-    out = []
-    for cond in conditions:
-        preset, fps = CONDITIONS[cond]
-        ci = list(CONDITIONS).index(cond)  # a condition's streams never depend on the others
-        for ti, take in enumerate(takes):
-            rng = np.random.default_rng([seed, ci, ti])
-            params = simulate.sample_params(rng, preset)
-            if fps is not None:
-                params = dataclasses.replace(params, fps=fps)
-            noisy, truth = simulate.apply(take.animation, params, rng)
-            out.append((cond, f"{take.source}/{take.name}", noisy, truth))
-    return out
 
 
 @torch.no_grad()
@@ -53,24 +26,14 @@ def run(model: LSTMCleaner, noisy: Sequence[Animation]) -> list[np.ndarray]:
     """Model outputs (N_i, M) for each stream (batched, padded); missing frames NaN."""
     model.eval()
     arrays = [a.arkit(model.channels)[0] for a in noisy]
-    T = max(len(a) for a in arrays)
-    x = np.full((len(arrays), T, model.M), np.nan, np.float32)
-    t = np.full((len(arrays), T), np.nan)
-    for i, (a, anim) in enumerate(zip(arrays, noisy, strict=True)):
-        x[i, : len(a)] = a
-        t[i, : len(a)] = anim.times - anim.times[0]
-    y = model(torch.from_numpy(x), torch.from_numpy(t).float()).numpy().astype(np.float64)
-    out = []
-    for i, a in enumerate(arrays):
-        yi = y[i, : len(a)].copy()
-        yi[np.isnan(a).all(1)] = np.nan
-        out.append(yi)
-    return out
+    t, x = pad([a.times - a.times[0] for a in noisy], arrays)  # (B, T) s from 0, (B, T, M)
+    y = model(torch.from_numpy(x.astype(np.float32)), torch.from_numpy(t).float())
+    return unpad(y.numpy().astype(np.float64), arrays)
 
 
 def evaluate(
     model: LSTMCleaner,
-    streams: Sequence[tuple[str, str, Animation, Animation]],
+    streams: Sequence[Stream],
     loss: Loss | None = None,
     lag: bool = False,
 ) -> dict[str, dict[str, float]]:
@@ -129,25 +92,18 @@ def _wmean(values: list[float], w: np.ndarray) -> float:
 
 
 @torch.no_grad()
-def _loss(model: LSTMCleaner, loss: Loss, streams) -> float:
+def _loss(model: LSTMCleaner, loss: Loss, streams: Sequence[Stream]) -> float:
     """The training loss over whole streams (padded batch)."""
-    xs = [s[2].arkit(model.channels)[0] for s in streams]
-    gs = [s[3].arkit(model.channels)[0] for s in streams]
-    T = max(len(a) for a in xs)
-    x = np.full((len(xs), T, model.M), np.nan, np.float32)
-    g = np.zeros((len(xs), T, model.M), np.float32)
-    t = np.zeros((len(xs), T))
-    valid = np.zeros((len(xs), T), bool)
-    for i, (a, b, s) in enumerate(zip(xs, gs, streams, strict=True)):
-        n = len(a)
-        x[i, :n], g[i, :n] = a, np.nan_to_num(b)
-        times = s[2].times - s[2].times[0]
-        t[i, :n] = times
-        t[i, n:] = times[-1] + np.arange(1, T - n + 1) / 60.0  # padding: invalid frames
-        valid[i, :n] = ~np.isnan(a).all(1) & ~np.isnan(b).all(1)
-    xt, tt = torch.from_numpy(x), torch.from_numpy(t).float()
+    times = [s.noisy.times - s.noisy.times[0] for s in streams]
+    t, x = pad(times, [s.noisy.arkit(model.channels)[0] for s in streams])  # (B, T, M)
+    _, g = pad(times, [s.truth.arkit(model.channels)[0] for s in streams])
+    valid = ~np.isnan(x).all(-1) & ~np.isnan(g).all(-1)  # (B, T); padding: invalid
+    for i, ti in enumerate(times):
+        t[i, len(ti) :] = ti[-1] + np.arange(1, t.shape[1] - len(ti) + 1) / 60.0  # padding
+    xt, tt = torch.from_numpy(x.astype(np.float32)), torch.from_numpy(t).float()
+    gt = torch.from_numpy(np.nan_to_num(g).astype(np.float32))
     y, d, stepped = model(xt, tt, return_derivatives=True)
-    total, _ = loss(y, d, stepped, xt, torch.from_numpy(g), tt, torch.from_numpy(valid))
+    total, _ = loss(y, d, stepped, xt, gt, tt, torch.from_numpy(valid))
     return float(total)
 
 
