@@ -171,3 +171,31 @@ def test_bad_parameters_are_one_line_errors(method, params):
     with pytest.raises(FacecleanError) as e:
         make(method, params, names=NAMES)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("near", [False, True], ids=["vectorised", "near-duplicates"])
+@pytest.mark.parametrize("seed", range(3))
+def test_time_rules_over_sequences_equal_stepping_frame_by_frame(seed, near):
+    """base.time_rules (the batched decision the LSTM's clean and the trainer use) gives
+    what stepping decides frame by frame: duplicates, near-duplicates within MIN_DT,
+    backwards times, pauses over max_gap, missing frames and non-finite times."""
+    from faceclean.filters.base import MIN_DT, frame_rules, time_rules
+
+    rng = np.random.default_rng(seed)
+    S, T, max_gap = 3, 200, 0.5
+    steps = [1 / 60, 0.0, -0.01, 0.7] + ([MIN_DT / 2, 2 * MIN_DT] if near else [])
+    steps = rng.choice(steps, (S, T))
+    t = np.cumsum(steps, axis=1) + 10.0
+    t[rng.random((S, T)) < 0.03] = np.nan
+    missing = rng.random((S, T)) < 0.1
+    start, advance, dt = time_rules(t, missing, max_gap)
+    prev = np.full(S, np.nan)
+    for n in range(T):
+        gone = missing[:, n] | ~np.isfinite(t[:, n])
+        want_dt = t[:, n] - prev
+        s, a = frame_rules(gone, want_dt, max_gap)
+        np.testing.assert_array_equal(start[:, n], s)
+        np.testing.assert_array_equal(advance[:, n], a)
+        np.testing.assert_array_equal(dt[:, n], np.where(a, want_dt, np.nan))
+        prev = np.where(s | a, t[:, n], prev)
+    assert advance.any() and start[:, 1:].any() and (~(start | advance)).any()

@@ -39,6 +39,56 @@ from faceclean.errors import FacecleanError
 State = tuple[np.ndarray, ...]  # each (S, M)
 MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
 MIN_DT = 1e-12  # s; a step this small or smaller is a duplicate (rule 4)
+MAX_GAP = 0.5  # s; the default max_gap: a longer pause restarts the state (rule 3)
+
+
+def gap_seconds(max_gap: float) -> float:
+    """A cleaner's ``max_gap`` checked: a number of seconds > 0 (NaN is refused)."""
+    if not max_gap > 0:
+        raise FacecleanError(f"max_gap must be > 0 s (got {max_gap})")
+    return float(max_gap)
+
+
+def advances(dt, max_gap: float):
+    """Rules 4-5 for a frame dt s after the last accepted one (NaN: none yet), scalar or
+    array: True where the state advances by dt (MIN_DT < dt <= max_gap); NaN is False."""
+    return (dt > MIN_DT) & (dt <= max_gap)
+
+
+def frame_rules(missing: np.ndarray, dt: np.ndarray, max_gap: float) -> tuple[np.ndarray, ...]:
+    """Rules 1, 3-5 per stream: (start, advance) bool (S,) for frames that are
+    ``missing`` (rule 1) or came dt (S,) s after the last accepted one (NaN: none yet).
+    Neither: the frame holds (the last output, state unchanged)."""
+    start = ~missing & ~(dt <= max_gap)  # rule 3 (NaN dt starts)
+    return start, ~missing & advances(dt, max_gap)  # rule 4 holds the rest
+
+
+def time_rules(t: np.ndarray, missing: np.ndarray, max_gap: float) -> tuple[np.ndarray, ...]:
+    """``frame_rules`` over whole sequences, as stepping them frame by frame would apply
+    them: t (S, T) s, missing (S, T) bool (rule 1; a non-finite t is missing too).
+
+    Returns (start, advance, dt): (S, T) bool, bool and s since the last accepted frame
+    where advancing (NaN elsewhere). Accepted times only increase, so the last accepted
+    time is the running maximum of the earlier present times unless some frame lands
+    within MIN_DT above that maximum (a held near-duplicate); then it loops over T.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    missing = np.asarray(missing, dtype=bool) | ~np.isfinite(t)
+    seen = np.maximum.accumulate(np.where(missing, -np.inf, t), axis=1)  # (S, T)
+    last = np.concatenate([np.full((len(t), 1), -np.inf), seen[:, :-1]], axis=1)
+    with np.errstate(invalid="ignore"):
+        dt = np.where(np.isfinite(last), t - last, np.nan)  # NaN: nothing accepted yet
+        exact = not ((dt > 0) & (dt <= MIN_DT) & ~missing).any()
+        if exact:
+            start, advance = frame_rules(missing, dt, max_gap)
+        else:
+            start, advance = np.zeros_like(missing), np.zeros_like(missing)
+            prev = np.full(len(t), np.nan)  # (S,) s, time of the last accepted frame
+            for n in range(t.shape[1]):
+                dt[:, n] = t[:, n] - prev
+                start[:, n], advance[:, n] = frame_rules(missing[:, n], dt[:, n], max_gap)
+                prev = np.where(start[:, n] | advance[:, n], t[:, n], prev)
+    return start, advance, np.where(advance, dt, np.nan)
 
 
 class Cleaner(ABC):
@@ -103,7 +153,7 @@ class StreamCleaner(Cleaner):
     subclass sets its parameters and ends in ``reset()``.
     """
 
-    max_gap: float = 0.5  # s; longer pauses restart the state (rule 3)
+    max_gap: float = MAX_GAP  # s; longer pauses restart the state (rule 3)
 
     def reset(self) -> None:
         self._t: np.ndarray | None = None  # (S,) s, time of the last accepted frame
@@ -135,8 +185,7 @@ class StreamCleaner(Cleaner):
         if bad.any():  # rule 2
             x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
         dt = t - self._t  # NaN for streams not started
-        start = ~missing & ~(dt <= self.max_gap)  # rule 3 (NaN dt starts)
-        advance = ~missing & (dt > MIN_DT) & ~start  # rule 4 holds the rest
+        start, advance = frame_rules(missing, dt, self.max_gap)
 
         if advance.all():
             self._state, y = self._advance(self._state, x, dt[:, None])

@@ -52,7 +52,7 @@ from faceclean import strict_json
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, group_of
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.base import MAX_GAP, State, StreamCleaner, gap_seconds
 from faceclean.io.npz_safe import MiB, load_arrays
 from faceclean.learned.formats import ADAPTIVE as FORMAT
 
@@ -197,7 +197,7 @@ class Adaptive(StreamCleaner):
         *,
         names: Sequence[str] = ARKIT52,
         weights: AdaptiveWeights | None = None,
-        max_gap: float = 0.5,
+        max_gap: float = MAX_GAP,
     ) -> None:
         if weights is None:
             if model is None:
@@ -207,7 +207,7 @@ class Adaptive(StreamCleaner):
             weights = AdaptiveWeights.load(model)
         self.weights = weights
         self.names = tuple(names)
-        self.max_gap = float(max_gap)
+        self.max_gap = gap_seconds(max_gap)
         w = weights.arrays
         rows = ChannelMap(self.names, weights.channels).src
         self._learn = rows >= 0  # (M,) channels the model knows

@@ -10,14 +10,15 @@ One step, when frame n+1 arrives dt[n] seconds after frame n (K = 1):
             g = 1 + tanh a (gated) or 1 - exp(-dt / (RATE_TAU0 e^a)) (rate)
     x̂[n+1] = clamp(x̂[n] + dt x̂'[n], value_range)        # integrate
 
-Speed: the weights are fused (lstm_weights.Fused): one matrix product per layer with the
+Speed: the weights are fused (checkpoint.Fused): one matrix product per layer with the
 state laid out beside the input in one preallocated float32 buffer [x̂ | x̂' | x_c | h_0 | 1]
-(lstm_kernel.Workspace), S streams being S columns of the same products; a compiled
+(kernel.Workspace), S streams being S columns of the same products; a compiled
 kernel (learned/jit.py, when numba is installed) serves a few streams. When every
 stream advances normally (the common case) ``step`` runs that kernel in place with no
 array allocation but the returned frame; anything else (first frame, missing values,
-a gap, a repeated timestamp) takes the base class's generic rules, which a test proves
-equal on the common case.
+a gap, a repeated timestamp) takes the base class's generic rules; which frames are
+common is decided by filters/base.py's own ``advances`` and ``time_rules``, and a test
+proves the two paths equal on the common case.
 """
 
 from __future__ import annotations
@@ -31,7 +32,15 @@ from faceclean.animation import Animation
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import MAX_ABS, MIN_DT, State, StreamCleaner
+from faceclean.filters.base import (
+    MAX_ABS,
+    MAX_GAP,
+    State,
+    StreamCleaner,
+    advances,
+    gap_seconds,
+    time_rules,
+)
 from faceclean.learned import jit
 from faceclean.learned.checkpoint import LSTMWeights
 from faceclean.learned.kernel import HEADS, Workspace, step_numpy
@@ -63,15 +72,14 @@ class Learned(StreamCleaner):
         *,
         names: Sequence[str] = ARKIT52,
         weights: LSTMWeights | None = None,
-        max_gap: float = 0.5,
+        max_gap: float = MAX_GAP,
         kernel: str = "auto",
     ) -> None:
         if weights is None:
             weights = LSTMWeights.load(default_model_path() if model is None else model)
         if weights.K != 1:
             raise FacecleanError(f"the runtime steps K = 1 models only (this one: K = {weights.K})")
-        if not max_gap > 0:
-            raise FacecleanError(f"max_gap must be > 0 s (got {max_gap})")
+        self.max_gap = gap_seconds(max_gap)
         if kernel not in ("auto", "numpy", "numba"):
             raise FacecleanError(f"kernel must be auto, numpy or numba (got {kernel!r})")
         if kernel == "numba" and not jit.available():
@@ -82,7 +90,6 @@ class Learned(StreamCleaner):
         self._wts = tuple(np.ascontiguousarray(w.T) for w in fused.layers)  # (4H, in + H + 1)
         self._head_t = np.ascontiguousarray(fused.head.T)  # (M, or 2M gated/rate, H + 1)
         self._mode = HEADS[weights.output]
-        self.max_gap = float(max_gap)
         self.names = tuple(names)
         self.lo, self.hi = (np.float32(v) for v in weights.value_range)
         self.map = ChannelMap(weights.channels, self.names)
@@ -163,12 +170,12 @@ class Learned(StreamCleaner):
                 return self._generic_step(frame, t)
             tf = float(t)
             dt = tf - float(self._t[0])
-            if not (MIN_DT < dt <= self.max_gap):  # NaN fails too
+            if not advances(dt, self.max_gap):  # rules 3-4 (NaN too): the generic path
                 return self._generic_step(frame, t)
             ws.dt[0, 0] = dt
         else:
             dt = np.subtract(t, self._t, out=ws.dt64)
-            if not (np.all(dt > MIN_DT) and np.all(dt <= self.max_gap)):
+            if not advances(dt, self.max_gap).all():
                 return self._generic_step(frame, t)
             np.copyto(ws.dt[0], dt, casting="unsafe")
         if x.dtype.kind != "f":
@@ -194,19 +201,21 @@ class Learned(StreamCleaner):
 
     def clean(self, anim: Animation) -> Animation:
         """Reset, then step every valid frame (filters.base); runs of ordinary frames
-        (finite, 0 < dt <= max_gap after an accepted frame) go through the kernel in one
-        call, with the same numbers as stepping them one by one (tested)."""
+        (every value sane, advancing by the base's ``time_rules``) go through the kernel
+        in one call, with the same numbers as stepping them one by one (tested)."""
         if not self.map.identity or anim.n_channels != len(self.names):
             return super().clean(anim)
         self.reset()
         out = np.full_like(anim.values, np.nan)
         idx = np.flatnonzero(anim.valid)
         x, t = anim.values[idx], anim.times[idx]
-        dt = np.diff(t, prepend=np.nan)  # s, to the previous valid frame
-        ok = np.isfinite(x).all(axis=1) & (dt > MIN_DT) & (dt <= self.max_gap)
+        bad = ~(np.abs(x) <= MAX_ABS)  # (V, M) rule 2's cells
+        _, advance, dt = time_rules(t[None], bad.all(axis=1)[None], self.max_gap)
+        ok = advance[0] & ~bad.any(axis=1)  # the rest: the generic step's rules 1-4
+        dt = dt[0]  # s, since the last accepted frame
         k = 0
         while k < len(idx):
-            if ok[k] and self._state is not None and self._t[0] == t[k - 1]:
+            if ok[k]:
                 j = k + int(np.argmin(ok[k:])) if not ok[k:].all() else len(idx)
                 out[idx[k:j]] = self._run_many(x[k:j], dt[k:j])
                 self._t[0], self._y[0] = t[j - 1], out[idx[j - 1]]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from faceclean.filters.base import MAX_ABS
 from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0
 
 try:  # the optional ``fast`` extra
@@ -50,7 +51,8 @@ def _tanh(x):
 
 def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, x, out):
     """One step for every stream, in place (lstm_kernel's layout: one column per stream);
-    False, with nothing changed, if ``x`` holds a non-finite value.
+    False, with nothing changed, if ``x`` holds a non-finite or absurd value (rule 2 of
+    filters/base.py: beyond +-MAX_ABS).
 
     dt (1, S) s; zs, cs, top: the workspace's buffers; g (4H, S), cols (S, rows of
     zs[0]), hv (H, S): scratch; wts[l] (4H, rows of zs[l]) fused weights, gates
@@ -64,7 +66,7 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, x, out):
     S, M = x.shape
     for s in range(S):
         for m in range(M):
-            if not np.isfinite(x[s, m]):
+            if not abs(x[s, m]) <= MAX_ABS:  # NaN fails too
                 return False
     H = cs[0].shape[0]
     L = len(zs)
@@ -133,7 +135,7 @@ def _step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, x, out):
 
 def _run(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, xs, dts, out):
     """``_step`` over frames xs (N, M) with dts (N,) s, one stream; out (N, M) gets
-    x̂ after each. The frames must be finite (the caller checked); dt (1, 1) scratch."""
+    x̂ after each. The frames must be sane (the caller checked); dt (1, 1) scratch."""
     for n in range(xs.shape[0]):
         dt[0, 0] = dts[n]
         step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, xs[n : n + 1], out[n : n + 1])

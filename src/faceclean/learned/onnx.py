@@ -18,7 +18,7 @@ from faceclean import strict_json
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import State, StreamCleaner
+from faceclean.filters.base import MAX_GAP, State, StreamCleaner, gap_seconds
 from faceclean.learned.formats import STEP as STEP_FORMAT
 
 
@@ -66,7 +66,7 @@ class OnnxLearned(StreamCleaner):
         path: str | os.PathLike | bytes,
         *,
         names: Sequence[str] = ARKIT52,
-        max_gap: float = 0.5,
+        max_gap: float = MAX_GAP,
         threads: int = 1,
     ) -> None:
         graph = path if isinstance(path, bytes) else model_bytes(path)
@@ -87,9 +87,7 @@ class OnnxLearned(StreamCleaner):
             self.state_names = tuple(str(s) for s in state)
         except (KeyError, ValueError) as e:
             raise FacecleanError(f"{label}: bad faceclean metadata ({e})") from None
-        if not max_gap > 0:
-            raise FacecleanError(f"max_gap must be > 0 s (got {max_gap})")
-        self.max_gap = float(max_gap)
+        self.max_gap = gap_seconds(max_gap)
         self.names = tuple(names)
         self.map = ChannelMap(self.channels, self.names)
         widths = {i.name: i.shape[1] for i in self.session.get_inputs()}

@@ -25,7 +25,8 @@ in seconds at any rate (a zero network is a 2 ms low-pass: g = 0.98 at 120 fps).
 
 ``forward`` applies the runtime's time rules (filters/base.py) inside a batch: a missing
 frame (all NaN or t NaN) holds the output and the state, a NaN channel takes the last
-output, and a pause longer than ``max_gap`` seconds restarts from the input.
+output, and a pause longer than ``MAX_GAP`` seconds restarts from the input; which frames
+advance or restart is decided by filters/base.py's ``time_rules``, not coded here.
 """
 
 from __future__ import annotations
@@ -37,9 +38,9 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from faceclean.filters.base import MAX_GAP, time_rules
 from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0
 
-MAX_GAP = 0.5  # s; as StreamCleaner.max_gap: longer pauses restart the state
 OUTPUTS = ("additive", "gated", "rate")  # the paper's residual, or gain + residual
 
 
@@ -213,26 +214,10 @@ class _Advance(NamedTuple):
 
 
 def _time_rules(missing: Tensor, t: Tensor) -> tuple[_Advance, np.ndarray]:
-    """The runtime's time rules over a batch: (advance, start (B, T) bool).
-
-    Missing frames hold; the first frame and pauses over MAX_GAP restart; a time not
-    after the last accepted frame's holds.
-    """
+    """The runtime's time rules (filters/base.py) over a batch: (advance, start (B, T))."""
     miss = missing.detach().cpu().numpy()
-    tt = t.detach().cpu().double().numpy()
-    B, T = miss.shape
-    adv = np.zeros((B, T), bool)
-    start = np.zeros((B, T), bool)
-    dt = np.ones((B, T))
-    last = np.full(B, np.nan)  # time of the last accepted frame
-    with np.errstate(invalid="ignore"):
-        for n in range(T):
-            gap = tt[:, n] - last
-            start[:, n] = ~miss[:, n] & ~(gap <= MAX_GAP)
-            adv[:, n] = ~miss[:, n] & (gap > 0) & ~start[:, n]
-            dt[adv[:, n], n] = gap[adv[:, n]]
-            last = np.where(adv[:, n] | start[:, n], tt[:, n], last)
-    return _Advance(adv, dt), start
+    start, adv, dt = time_rules(t.detach().cpu().double().numpy(), miss, MAX_GAP)
+    return _Advance(adv, np.where(adv, dt, 1.0)), start
 
 
 def _pick(advance: Tensor, start: Tensor, new, fresh, old):
