@@ -97,10 +97,9 @@ def model_files(extra: Sequence[str | os.PathLike] = ()) -> list[Path]:
 def model_config(path: Path) -> dict[str, Any]:
     """A checkpoint's config JSON (without loading its weights into a cleaner)."""
     from faceclean import strict_json
-    from faceclean.io.npz_safe import load_arrays
-    from faceclean.learned.checkpoint import MAX_MODEL_BYTES
+    from faceclean.learned import formats
 
-    z = load_arrays(path, MAX_MODEL_BYTES, "model file")  # bounded, no pickle
+    z = formats.read_arrays(path)  # bounded, no pickle
     try:
         raw = str(z["config"][()])
     except (ValueError, KeyError, IndexError) as e:

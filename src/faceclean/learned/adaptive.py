@@ -53,7 +53,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import MAX_GAP, State, StreamCleaner, gap_seconds
-from faceclean.io.npz_safe import MiB, load_arrays
+from faceclean.learned import formats
 from faceclean.learned.formats import ADAPTIVE as FORMAT
 
 N_FEATURES = 7  # per-channel signal features before the embedding
@@ -68,7 +68,6 @@ A_MIN, A_MAX = -0.5, 1.5
 F_SLOW = 0.5  # Hz: the slow level the transient gain is measured from (tau 0.32 s)
 G_MAX = 1.0  # the transient gain lies in (-G_MAX, G_MAX)
 DT_MIN = 1e-4  # s; a smaller step is taken as this one
-MAX_MODEL_BYTES = 16 * MiB
 
 # ARKit-52 mirror partner (left <-> right), and each channel's group, by canonical name.
 _SIDES = (("Left", "Right"), ("Right", "Left"))
@@ -95,7 +94,7 @@ def group_matrix(names: Sequence[str]) -> np.ndarray:
 def is_adaptive(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a readable .npz whose config names this format."""
     try:
-        raw = load_arrays(path, max_bytes=MAX_MODEL_BYTES)["config"]
+        raw = formats.read_arrays(path)["config"]
         config = strict_json.loads(str(raw[()]), "config")
     except (FacecleanError, KeyError, ValueError, TypeError, IndexError):
         return False
@@ -130,7 +129,7 @@ class AdaptiveWeights:
     def load(cls, path: str | os.PathLike) -> AdaptiveWeights:
         """Read and check a ``faceclean-adaptive/1`` .npz; FacecleanError if it is not one."""
         p = Path(path)
-        arrays = load_arrays(p, max_bytes=MAX_MODEL_BYTES, what="model file")
+        arrays = formats.read_arrays(p)
         try:
             raw = str(arrays.pop("config")[()])
         except (KeyError, ValueError, TypeError, IndexError):

@@ -25,9 +25,8 @@ from typing import Any
 import numpy as np
 
 from faceclean.errors import FacecleanError
-from faceclean.io.npz_safe import load_arrays
+from faceclean.learned import formats
 from faceclean.learned.formats import LSTM as FORMAT
-from faceclean.learned.formats import MAX_MODEL_BYTES
 
 OUTPUTS = ("additive", "gated", "rate")  # output heads (docs/ARCHITECTURE.md)
 RATE_TAU0 = 0.002  # s, "rate" head: time constant tau = RATE_TAU0 e^a of a zero network
@@ -100,14 +99,7 @@ class LSTMWeights:
     @classmethod
     def load(cls, path: str | os.PathLike) -> LSTMWeights:
         """Read and check a ``faceclean-lstm/1`` .npz; FacecleanError if it is not one."""
-        p = Path(path)
-        if not p.is_file():
-            raise FacecleanError(f"no such model file: {p}")
-        with open(p, "rb") as f:
-            if f.read(4) != b"PK\x03\x04":  # an .npz is a zip archive
-                raise FacecleanError(f"{p.name}: not a model .npz (not a zip archive)")
-        arrays = load_arrays(p, MAX_MODEL_BYTES, "model .npz")  # no pickle, size-checked
-        return cls.from_arrays(arrays, p.name)
+        return cls.from_arrays(formats.read_arrays(path), Path(path).name)
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], label: str = "model") -> LSTMWeights:

@@ -48,7 +48,6 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, GROUPS, channel_key
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import MAX_ABS, State, StreamCleaner
-from faceclean.io.npz_safe import load_arrays
 from faceclean.learned import formats
 from faceclean.learned.checkpoint import read_config
 
@@ -59,7 +58,7 @@ BIG = 1e30  # derivatives are clipped to +-BIG (a dt of 1e-9 s must not overflow
 
 def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], dict]:
     """(config, arrays) of a baseline checkpoint; FacecleanError if it is not one."""
-    arrays = load_arrays(path, formats.MAX_MODEL_BYTES, "model file")  # no pickle, size-checked
+    arrays = formats.read_arrays(path)
     config = read_config(arrays, Path(path).name, fmt)  # checked: one line, never later
     arrays.pop("config")
     for key, a in arrays.items():

@@ -28,18 +28,24 @@ METHODS = {
 MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
 
 
-def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict]:
-    """(config, the other arrays) of a checkpoint; one-line FacecleanError otherwise.
-
-    Never unpickles; size-checked (``MAX_MODEL_BYTES``).
-    """
+def read_arrays(path: str | os.PathLike) -> dict[str, Any]:
+    """Every array of a checkpoint file by name (``config`` among them): the one reader
+    of model files. Never unpickles; size-checked (``MAX_MODEL_BYTES``); one-line
+    FacecleanError for a missing file or one that is not a readable .npz."""
     p = Path(path)
     if not p.is_file():
         raise FacecleanError(f"no such model file: {p}")
     with open(p, "rb") as f:
         if f.read(4) != b"PK\x03\x04":  # an .npz is a zip archive
             raise FacecleanError(f"{p.name}: not a model .npz (not a zip archive)")
-    arrays = load_arrays(p, MAX_MODEL_BYTES, "model file")
+    return load_arrays(p, MAX_MODEL_BYTES, "model .npz")
+
+
+def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict]:
+    """(config, the other arrays) of a checkpoint (``read_arrays``); the config is only
+    parsed here: each format's loader checks it."""
+    p = Path(path)
+    arrays = read_arrays(p)
     try:
         config = json.loads(str(arrays.pop("config")[()]))
     except (KeyError, ValueError, TypeError, RecursionError) as e:
