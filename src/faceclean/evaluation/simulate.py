@@ -64,58 +64,38 @@ class Params:
     crosstalk_mouth: float = 0.0  # 0-0.15: jawOpen -> funnel/lowerDown, smile -> cheekSquint
 
 
-# preset -> field -> (low, high), drawn uniformly (fps log-uniformly); fields left out keep
-# the Params default. "mixed" spans both real presets and every rate: the training preset.
+# field -> ((low, high) for "iphone", (low, high) for "webcam"): the two measured presets,
+# side by side. Drawn uniformly (fps log-uniformly); fields left out keep the Params default.
+_MEASURED = {
+    "fps": ((60.0, 60.0), (24.0, 30.0)),
+    "timing_irregularity": ((0.0, 0.02), (0.1, 0.35)),
+    "jitter": ((0.01, 0.02), (0.012, 0.03)),
+    "jitter_velocity": ((0.001, 0.005), (0.003, 0.01)),
+    "jitter_cutoff": ((8.0, 16.0), (4.0, 10.0)),
+    "jitter_white": ((0.03, 0.1), (0.05, 0.3)),
+    "channel_spread": ((0.3, 0.5), (0.3, 0.6)),
+    "blink_peak": ((0.65, 0.92), (0.55, 0.85)),
+    "peak": ((0.85, 1.0), (0.75, 0.95)),
+    "crosstalk_lr": ((0.0, 0.08), (0.03, 0.15)),
+    "crosstalk_jaw": ((0.0, 0.15), (0.05, 0.25)),
+    "crosstalk_brow": ((0.0, 0.1), (0.03, 0.2)),
+    "drift": ((0.0, 0.02), (0.01, 0.04)),
+    "drift_period": ((10.0, 40.0), (5.0, 20.0)),
+    "spike_rate": ((0.0, 0.15), (0.1, 0.5)),
+    "spike_amplitude": ((0.1, 0.4), (0.2, 0.6)),
+    "spike_duration": ((0.02, 0.08), (0.05, 0.15)),
+    "freeze_rate": ((0.0, 0.01), (0.01, 0.05)),
+    "drop_rate": ((0.0, 0.04), (0.03, 0.1)),
+    "drop_burst": ((1.0, 6.0), (1.0, 3.0)),
+    "loss_rate": ((0.0, 0.5), (0.5, 3.0)),
+    "loss_duration": ((0.2, 0.8), (0.3, 1.5)),
+}  # fmt: skip
+# preset -> field -> (low, high). "mixed" spans both measured presets and every rate: the
+# training preset.
 PRESETS: dict[str, dict[str, tuple[float, float]]] = {
     "clean": {"jitter": (0.0005, 0.001)},
-    "iphone": {
-        "fps": (60.0, 60.0),
-        "timing_irregularity": (0.0, 0.02),
-        "jitter": (0.01, 0.02),
-        "jitter_velocity": (0.001, 0.005),
-        "jitter_cutoff": (8.0, 16.0),
-        "jitter_white": (0.03, 0.1),
-        "channel_spread": (0.3, 0.5),
-        "blink_peak": (0.65, 0.92),
-        "peak": (0.85, 1.0),
-        "crosstalk_lr": (0.0, 0.08),
-        "crosstalk_jaw": (0.0, 0.15),
-        "crosstalk_brow": (0.0, 0.1),
-        "drift": (0.0, 0.02),
-        "drift_period": (10.0, 40.0),
-        "spike_rate": (0.0, 0.15),
-        "spike_amplitude": (0.1, 0.4),
-        "spike_duration": (0.02, 0.08),
-        "freeze_rate": (0.0, 0.01),
-        "drop_rate": (0.0, 0.04),
-        "drop_burst": (1.0, 6.0),
-        "loss_rate": (0.0, 0.5),
-        "loss_duration": (0.2, 0.8),
-    },
-    "webcam": {
-        "fps": (24.0, 30.0),
-        "timing_irregularity": (0.1, 0.35),
-        "jitter": (0.012, 0.03),
-        "jitter_velocity": (0.003, 0.01),
-        "jitter_cutoff": (4.0, 10.0),
-        "jitter_white": (0.05, 0.3),
-        "channel_spread": (0.3, 0.6),
-        "blink_peak": (0.55, 0.85),
-        "peak": (0.75, 0.95),
-        "crosstalk_lr": (0.03, 0.15),
-        "crosstalk_jaw": (0.05, 0.25),
-        "crosstalk_brow": (0.03, 0.2),
-        "drift": (0.01, 0.04),
-        "drift_period": (5.0, 20.0),
-        "spike_rate": (0.1, 0.5),
-        "spike_amplitude": (0.2, 0.6),
-        "spike_duration": (0.05, 0.15),
-        "freeze_rate": (0.01, 0.05),
-        "drop_rate": (0.03, 0.1),
-        "drop_burst": (1.0, 3.0),
-        "loss_rate": (0.5, 3.0),
-        "loss_duration": (0.3, 1.5),
-    },
+    "iphone": {k: iphone for k, (iphone, _) in _MEASURED.items()},
+    "webcam": {k: webcam for k, (_, webcam) in _MEASURED.items()},
 }
 PRESETS["mixed"] = {
     k: (min(PRESETS["iphone"][k][0], lo), max(PRESETS["iphone"][k][1], hi))

@@ -17,7 +17,7 @@ import numpy as np
 
 from faceclean.channels import ARKIT52
 from faceclean.filters.base import State, StreamCleaner
-from faceclean.filters.params import seconds_or
+from faceclean.filters.params import set_seconds_or
 
 TAU = 0.025  # s; default time constant (a 6.4 Hz low-pass) for 60 fps ARKit data
 
@@ -35,10 +35,7 @@ class Ema(StreamCleaner):
         gamma: float | Sequence[float] | None = None,
         names: Sequence[str] = ARKIT52,
     ) -> None:
-        self.names = tuple(names)
-        self.tau, self.gamma = seconds_or(
-            "ema", names, ("tau", tau, TAU), ("gamma", gamma, "per frame"), high=1.0
-        )
+        set_seconds_or(self, names, ("tau", tau, TAU), ("gamma", gamma, "per frame"), high=1.0)
         self.reset()
 
     def _start(self, x: np.ndarray) -> State:

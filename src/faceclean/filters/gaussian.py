@@ -18,7 +18,7 @@ import numpy as np
 
 from faceclean.channels import ARKIT52
 from faceclean.filters.base import OfflineCleaner
-from faceclean.filters.params import seconds_or
+from faceclean.filters.params import set_seconds_or
 from faceclean.filters.window import median_dt, reach, shifted
 
 SIGMA = 0.03  # s; default (about 2 frames at 60 fps)
@@ -38,9 +38,8 @@ class Gaussian(OfflineCleaner):
         sigma_frames: float | Sequence[float] | None = None,
         names: Sequence[str] = ARKIT52,
     ) -> None:
-        self.names = tuple(names)
-        self.sigma, self.sigma_frames = seconds_or(
-            "gaussian", names, ("sigma", sigma, SIGMA), ("sigma_frames", sigma_frames, "frames")
+        set_seconds_or(
+            self, names, ("sigma", sigma, SIGMA), ("sigma_frames", sigma_frames, "frames")
         )
         self.reset()
 

@@ -63,3 +63,18 @@ def seconds_or(
         return None, per_channel(o_value, names, f"{method} {o_key}", **bounds)
     value = default if s_value is None else s_value
     return per_channel(value, names, f"{method} {s_key}"), None
+
+
+def set_seconds_or(
+    cleaner: Any,
+    names: Sequence[str],
+    seconds: tuple[str, Any, float],
+    other: tuple[str, Any, str],
+    **bounds: Any,
+) -> None:
+    """A constructor's settings for a cleaner set by one width in seconds or in another
+    unit (``seconds_or``): ``cleaner.names`` and both attributes, the unused one None."""
+    cleaner.names = tuple(names)
+    values = seconds_or(cleaner.name, names, seconds, other, **bounds)
+    for (key, *_), value in zip((seconds, other), values, strict=True):
+        setattr(cleaner, key, value)
