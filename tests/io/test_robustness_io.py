@@ -3,6 +3,7 @@ its documented behaviour; inputs never modified; refused runs leave no file behi
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import pickle
@@ -17,6 +18,7 @@ from faceclean import io
 from faceclean.animation import Animation
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
+from faceclean.filters.base import check_finite
 from faceclean.io import stream
 from faceclean.resolve import resolve
 from faceclean.settings import takes_dir
@@ -334,8 +336,10 @@ def _in_memory(src: Path, dst: Path, method: str) -> None:
 def _streamed(src: Path, dst: Path, method: str) -> tuple[int, int]:
     fmt = io.detect(src)
     cleaner = resolve(method).build(stream.channel_names(src, fmt))
-    assert stream.can_stream(cleaner, fmt, fmt)
-    return stream.clean_file(src, dst, cleaner, fmt)
+    assert cleaner.stepwise and stream.can_stream(fmt, fmt)
+    cleaner.reset()
+    check = functools.partial(check_finite, name=cleaner.name)
+    return stream.clean_file(src, dst, cleaner.step, fmt, check=check)
 
 
 def _edge_files() -> dict[str, bytes]:
@@ -386,11 +390,11 @@ def test_iter_lines_matches_splitlines():
 
 def test_clean_streams_only_when_it_can():
     one_euro, gaussian = resolve("one-euro").build(), resolve("gaussian").build()
-    assert stream.can_stream(one_euro, "livelink", "livelink")
-    assert stream.can_stream(one_euro, "csv", "csv")
-    assert not stream.can_stream(one_euro, "livelink", "json")  # another format: whole
-    assert not stream.can_stream(one_euro, "json", "json")
-    assert not stream.can_stream(gaussian, "csv", "csv")  # offline: whole
+    assert stream.can_stream("livelink", "livelink") and one_euro.stepwise
+    assert stream.can_stream("csv", "csv")
+    assert not stream.can_stream("livelink", "json")  # another format: whole
+    assert not stream.can_stream("json", "json")
+    assert not gaussian.stepwise  # offline: whole
 
 
 @needs_takes

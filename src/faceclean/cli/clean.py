@@ -97,10 +97,11 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     src = Path(input)
     io.paths.rewritable(src)  # clean IN -o IN replaces IN (atomically, once complete)
     fmt_in = io.detect(src) if src.is_file() else None
-    if fmt_in in stream.FORMATS and io.output_format(output, fmt_in, args.fmt) == fmt_in:
+    fmt_out = io.output_format(output, fmt_in, args.fmt) if fmt_in in stream.FORMATS else None
+    if stream.can_stream(fmt_in, fmt_out):
         names = stream.channel_names(src, fmt_in)
         cleaner, what = build_cleaner(choice, names)
-        if names and stream.can_stream(cleaner, fmt_in, fmt_in):
+        if names and cleaner.stepwise:
             adjust = build_levels(args, choice, names)
             if not adjust.is_identity:
                 cleaner = Adjusted(cleaner, adjust, names)
@@ -142,15 +143,20 @@ def _stream(
     src: Path, out: str, cleaner: Cleaner, fmt: str, progress: bool = True
 ) -> tuple[int, int]:
     """``stream.clean_file`` with a progress bar (bytes) on stderr for big files."""
+    import functools
+
     from tqdm import tqdm
 
+    from faceclean.filters.base import check_finite
     from faceclean.io import stream
 
+    cleaner.reset()
+    check = functools.partial(check_finite, name=cleaner.name)
     size = src.stat().st_size
     if size < PROGRESS_BYTES or not progress:
-        return stream.clean_file(src, out, cleaner, fmt)
+        return stream.clean_file(src, out, cleaner.step, fmt, check=check)
     with tqdm(total=size, unit="B", unit_scale=True, file=sys.stderr, leave=False) as bar:
-        return stream.clean_file(src, out, cleaner, fmt, progress=bar.update)
+        return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check)
 
 
 def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:

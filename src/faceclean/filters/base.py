@@ -103,6 +103,12 @@ class Cleaner(ABC):
         if own is not None and not getattr(own, "_finite_checked", False):
             cls.clean = _checked(own)  # a subclass's own clean gets the same check
 
+    @property
+    def stepwise(self) -> bool:
+        """Whether ``clean`` is the base's reset-then-step: stepping the frames one by one
+        gives its numbers, so a file may go through in blocks (io/stream.py)."""
+        return not self.offline and type(self).clean is Cleaner.clean
+
     @abstractmethod
     def reset(self) -> None: ...
 

@@ -59,7 +59,6 @@ ANGLES: tuple[str, ...] = (
 
 # HH:MM:SS:FF.fff, each field 1-2 digits (range-checked), at most 9 decimals of a frame
 _TIMECODE = re.compile(rb"^\s*(\d{1,2}):(\d{1,2}):(\d{1,2})[:;.](\d{1,2}(?:\.\d{0,9})?)\s*$")
-_BOM = b"\xef\xbb\xbf"
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,7 +77,7 @@ class Source:
 
 def sniff(head: bytes) -> bool:
     """A Live Link Face CSV starts ``Timecode,BlendshapeCount``."""
-    return head.removeprefix(_BOM).lower().startswith(b"timecode,blendshapecount")
+    return head.removeprefix(bounded.BOM).lower().startswith(b"timecode,blendshapecount")
 
 
 def timecode_seconds(text: bytes | str) -> float:
@@ -130,7 +129,7 @@ def read(path: str | os.PathLike) -> Animation:
         names=head.names,
         values=values.copy(),
         times=times.copy(),
-        decimals=_decimals(table[~np.array(missing, bool)][:DECIMALS_SAMPLE, head.columns - 2]),
+        decimals=decimals_of(table[~np.array(missing, bool)][:DECIMALS_SAMPLE, head.columns - 2]),
     )
     meta = {
         "format": "livelink",
@@ -154,7 +153,7 @@ class Header:
 
 def parse_header(line: bytes, label: str) -> Header:
     """The first line -> Header; the first spelling of a blendshape wins, repeats pass."""
-    raw = _content(line).removeprefix(_BOM).split(b",")
+    raw = _content(line).removeprefix(bounded.BOM).split(b",")
     bounded.check_cells(raw, f"{label} line 1", bounded.MAX_NAME)
     fields = tuple(h.strip().decode("utf-8") for h in raw)
     columns, names, pose_cols = [], [], []
@@ -235,8 +234,9 @@ def _content(line: bytes) -> bytes:
     return line.rstrip(b"\r\n")
 
 
-def _decimals(sample: np.ndarray) -> int:
-    """Most decimals among sample cells (bytes), else the app's 10."""
+def decimals_of(sample: np.ndarray) -> int:
+    """Most decimals among sample cells (bytes, any shape), else the app's 10: the
+    precision the writer gives cleaned values."""
     best = 0
     for cell in sample.ravel():
         text = cell.strip()

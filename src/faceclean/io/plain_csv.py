@@ -20,19 +20,23 @@ from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
 from faceclean.io import source
 
-_BOM = b"\xef\xbb\xbf"
+
+def header_line(line: bytes) -> bytes:
+    """The first line of a file as ``sniff`` and ``parse_header`` take it: no BOM, no
+    line ending."""
+    return line.removeprefix(source.BOM).rstrip(b"\r\n")
 
 
 def sniff(head: bytes) -> bool:
     """A plain CSV has a ``time`` column in its first line."""
-    first = head.removeprefix(_BOM).split(b"\n", 1)[0].rstrip(b"\r")
+    first = head.removeprefix(source.BOM).split(b"\n", 1)[0].rstrip(b"\r")
     return b"time" in (c.strip().strip(b'"').lower() for c in first.split(b","))
 
 
 def read(path: str | os.PathLike) -> Animation:
     """Read a plain CSV; empty cells are NaN."""
     p = Path(path)
-    lines = source.read_bytes(p).removeprefix(_BOM).splitlines()
+    lines = source.read_bytes(p).removeprefix(source.BOM).splitlines()
     if not lines or not sniff(lines[0]):
         raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
     t_col, names = parse_header(lines[0])

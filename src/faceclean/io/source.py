@@ -35,6 +35,7 @@ MAX_CELL = 64  # bytes of one CSV data cell (a number needs at most ~25)
 MAX_NAME = 256  # bytes of one CSV header cell (a channel name)
 MAX_FIELDS = 4096  # fields of one CSV row
 MAX_LINE = (MAX_NAME + 1) * MAX_FIELDS  # bytes of one CSV line
+BOM = b"\xef\xbb\xbf"  # UTF-8 byte order mark some tools write before a CSV header
 
 
 def regular(path: str | os.PathLike, what: str = "file") -> os.stat_result:

@@ -9,8 +9,12 @@ proves it): the same parsers, the same writers, the same cleaner calls in the sa
 order. A refused file (a bad row half-way) leaves no output: the temporary file is
 removed and an existing OUT is untouched.
 
-Only a cleaner whose ``clean`` is reset-then-step can stream (offline cleaners and
-cleaners with their own batch path load the whole file), and only into the same format.
+The cleaner is a plain ``step(x, t) -> x`` callable over one frame (M,) at t s, reset by
+the caller; ``check(input, output)`` (R, M), when given, sees every block before it is
+written and raises to refuse the file (the cleaner's finite check, filters/base.py).
+Only a cleaner whose ``clean`` is reset-then-step can stream (the caller asks
+``Cleaner.stepwise``; offline cleaners and cleaners with their own batch path load the
+whole file), and only into the same format (``can_stream``).
 """
 
 from __future__ import annotations
@@ -23,7 +27,6 @@ from typing import BinaryIO
 import numpy as np
 
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner, check_finite
 from faceclean.io import livelink_csv, plain_csv, source
 from faceclean.io.atomic import atomic_open
 
@@ -32,16 +35,13 @@ CHUNK = 1 << 20  # bytes per read
 FORMATS = ("livelink", "csv")
 
 Progress = Callable[[int], None]  # called with the bytes consumed since the last call
+Step = Callable[[np.ndarray, float], np.ndarray]  # one frame (M,) at t s -> cleaned (M,)
+Check = Callable[[np.ndarray, np.ndarray], None]  # (input, output) (R, M); raises to refuse
 
 
-def can_stream(cleaner: Cleaner, fmt_in: str, fmt_out: str) -> bool:
-    """Whether ``clean_file`` applies: a row format in and out, a step-by-step cleaner."""
-    return (
-        fmt_in in FORMATS
-        and fmt_out == fmt_in
-        and not cleaner.offline
-        and type(cleaner).clean is Cleaner.clean
-    )
+def can_stream(fmt_in: str | None, fmt_out: str | None) -> bool:
+    """Whether ``clean_file`` applies to these formats: a row format in and out."""
+    return fmt_in in FORMATS and fmt_out == fmt_in
 
 
 def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
@@ -54,7 +54,7 @@ def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
             if not livelink_csv.sniff(first):
                 raise FacecleanError(f"{p.name}: not a Live Link Face CSV")
             return livelink_csv.parse_header(first, p.name).names
-        head = first.removeprefix(plain_csv._BOM).rstrip(b"\r\n")
+        head = plain_csv.header_line(first)
         if not plain_csv.sniff(head):
             raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
         return plain_csv.parse_header(head)[1]
@@ -65,22 +65,24 @@ def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
 def clean_file(
     src: str | os.PathLike,
     dst: str | os.PathLike,
-    cleaner: Cleaner,
+    step: Step,
     fmt: str,
     progress: Progress | None = None,
+    check: Check | None = None,
 ) -> tuple[int, int]:
-    """Clean ``src`` (format ``fmt``) into ``dst`` block by block; (frames, missing frames).
+    """Clean ``src`` (format ``fmt``) into ``dst`` block by block with ``step`` (a reset
+    cleaner's); (frames, missing frames). ``check``: see the module docstring.
 
     OUT may be IN: the output replaces it only once the whole file is through.
     """
     if fmt not in FORMATS:
         raise FacecleanError(f"cannot stream format {fmt!r} (only {', '.join(FORMATS)})")
     p = Path(src)
-    step = _livelink if fmt == "livelink" else _plain
-    cleaner.reset()
+    rows = _Rows(step, check)
+    through = _livelink if fmt == "livelink" else _plain
     with source.open_binary(p) as f, atomic_open(dst, "wb") as out:
         try:
-            return step(p.name, _counted(f, progress), out, cleaner)
+            return through(p.name, _counted(f, progress), out, rows)
         except UnicodeDecodeError as e:
             raise FacecleanError(f"{p.name}: not UTF-8 text ({e})") from None
 
@@ -117,17 +119,24 @@ def _counted(f: BinaryIO, progress: Progress | None) -> Iterator[list[bytes]]:
             progress(size)
 
 
-def _step_rows(cleaner: Cleaner, times: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Cleaned (R, M) values: valid rows stepped in order, missing rows NaN (Cleaner.clean)."""
-    out = np.full_like(values, np.nan)
-    valid = ~np.all(np.isnan(values), axis=1) if values.shape[1] else np.ones(len(values), bool)
-    for i in np.flatnonzero(valid):
-        out[i] = cleaner.step(values[i], times[i])
-    check_finite(values, out, cleaner.name)  # as Cleaner.clean: an erasing cleaner fails
-    return out
+class _Rows:
+    """Cleaned (R, M) values of a block: valid rows stepped in order, missing rows NaN
+    (as Cleaner.clean), then ``check``ed."""
+
+    def __init__(self, step: Step, check: Check | None) -> None:
+        self.step, self.check = step, check
+
+    def __call__(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+        out = np.full_like(values, np.nan)
+        valid = ~np.all(np.isnan(values), axis=1) if values.shape[1] else np.ones(len(values), bool)
+        for i in np.flatnonzero(valid):
+            out[i] = self.step(values[i], times[i])
+        if self.check is not None:
+            self.check(values, out)  # as Cleaner.clean: an erasing cleaner fails
+        return out
 
 
-def _livelink(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, cleaner: Cleaner):
+def _livelink(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, clean_rows: _Rows):
     first = next(blocks, None)
     if not first or not livelink_csv.sniff(first[0]):
         raise FacecleanError(f"{name}: not a Live Link Face CSV (no Timecode,BlendshapeCount)")
@@ -152,7 +161,7 @@ def _livelink(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, cleaner: 
             times, wraps = livelink_csv.relative_times(absolute, start, previous, wraps)
             previous = float(absolute[-1])
             values = livelink_csv.parse_numbers(table, name)[:, cols]
-            new = _step_rows(cleaner, times, values)
+            new = clean_rows(times, values)
             local = np.array(rows) - first_line
             livelink_csv.patch_lines(
                 lines, local, np.array(missing, bool), head.columns, values, new, decimals
@@ -192,12 +201,12 @@ def _decimals(sample: list[np.ndarray]) -> int:
         return livelink_csv.DECIMALS
     width = max(c.dtype.itemsize for c in cells)
     table = np.concatenate([c.astype(f"S{width}") for c in cells])
-    return livelink_csv._decimals(table[: livelink_csv.DECIMALS_SAMPLE])
+    return livelink_csv.decimals_of(table[: livelink_csv.DECIMALS_SAMPLE])
 
 
-def _plain(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, cleaner: Cleaner):
+def _plain(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, clean_rows: _Rows):
     first = next(blocks, None)
-    head = first[0].removeprefix(plain_csv._BOM).rstrip(b"\r\n") if first else b""
+    head = plain_csv.header_line(first[0]) if first else b""
     if not first or not plain_csv.sniff(head):
         raise FacecleanError(f"{name}: not a plain CSV (no 'time' column in the header)")
     t_col, names = plain_csv.parse_header(head)
@@ -206,7 +215,7 @@ def _plain(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, cleaner: Cle
     for lines in _chain([first[1:]], blocks):
         stripped = [line.rstrip(b"\r\n") for line in lines]
         times, values, done = plain_csv.parse_rows(stripped, done, t_col, len(names) + 1, name)
-        new = _step_rows(cleaner, times, values)
+        new = clean_rows(times, values)
         out.write(plain_csv.rows_text(times, new))
         frames += len(times)
         missing += int(np.all(np.isnan(values), axis=1).sum()) if values.shape[1] else 0
