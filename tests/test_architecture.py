@@ -90,6 +90,12 @@ def test_torch_only_in_neural():
     ]
 
 
+def test_no_dev_dependency_in_the_library():
+    """hypothesis and pytest are dev dependencies: no module under src imports them."""
+    dev = {"hypothesis", "pytest"}
+    assert not [(a, b) for a, b, _, _ in IMPORTS if b.split(".")[0] in dev]
+
+
 def test_no_private_name_across_packages():
     bad = []
     for a, b, name, _ in OURS:

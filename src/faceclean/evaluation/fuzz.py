@@ -7,10 +7,11 @@ raises Malformed, the relay's counted rejection. Anything else is a bug. A reada
 file must also write back in its own format without any other error, and a Live Link
 file must come back byte for byte.
 
-Inputs come from hypothesis: arbitrary bytes, and real files or packets (``seeds``)
-mutated by a few byte-level edits (flips, cuts, repeats, splices of tokens that parsers
-care about). ``tests/evaluation/test_fuzz.py`` runs a bounded number per target in ``make test``;
-``faceclean fuzz`` runs many more. hypothesis is a dev dependency, imported when used.
+Inputs come from a seeded numpy generator (``draw``): arbitrary bytes, and real files
+or packets (``seeds``) mutated by a few byte-level edits (flips, cuts, repeats, splices
+of tokens that parsers care about); a failing input is shrunk by deleting spans. No
+hypothesis here (a dev dependency): ``tests/evaluation/test_fuzz.py`` drives the same
+``Checker`` with hypothesis in ``make test``; ``faceclean fuzz`` runs this fuzzer long.
 """
 
 from __future__ import annotations
@@ -287,36 +288,60 @@ def _packet_seeds(target: str) -> list[bytes]:
     return [(text + "|=head#1.0,2.0,3.0,0.1,0.2,0.3|").encode(), text.replace("-", "&").encode()]
 
 
-# -- hypothesis strategies and the long run ------------------------------------------------
+# -- the mutation fuzzer and the long run --------------------------------------------------
+
+EDITS = 6  # at most this many byte-level edits of a seed per input
 
 
-def strategy(target: str):
-    """Inputs for ``target``: arbitrary bytes, or a seed with a few byte-level edits."""
-    from hypothesis import strategies as st
+def mutated(rng: np.random.Generator, pool: tuple[bytes, ...]) -> bytes:
+    """A seed from ``pool`` with 1 to EDITS byte-level edits: a byte flipped, the tail cut,
+    a span deleted, a token (TOKENS) spliced in, a span repeated, random bytes inserted."""
+    data = bytearray(pool[int(rng.integers(len(pool)))])
+    for _ in range(int(rng.integers(1, EDITS + 1))):
+        at = int(rng.integers(len(data) + 1))
+        kind = int(rng.integers(6))
+        if kind == 0 and at < len(data):  # flip a byte
+            data[at] = int(rng.integers(256))
+        elif kind == 1:  # cut the tail
+            del data[at:]
+        elif kind == 2:  # delete a span
+            del data[at : at + int(rng.integers(1, 65))]
+        elif kind == 3:  # splice a token
+            data[at:at] = TOKENS[int(rng.integers(len(TOKENS)))]
+        elif kind == 4:  # repeat a span
+            data[at:at] = data[at : at + int(rng.integers(1, 257))]
+        elif kind == 5:  # random bytes
+            data[at:at] = rng.bytes(int(rng.integers(1, 17)))
+    return bytes(data)
 
+
+def draw(rng: np.random.Generator, target: str) -> bytes:
+    """One input for ``target``: arbitrary bytes (a quarter), a seed as is (an eighth),
+    else a mutated seed."""
     pool = seeds(target)
+    u = rng.random()
+    if u < 0.25:
+        return rng.bytes(int(rng.integers(MAX_BYTES + 1)))
+    if u < 0.375:
+        return pool[int(rng.integers(len(pool)))]
+    return mutated(rng, pool)
 
-    @st.composite
-    def mutated(draw) -> bytes:
-        data = bytearray(draw(st.sampled_from(pool)))
-        for _ in range(draw(st.integers(1, 6))):
-            at = draw(st.integers(0, len(data)))
-            kind = draw(st.integers(0, 5))
-            if kind == 0 and data and at < len(data):  # flip a byte
-                data[at] = draw(st.integers(0, 255))
-            elif kind == 1:  # cut the tail
-                del data[at:]
-            elif kind == 2:  # delete a span
-                del data[at : at + draw(st.integers(1, 64))]
-            elif kind == 3:  # splice a token
-                data[at:at] = draw(st.sampled_from(TOKENS))
-            elif kind == 4:  # repeat a span
-                data[at:at] = data[at : at + draw(st.integers(1, 256))]
-            else:  # random bytes
-                data[at:at] = draw(st.binary(min_size=1, max_size=16))
-        return bytes(data)
 
-    return st.one_of(st.binary(max_size=MAX_BYTES), mutated(), st.sampled_from(pool))
+def shrink(fails: Callable[[bytes], bool], data: bytes, budget: int = 400) -> bytes:
+    """A shorter input that still ``fails``: spans deleted, halves first, then smaller
+    (at most ``budget`` tries)."""
+    span = max(len(data) // 2, 1)
+    while span >= 1 and budget > 0:
+        at = 0
+        while at < len(data) and budget > 0:
+            budget -= 1
+            shorter = data[:at] + data[at + span :]
+            if fails(shorter):
+                data = shorter
+            else:
+                at += span
+        span //= 2
+    return data
 
 
 def run(
@@ -325,48 +350,45 @@ def run(
     seconds: float | None = None,
     batch: int = 2000,
     on_batch: Callable[[Report], None] | None = None,
+    seed: int = 0,
 ) -> Report:
-    """Fuzz one target for ``examples`` inputs or ``seconds`` seconds (batches of
-    ``batch``, each with fresh randomness). Stops at the first failure (shrunk)."""
-    from hypothesis import HealthCheck, Phase, given, settings
-
+    """Fuzz one target for ``examples`` inputs or ``seconds`` seconds (numpy's generator
+    seeded with ``seed``: the same inputs every run), reporting after every ``batch``.
+    Stops at the first failure, shrunk."""
     if (examples is None) == (seconds is None):
         raise FacecleanError("give a number of examples or a number of seconds")
     report = Report(target)
+    rng = np.random.default_rng([seed, TARGETS.index(target)])
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="faceclean-fuzz-") as folder:
         check = Checker(target, folder)
 
-        def one(data: bytes) -> None:
+        def failure(data: bytes) -> BaseException | None:
+            try:
+                check(data)
+            except Exception as e:  # anything but the policy's refusal is a bug
+                return e
+            return None
+
+        while True:
+            if examples is not None and report.tried >= examples:
+                break
+            if seconds is not None and time.monotonic() - start >= seconds:
+                break
+            data = draw(rng, target)
             report.tried += 1
             try:
                 ok = check(data)
-            except Exception as e:  # keep the smallest failing input and where it failed
-                if report.failing_input is None or len(data) < len(report.failing_input):
-                    report.failing_input, report.failure = data, _one_line(e)
-                raise
+            except Exception as e:
+                small = shrink(lambda d: failure(d) is not None, data)
+                report.failing_input, report.failure = small, _one_line(failure(small) or e)
+                break
             if ok:
                 report.accepted += 1
             else:
                 report.refused += 1
-
-        while report.failure is None:
-            n = batch if examples is None else min(batch, examples - report.tried)
-            if n <= 0 or (seconds is not None and time.monotonic() - start >= seconds):
-                break
-            cfg = settings(
-                max_examples=n,
-                deadline=None,
-                database=None,
-                phases=[Phase.generate, Phase.shrink],
-                suppress_health_check=list(HealthCheck),
-            )
-            try:
-                cfg(given(strategy(target))(one))()
-            except Exception as e:  # the property failed: ``one`` kept the input
-                report.failure = report.failure or _one_line(e)
-            report.seconds = time.monotonic() - start
-            if on_batch is not None:
+            if on_batch is not None and report.tried % batch == 0:
+                report.seconds = time.monotonic() - start
                 on_batch(report)
     report.seconds = time.monotonic() - start
     return report
@@ -388,4 +410,7 @@ def failing_example(report: Report) -> str:
     return repr(data[:200]) + (f" ... ({len(data)} bytes)" if len(data) > 200 else "")
 
 
-__all__ = ["DECODERS", "READERS", "TARGETS", "Checker", "Report", "check_animation", "run"]
+__all__ = [
+    "DECODERS", "READERS", "TARGETS", "Checker", "Report", "check_animation", "draw",
+    "mutated", "run", "seeds", "shrink",
+]  # fmt: skip
