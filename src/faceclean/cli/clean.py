@@ -64,11 +64,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     options.add_arguments(p)
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
     p.add_argument(
-        "--calibration",
-        metavar="FILE",
-        help="level mapping from 'faceclean calibrate', applied before the cleaner",
-    )
-    p.add_argument(
         "--jobs", type=int, default=1, metavar="N", help="batch: clean N files at once (processes)"
     )
 
@@ -120,7 +115,7 @@ def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...
     """The level mapping: ``--calibration``, then the ``--set`` level items on top."""
     from faceclean.adjust import Adjust
 
-    base = Adjust.load(args.calibration) if getattr(args, "calibration", None) else Adjust()
+    base = options.calibration(args) or Adjust()
     return base.merged(choice.adjust(names))
 
 

@@ -1,6 +1,7 @@
 """The cleaner options every cleaning command shares (``clean``, ``relay``, ``plot``,
 ``report``): ``--method``/``--model``/``--preset`` and ``--set``, read by
-``faceclean.resolve``. Not a command itself."""
+``faceclean.resolve``, and ``--calibration`` (the level mapping before the cleaner).
+Not a command itself."""
 
 from __future__ import annotations
 
@@ -28,7 +29,9 @@ settings (--set, repeatable; values: true/false, numbers, JSON lists, else text)
 """
 
 
-def add_arguments(p: argparse.ArgumentParser, what: str = "the cleaner") -> None:
+def add_arguments(
+    p: argparse.ArgumentParser, what: str = "the cleaner", levels: str = "the cleaner"
+) -> None:
     p.add_argument(
         "--method",
         metavar="NAME",
@@ -45,6 +48,19 @@ def add_arguments(p: argparse.ArgumentParser, what: str = "the cleaner") -> None
         default=[],
         help="setting, repeatable; per channel by name, glob or group (see below)",
     )
+    p.add_argument(
+        "--calibration",
+        metavar="FILE",
+        help=f"level mapping from 'faceclean calibrate', applied before {levels}",
+    )
+
+
+def calibration(args: argparse.Namespace):
+    """The ``--calibration`` level mapping (faceclean.adjust.Adjust), None without one."""
+    from faceclean.adjust import Adjust
+
+    path = getattr(args, "calibration", None)
+    return Adjust.load(path) if path else None
 
 
 def words(args: argparse.Namespace) -> str | None:

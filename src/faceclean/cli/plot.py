@@ -14,7 +14,7 @@ EPILOG = options.SETTINGS_HELP  # the cleaner options and --set syntax
 def add_method_arguments(p: argparse.ArgumentParser) -> None:
     """--truth, the cleaner options, --compare: shared by ``plot`` and ``report``."""
     p.add_argument("--truth", metavar="CLEAN", help="the clean animation (any timestamps)")
-    options.add_arguments(p, "the cleaner shown as 'cleaned'")
+    options.add_arguments(p, "the cleaner shown as 'cleaned'", levels="every cleaner")
     p.add_argument(
         "--compare",
         metavar="METHOD",
@@ -22,11 +22,6 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
         action="extend",
         default=[],
         help="other cleaners to show beside it, settings inline: 'one-euro:min_cutoff=2,beta=0.1'",
-    )
-    p.add_argument(
-        "--calibration",
-        metavar="FILE",
-        help="level mapping from 'faceclean calibrate', applied before every cleaner",
     )
 
 
@@ -53,12 +48,7 @@ def comparison_from(args: argparse.Namespace):
     truth = io.load(args.truth) if args.truth else None
     label = " ".join([options.words(args) or DEFAULT, *args.params])
     methods = [(label, options.choice(args)), *args.compare]
-    adjust = None
-    if getattr(args, "calibration", None):
-        from faceclean.adjust import Adjust
-
-        adjust = Adjust.load(args.calibration)
-    return comparison.compare(noisy, truth, methods, adjust)
+    return comparison.compare(noisy, truth, methods, options.calibration(args))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -47,11 +47,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--send", required=True, metavar="URL", help="e.g. vmc://127.0.0.1:39539")
     options.add_arguments(p)
     p.add_argument(
-        "--calibration",
-        metavar="FILE",
-        help="level mapping from 'faceclean calibrate', applied before the cleaner",
-    )
-    p.add_argument(
         "--stats", type=float, metavar="SECONDS", help="print counters and latency this often"
     )
     p.add_argument(
@@ -83,7 +78,7 @@ def with_levels(args: argparse.Namespace, choice: Choice, cleaner: Any) -> tuple
     from faceclean.calibration import LiveCalibration
     from faceclean.channels import ARKIT52
 
-    base = Adjust.load(args.calibration) if args.calibration else Adjust()
+    base = options.calibration(args) or Adjust()
     overrides = choice.adjust(ARKIT52)
     notes = [f"calibration {args.calibration}"] if args.calibration else []
     notes += [f"{len(overrides.rules)} level overrides"] if overrides.rules else []

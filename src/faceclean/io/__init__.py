@@ -19,7 +19,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
 from faceclean.io import paths, source  # noqa: F401 (io.paths: the output policy)
-from faceclean.io.atomic import atomic_open
+from faceclean.io.atomic import atomic_open, writable
 
 # format name -> module; extensions that select it.
 FORMATS: dict[str, str] = {
@@ -152,14 +152,8 @@ def check_output(
     """Refuse now what ``save(.., path)`` would refuse for its path (missing folder, a
     folder, a FIFO or device, an input of this command, an unknown type): a command with
     several outputs checks them all before writing the first."""
-    p = Path(path)
-    folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise FacecleanError(f"output folder does not exist: {folder}")
-    if p.is_dir():
-        raise FacecleanError(f"output path is a folder: {p}")
-    paths.target(path)
-    _module(output_format(p, source, fmt))
+    writable(path)
+    _module(output_format(Path(path), source, fmt))
 
 
 def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> None:

@@ -19,16 +19,22 @@ from faceclean.errors import FacecleanError
 from faceclean.io import paths
 
 
-@contextlib.contextmanager
-def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
-    """Open a temporary file for writing; on success it replaces ``path`` atomically."""
+def writable(path: str | os.PathLike) -> Path:
+    """The real file an output ``path`` names (symlinks followed), once checked: its
+    folder exists, it is not a folder, and ``paths.target`` accepts it."""
     given = Path(path)
     folder = given.parent if str(given.parent) else Path(".")
     if not folder.is_dir():
         raise FacecleanError(f"output folder does not exist: {folder}")
     if given.is_dir():
         raise FacecleanError(f"output path is a folder: {given}")
-    target = paths.target(path)  # the real file (symlinks followed), checked
+    return paths.target(path)
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
+    """Open a temporary file for writing; on success it replaces ``path`` atomically."""
+    target = writable(path)
     folder = target.parent
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name[:100]}.", suffix=".tmp", dir=folder)
     try:
