@@ -142,12 +142,18 @@ def test_clean_equals_stepping_every_frame(weights, clip, kernel):
     x[30] = np.nan  # missing frame
     x[40, 2:5] = np.nan  # NaN channels
     t[60] = t[59]  # repeated timestamp (held), then the next frame follows it
+    t[80] = t[79] - 0.01  # backwards: held
+    t[90] = t[89] + 1e-13  # within MIN_DT of the last: held
     t[100:] += 2.0  # a pause: restart
+    x[70, 7] = np.nan
+    nan = Learned(weights=weights, kernel=kernel).clean(Animation.from_arkit(t, x)).values
+    x[70, 7] = 1e7  # absurd: rule 2 takes it as non-finite, on every path
     anim = Animation.from_arkit(t, x)
     fast = Learned(weights=weights, kernel=kernel).clean(anim).values
     stepped = Learned(weights=weights, kernel=kernel)
     slow = super(Learned, stepped).clean(anim).values  # the base loop: step every frame
     np.testing.assert_array_equal(fast, slow)
+    np.testing.assert_array_equal(fast, nan)
     assert np.isnan(fast[30]).all() and np.isfinite(np.delete(fast, 30, 0)).all()
 
 
