@@ -38,7 +38,6 @@ from typing import Any
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import dataset, harm, metrics
 from faceclean.evaluation.harness import (
@@ -49,8 +48,9 @@ from faceclean.evaluation.harness import (
     head,
     run_streams,
 )
-from faceclean.filters import Cleaner, make
+from faceclean.filters import make
 from faceclean.learned import formats
+from faceclean.resolve import resolve
 
 TUNE_SECONDS = 20.0  # s of each training take used to tune the classical filters
 QUICK_SECONDS = 6.0  # s of each take in --quick mode
@@ -128,13 +128,13 @@ def pick_models(files: Sequence[Path], sources: Sequence[str]) -> dict[str, dict
 
 
 def _arkit(pairs: Sequence[tuple[Animation, Animation]]) -> list[tuple[Animation, Animation]]:
-    """The harness's (noisy, truth) pairs with (N, 52) ARKit-52 values.
-
-    The names stay the take's own, as every RESULTS figure so far was computed: a take
-    not in ARKit-52 order (Live Link Face's JawRight before JawLeft, MouthRight before
-    MouthLeft) has those 4 columns labelled mirrored, which the learned rows see; naming
-    them ARKIT52 moves those rows, so it waits for a rerun of ``make eval``."""
-    return [(a.with_values(a.arkit()[0]), b.with_values(b.arkit()[0])) for a, b in pairs]
+    """The harness's (noisy, truth) pairs as ARKit-52 takes: (N, 52) values named ARKIT52
+    in canonical order, whatever order the take listed them in (Live Link Face writes
+    JawRight before JawLeft), so every cleaner sees each channel under its own name."""
+    return [
+        (Animation.from_arkit(a.times, a.arkit()[0]), Animation.from_arkit(b.times, b.arkit()[0]))
+        for a, b in pairs
+    ]
 
 
 def _scores(outs: Sequence[np.ndarray], pairs) -> list[dict[str, float]]:
@@ -193,7 +193,7 @@ def evaluate(
             for label, method in LEARNED_ROWS:
                 path = picked[method].get(source)
                 if path is not None:
-                    outs = run_streams(_learned(method, path, names), inputs)
+                    outs = run_streams(resolve(path).build(names), inputs)
                     record(label, cond, source, val, _scores(outs, pairs))
     if progress:
         progress("do no harm")
@@ -228,10 +228,6 @@ def _shown(path: Path) -> str:
         return str(path)
 
 
-def _learned(method: str, path: Path, names: Sequence[str]) -> Cleaner:
-    return make(method, {"model": str(path)}, names=names)
-
-
 def _harm(
     takes: Sequence[dataset.Take], picked: dict[str, dict[str, Path]], seconds: float | None
 ) -> dict[str, dict[str, Any]]:
@@ -242,13 +238,14 @@ def _harm(
     from faceclean.settings import MODELS
 
     rows: dict[str, Any] = {
-        f"{label} (shipped preset)": (lambda _t, m=method: make(m)) for label, method in TUNED_ROWS
+        f"{label} (shipped preset)": (lambda _t, m=method: resolve(m).build())
+        for label, method in TUNED_ROWS
     }
     for label, method in LEARNED_ROWS:
         if method in ("fc", "gbt"):
             continue
         rows[label] = lambda t, m=method: (
-            _learned(m, picked[m][t.source], ARKIT52) if t.source in picked[m] else None
+            resolve(picked[m][t.source]).build() if t.source in picked[m] else None
         )
     default = MODELS / "default.npz"
     if default.is_file():
