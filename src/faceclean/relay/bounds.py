@@ -26,6 +26,8 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52
 from faceclean.relay.frame import Frame, Malformed
 
 MAX_SENDERS = 64  # source addresses with decoder state
@@ -63,6 +65,24 @@ class Bounded(Generic[K, V]):
 
     def __len__(self) -> int:
         return len(self._d)
+
+
+class ArkitColumns:
+    """Where a frame's channels go in ARKit-52 order: (frame columns, ARKit positions) of
+    ``ChannelMap(ARKIT52, names)``, cached per name tuple (senders choose the names)."""
+
+    def __init__(self) -> None:
+        self._cache: Bounded[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = Bounded(MAX_CACHE)
+
+    def __call__(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        cols = self._cache.get(names)
+        if cols is None:
+            arkit = ChannelMap(ARKIT52, names)
+            cols = self._cache.put(names, (arkit.cols, arkit.have))
+        return cols
+
+    def __len__(self) -> int:
+        return len(self._cache)
 
 
 def name(text: str, what: str = "name") -> str:

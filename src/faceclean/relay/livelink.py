@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.relay import bounds
@@ -86,17 +85,9 @@ class Encoder:
         self.subject = subject
         self.device = device
         # caches keyed by what senders chose: bounded (relay/bounds.py)
-        self._index: bounds.Bounded[tuple[str, ...], tuple] = bounds.Bounded(bounds.MAX_CACHE)
+        self._index = bounds.ArkitColumns()  # a frame's names -> its ARKit columns
         self._heads: bounds.Bounded[tuple[str, str], bytes] = bounds.Bounded(bounds.MAX_CACHE)
         self._count = 0
-
-    def _columns(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-        cols = self._index.get(names)
-        if cols is None:  # (source columns, ARKit positions), cached per name tuple
-            arkit = ChannelMap(ARKIT52, names)
-            cols = (arkit.cols, arkit.have)
-            self._index.put(names, cols)
-        return cols
 
     def _head(self, device: str, subject: str) -> bytes:
         key = (device, subject)
@@ -109,7 +100,7 @@ class Encoder:
 
     def encode(self, frame: Frame) -> bytes:
         floats = np.zeros(N_SHAPES + N_POSE)
-        src, dst = self._columns(frame.names)
+        src, dst = self._index(frame.names)
         floats[dst] = frame.values[src]
         if frame.pose is not None:
             floats[N_SHAPES : N_SHAPES + min(N_POSE, len(frame.pose))] = frame.pose[:N_POSE]

@@ -36,7 +36,6 @@ from typing import Protocol
 
 import numpy as np
 
-from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.relay import bounds
@@ -152,7 +151,7 @@ class Relay:
         self.encoder = send.encoder()
         self.stats = Stats()
         self._vmc_out = send.scheme == "vmc"
-        self._columns: bounds.Bounded[tuple[str, ...], tuple] = bounds.Bounded(bounds.MAX_CACHE)
+        self._columns = bounds.ArkitColumns()  # a frame's names -> its ARKit columns
         self._last_t: float | None = None  # s, time of the last frame sent
         self._packet_clock: bool | None = None  # the stream's frames carry their time
         self._source: object = None  # address of the sender whose face is followed
@@ -301,16 +300,8 @@ class Relay:
         if self.recorder is not None:
             self.recorder.restart()
 
-    def _cols(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-        cols = self._columns.get(names)
-        if cols is None:  # (frame columns, ARKit positions), cached per name tuple
-            arkit = ChannelMap(ARKIT52, names)
-            cols = (arkit.cols, arkit.have)
-            self._columns.put(names, cols)
-        return cols
-
     def _process(self, frame: Frame, t: float, received: int) -> None:
-        src, dst = self._cols(frame.names)
+        src, dst = self._columns(frame.names)
         x = np.full(len(ARKIT52), np.nan)  # (52,) canonical order
         x[dst] = frame.values[src]
         if not np.isfinite(x).any():
