@@ -11,8 +11,9 @@ HELP = "plot channels over time: input, truth, cleaned and compared methods (PNG
 EPILOG = options.SETTINGS_HELP  # the cleaner options and --set syntax
 
 
-def add_method_arguments(p: argparse.ArgumentParser) -> None:
-    """--truth, the cleaner options, --compare: shared by ``plot`` and ``report``."""
+def add_method_arguments(p: argparse.ArgumentParser, verb: str = "plot") -> None:
+    """NOISY, --truth, the cleaner options, --compare: shared by ``plot`` and ``report``."""
+    p.add_argument("input", metavar="NOISY", help=f"animation file to clean and {verb}")
     p.add_argument("--truth", metavar="CLEAN", help="the clean animation (any timestamps)")
     options.add_arguments(p, "the cleaner shown as 'cleaned'", levels="every cleaner")
     p.add_argument(
@@ -26,7 +27,6 @@ def add_method_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", metavar="NOISY", help="animation file to clean and plot")
     add_method_arguments(p)
     p.add_argument(
         "--channels",

@@ -13,8 +13,7 @@ EPILOG = options.SETTINGS_HELP  # the cleaner options and --set syntax
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", metavar="NOISY", help="animation file to clean and show")
-    add_method_arguments(p)
+    add_method_arguments(p, "show")
     p.add_argument(
         "--mesh",
         metavar="FILE",
