@@ -43,6 +43,10 @@ class Ema(StreamCleaner):
 
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         (y,) = state  # (S, M)
-        alpha = self.gamma if self.gamma is not None else -np.expm1(-dt / self.tau)
+        if self.gamma is not None:
+            alpha = self.gamma
+        else:
+            with np.errstate(over="ignore"):  # a tiny tau: dt/tau = inf, alpha 1 (no smoothing)
+                alpha = -np.expm1(-dt / self.tau)
         y = y + alpha * (x - y)
         return (y,), y
