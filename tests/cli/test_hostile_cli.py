@@ -343,14 +343,14 @@ def test_absurd_presets_are_one_line(tmp_path, take, body, capsys):
     one_line(capsys)
 
 
-def model_with_config(tmp_path: Path, **change) -> Path:
+def model_with_config(tmp_path: Path, shipped: str = "lstm.npz", **change) -> Path:
+    """A copy of a shipped model (the paper's LSTM, or the adaptive default) with config
+    keys changed."""
     from faceclean.io.npz_safe import load_arrays
     from faceclean.settings import MODELS
 
-    arrays = load_arrays(MODELS / "default.npz")
+    arrays = load_arrays(MODELS / shipped)
     config = json.loads(str(arrays["config"][()]))
-    if config.get("format") != "faceclean-lstm/1":  # the config checks are the LSTM loader's
-        pytest.skip("the shipped model is not an LSTM checkpoint")
     config.update(change)
     arrays["config"] = np.array(json.dumps(config))
     p = tmp_path / "model.npz"
@@ -370,13 +370,26 @@ def test_malformed_model_configs_are_one_line(tmp_path, take, change, capsys):
     one_line(capsys, "model.npz")
 
 
+@pytest.mark.parametrize(
+    "change",
+    [{"channels": [1, 2, 3]}, {"channels": "jawOpen"}, {"channels": ["jawOpen"] * 52},
+     {"channels": []}, {"channels": None}, {"hidden": -1}, {"hidden": "32"},
+     {"hidden": 32.0}, {"hidden": True}, {"hidden": 10**12}, {"embed": 0}, {"embed": None},
+     {"hidden": 31}, {"format": "faceclean-adaptive/9"}],
+)  # fmt: skip
+def test_malformed_adaptive_configs_are_one_line(tmp_path, take, change, capsys):
+    model = model_with_config(tmp_path, "default.npz", **change)
+    assert main(["clean", str(take), "-o", str(tmp_path / "o.csv"), "--model", str(model)]) == 2
+    one_line(capsys, "model.npz")
+    assert not (tmp_path / "o.csv").exists()
+
+
 def test_nonfinite_config_json_is_refused(tmp_path, take, capsys):
     from faceclean.io.npz_safe import load_arrays
     from faceclean.settings import MODELS
 
-    arrays = load_arrays(MODELS / "default.npz")
-    if '"K": 1' not in str(arrays["config"][()]):
-        pytest.skip("the shipped model is not an LSTM checkpoint")
+    arrays = load_arrays(MODELS / "lstm.npz")
+    assert '"K": 1' in str(arrays["config"][()])
     arrays["config"] = np.array(str(arrays["config"][()]).replace('"K": 1', '"K": NaN'))
     p = tmp_path / "model.npz"
     np.savez(p, **arrays)

@@ -101,6 +101,9 @@ def is_adaptive(path: str | os.PathLike) -> bool:
     return isinstance(config, dict) and config.get("format") == FORMAT
 
 
+MAX_WIDTH = 4096  # the widest hidden state or channel embedding a config may name
+
+
 def alpha(cutoff: np.ndarray, dt: np.ndarray) -> np.ndarray:
     """Smoothing factor of a first-order low-pass at ``cutoff`` Hz for a step of dt s."""
     return 1.0 / (1.0 + 1.0 / (2.0 * np.pi * cutoff * dt))
@@ -143,11 +146,21 @@ class AdaptiveWeights:
     ) -> AdaptiveWeights:
         if not isinstance(config, dict) or config.get("format") != FORMAT:
             raise FacecleanError(f"{what}: not a {FORMAT} model")
-        try:
-            names = [str(n) for n in config["channels"]]
-            H, E = int(config["hidden"]), int(config["embed"])
-        except (KeyError, TypeError, ValueError):
-            raise FacecleanError(f"{what}: config lacks channels, hidden or embed") from None
+        names = config.get("channels")
+        if (
+            not isinstance(names, list)
+            or not names
+            or not all(isinstance(n, str) and n for n in names)
+            or len(set(names)) != len(names)
+        ):
+            raise FacecleanError(f"{what}: config channels must be a list of distinct names")
+        for key in ("hidden", "embed"):
+            v = config.get(key)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_WIDTH:
+                raise FacecleanError(
+                    f"{what}: config {key} must be a whole number in [1, {MAX_WIDTH}] (got {v!r})"
+                )
+        H, E = config["hidden"], config["embed"]
         M, F = len(names), N_FEATURES + E
         shapes = {
             "emb": (M, E), "gru.w_ih": (3 * H, F), "gru.w_hh": (3 * H, H),
