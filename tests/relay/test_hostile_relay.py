@@ -237,6 +237,35 @@ def test_a_tracker_restarted_on_a_new_port_takes_over_after_the_silence():
     assert len(frames) + relay.stats.foreign == 120 and all(f.values[0] == 1.0 for f in frames)
 
 
+def test_senders_on_ever_new_ports_do_not_keep_the_stream_from_a_resumed_tracker():
+    """The soak's attack: a hostile face stream whose source port changes every 0.5 s
+    takes the stream during the good sender's 2 s silence (as a restarted tracker would),
+    but once the good sender streams again it wins the stream back and keeps it."""
+    from faceclean.relay.loop import CLAIM, HANDOVER
+
+    clock = Clock()
+    with relay_to(clock=clock) as (relay, rx, sender):
+        good = sender()
+        hostile = [sender() for _ in range(12)]
+        good_t, relayed, resumed = 0.0, [], None
+        for i in range(6 * 60):  # 6 s at 60 fps
+            now = i / 60
+            if not 1.0 <= now < 3.0:  # the good sender is silent from 1 s to 3 s
+                good.send(_stamped(0.0, good_t))
+                good_t += 1 / 60
+                resumed = resumed if now < 3.0 or resumed is not None else now
+            if i % 2 == 0:  # 30 face frames a second from a port that changes every 0.5 s
+                hostile[int(now / 0.5)].send(_stamped(1.0, 1000.0 + now))
+            drain(relay)
+            relayed += [(now, vmc.Decoder().feed(p).values[0]) for p in received(rx)]
+            clock.now += 1 / 60
+    hostile_out = [t for t, v in relayed if v == 1.0]
+    assert hostile_out and min(hostile_out) >= 2.0  # taken only after 1 s of silence
+    back = min(t for t, v in relayed if v == 0.0 and t >= resumed)
+    assert back - resumed < HANDOVER + 0.5 + CLAIM  # the last hostile port's 0.5 s + 1 s
+    assert all(v == 0.0 for t, v in relayed if t >= back)  # and it keeps it
+
+
 def test_own_output_looping_back_is_dropped():
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))

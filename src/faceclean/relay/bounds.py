@@ -66,6 +66,9 @@ class Bounded(Generic[K, V]):
     def __len__(self) -> int:
         return len(self._d)
 
+    def values(self) -> list[V]:
+        return list(self._d.values())
+
 
 class ArkitColumns:
     """Where a frame's channels go in ARKit-52 order: (frame columns, ARKit positions) of

@@ -4,8 +4,9 @@ Per wake-up the socket is drained without blocking; of the face frames it held, 
 newest is cleaned and sent (never a queue: a relay that falls behind skips, it does not
 lag). It follows one sender's face: another sender's face frames are taken only after the
 followed one has been silent for ``HANDOVER`` s *and* the other has streamed for ``CLAIM``
-s (frames under ``CLAIM`` s apart), so a stray frame never takes the stream, while a
-tracker restarted on a new port takes over within about a second. Datagrams that carry
+s (frames under ``CLAIM`` s apart), longest of the live streams, so a stray frame never
+takes the stream and senders that appear and vanish never keep it, while a tracker
+restarted on a new port takes over within about a second. Datagrams that carry
 only passthrough messages are forwarded as they come (VMC output). Ordering: a frame
 whose time is not after the last one sent is dropped (out of order or duplicate); a
 backwards jump over ``RESTART`` seconds is a new stream (the sender restarted) and
@@ -156,7 +157,10 @@ class Relay:
         self._packet_clock: bool | None = None  # the stream's frames carry their time
         self._source: object = None  # address of the sender whose face is followed
         self._source_seen = -float("inf")  # clock() of its last face frame
-        self._claim: tuple[object, float, float] | None = None  # (sender, since, last) s
+        # other senders' face streams: sender -> (streaming since, last frame) s
+        self._claims: bounds.Bounded[object, tuple[float, float]] = bounds.Bounded(
+            bounds.MAX_SENDERS
+        )
         self._stopping = False
         family, addr = listen.sockaddr()
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -286,14 +290,16 @@ class Relay:
     def _takes_over(self, sender: object, heard: float) -> bool:
         """Whether a face frame from a sender other than the followed one takes the stream:
         the first sender does; later, only one that has streamed CLAIM s while the followed
-        one has been silent HANDOVER s. One claim is tracked at a time (bounded state)."""
+        one has been silent HANDOVER s, and no other live stream has streamed longer (a
+        tracker that kept streaming beats senders that appear and vanish)."""
         if self._source is None:
             return True
-        c = self._claim
-        streaming = c is not None and c[0] == sender and heard - c[2] < CLAIM
-        since = c[1] if streaming else heard
-        self._claim = (sender, since, heard)
-        return heard - self._source_seen >= HANDOVER and heard - since >= CLAIM
+        c = self._claims.get(sender)
+        since = c[0] if c is not None and heard - c[1] < CLAIM else heard
+        self._claims.put(sender, (since, heard))
+        if heard - self._source_seen < HANDOVER or heard - since < CLAIM:
+            return False
+        return all(s >= since for s, last in self._claims.values() if heard - last < CLAIM)
 
     def _reset(self) -> None:
         self.cleaner.reset()
