@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from helpers import gltf_doc
 from hypothesis import strategies as st
 
 from faceclean import filters, io, strict_json
@@ -203,21 +204,7 @@ def check_npz(members) -> None:
 
 
 def _gltf_doc() -> tuple[dict, bytes]:
-    data = np.array([0, 1, 2, 3], "<f4").tobytes() + np.full(4, 0.5, "<f4").tobytes()
-    doc = {
-        "asset": {"version": "2.0"},
-        "buffers": [{"byteLength": len(data), "uri": "buf.bin"}],
-        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 16},
-                        {"buffer": 0, "byteOffset": 16, "byteLength": 16}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "SCALAR"},
-                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "SCALAR"}],
-        "meshes": [{"primitives": [{"attributes": {}, "targets": [{}]}],
-                    "extras": {"targetNames": ["jawOpen"]}}],
-        "nodes": [{"mesh": 0}],
-        "animations": [{"samplers": [{"input": 0, "output": 1}],
-                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
-    }  # fmt: skip
-    return doc, data
+    return gltf_doc("buf.bin")
 
 
 GLTF_FIELDS = [

@@ -60,3 +60,23 @@ def shared(*parts: str) -> Path:
 def first_take(source: str) -> Path:
     """The first take (by name) of a source folder under ../shared/data/arkit_takes."""
     return sorted(shared("arkit_takes", source).glob("*.csv"))[0]
+
+
+def gltf_doc(uri: str) -> tuple[dict, bytes]:
+    """A minimal .gltf document (one jawOpen weight track, 4 keys) whose one buffer of
+    4 float32 times and 4 weights lives at ``uri``, and that buffer's bytes."""
+    data = np.array([0, 1, 2, 3], "<f4").tobytes() + np.full(4, 0.5, "<f4").tobytes()
+    doc = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": len(data), "uri": uri}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 16},
+                        {"buffer": 0, "byteOffset": 16, "byteLength": 16}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "SCALAR"},
+                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "SCALAR"}],
+        "meshes": [{"primitives": [{"attributes": {}, "targets": [{}]}],
+                    "extras": {"targetNames": ["jawOpen"]}}],
+        "nodes": [{"mesh": 0}],
+        "animations": [{"samplers": [{"input": 0, "output": 1}],
+                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
+    }  # fmt: skip
+    return doc, data

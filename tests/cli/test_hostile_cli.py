@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import REPO
+from helpers import REPO, gltf_doc
 
 from faceclean import filters, io
 from faceclean.animation import Animation
@@ -51,20 +51,7 @@ def snapshot(folder: Path) -> dict[str, bytes]:
 
 def gltf_with_uri(folder: Path, uri: str) -> Path:
     """A .gltf whose one buffer (4 float32 times, 4 weights) lives at ``uri``."""
-    data = np.array([0, 1, 2, 3], "<f4").tobytes() + np.full(4, 0.5, "<f4").tobytes()
-    doc = {
-        "asset": {"version": "2.0"},
-        "buffers": [{"byteLength": len(data), "uri": uri}],
-        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 16},
-                        {"buffer": 0, "byteOffset": 16, "byteLength": 16}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "SCALAR"},
-                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "SCALAR"}],
-        "meshes": [{"primitives": [{"attributes": {}, "targets": [{}]}],
-                    "extras": {"targetNames": ["jawOpen"]}}],
-        "nodes": [{"mesh": 0}],
-        "animations": [{"samplers": [{"input": 0, "output": 1}],
-                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
-    }  # fmt: skip
+    doc, data = gltf_doc(uri)
     p = folder / "scene.gltf"
     p.write_text(json.dumps(doc))
     return p, data
