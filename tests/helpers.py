@@ -9,6 +9,8 @@ sys.path (pytest's rootdir conftest), so any test imports ``from helpers import 
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import socket
 from pathlib import Path
 
@@ -80,3 +82,21 @@ def gltf_doc(uri: str) -> tuple[dict, bytes]:
                         "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
     }  # fmt: skip
     return doc, data
+
+
+@contextlib.contextmanager
+def reaped(proc):
+    """Kill the command ``proc`` on the way out if it still runs (a failing test never
+    leaves one behind)."""
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def interrupt(proc, timeout: float = 30.0) -> tuple[str, str]:
+    """Ctrl-C a running command and wait for it: (stdout, stderr)."""
+    proc.send_signal(signal.SIGINT)
+    return proc.communicate(timeout=timeout)

@@ -13,7 +13,7 @@ import threading
 
 import numpy as np
 import pytest
-from helpers import REPO, first_take, shared
+from helpers import REPO, first_take, interrupt, reaped, shared
 from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
@@ -441,7 +441,7 @@ def test_relay_passes_every_frame_from_its_first_packet_on():
     with vmc_peer() as peer:
         send = f"vmc://127.0.0.1:{peer.port}"
         proc = _start(["--listen", "vmc://127.0.0.1:0", "--send", send, "--method", "lstm"])
-        try:
+        with reaped(proc):
             ready, _, _ = select.select([proc.stdout], [], [], 120.0)
             assert ready, "relay did not start"
             port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
@@ -450,12 +450,7 @@ def test_relay_passes_every_frame_from_its_first_packet_on():
                 client.send(vmc_bundle(ARKIT52, row, t=i / 60.0))
                 time.sleep(1 / 30)  # 30 packets/s, never a catch-up burst from a slow sender
             assert peer.wait_for(len(take), 30.0)
-            proc.send_signal(signal.SIGINT)
-            out, err = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+            out, err = interrupt(proc, timeout=60)
     n = len(take)
     assert f"stopped: in {n} out {n} dropped 0 (order 0, stale 0)" in out, out + err
     first = np.array([peer.frames[0][k] for k in ARKIT52])
@@ -559,7 +554,7 @@ def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
             + ["--method", "ema", "--set", "jawOpen.gain=2", "--calibrate-seconds", "0.05"]
             + ["--record", str(session)]
         )
-        try:
+        with reaped(proc):
             ready, _, _ = select.select([proc.stdout], [], [], 30.0)
             assert ready, "relay did not start"
             port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
@@ -567,12 +562,7 @@ def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
             for i in range(30):
                 client.send(vmc_bundle(["jawOpen", "eyeBlinkLeft"], [0.25, 0.1], t=i / 60.0))
                 OscPacket(rx.recv(65536))
-            proc.send_signal(signal.SIGINT)
-            out, err = proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+            out, err = interrupt(proc, timeout=30)
     assert proc.returncode == 0, err
     assert "calibrated the neutral of 2 channels" in out
     assert f"recorded 30 frames: {session} (input)" in out
@@ -598,13 +588,8 @@ def test_replay_stopped_by_a_signal_says_so_not_refused(tmp_path):
             [*cmd, f"vmc://127.0.0.1:{rx.getsockname()[1]}"],
             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
-        try:
+        with reaped(proc):
             rx.recv(65536)  # the first packet is out: the replay is running
-            proc.send_signal(signal.SIGINT)
-            out, err = proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+            out, err = interrupt(proc, timeout=30)
     assert proc.returncode == 0, err
     assert "not sent)" in out and "stopped;" in out and "refused" not in out
