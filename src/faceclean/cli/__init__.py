@@ -24,7 +24,7 @@ from faceclean.errors import FacecleanError
 COMMANDS: tuple[str, ...] = (
     "demo", "clean", "calibrate", "info", "convert", "tune",
     "corrupt", "synth",
-    "train", "eval", "plot", "export", "bench",
+    "pairs", "train", "eval", "plot", "export", "bench",
     "relay", "replay",
     "report", "face-mesh",
     "fuzz",

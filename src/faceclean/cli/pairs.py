@@ -1,0 +1,213 @@
+"""``faceclean pairs``: render takes, track them with MediaPipe, write (tracked, truth) pairs.
+
+Resumable (a finished pair is skipped), sharded (``--shard i/n`` keeps every n-th job of
+the same fixed list, so a cluster's array job can spread it), parallel (``--jobs``), with a
+progress bar on stderr; failures are listed at the end and do not stop the others.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from faceclean.errors import FacecleanError
+
+HELP = "render faces from known weights, track them with MediaPipe: paired training data"
+EPILOG = """examples:
+  faceclean pairs --shared --synthetic 20 -o ~/.cache/faceclean/pairs --jobs 2
+  faceclean pairs my_takes/ --settings studio,webcam -o pairs/ --shard 3/8
+  faceclean train --pairs ~/.cache/faceclean/pairs --out mediapipe.npz"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", nargs="*", help="takes or folders of takes (truth performances)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="folder of pairs")
+    p.add_argument("--shared", action="store_true", help="also the shared real ARKit takes")
+    p.add_argument(
+        "--synthetic", type=int, default=0, metavar="N", help="N full-range synthetic performers"
+    )
+    p.add_argument("--seconds", type=float, default=20.0, help="clip length in s (default 20)")
+    p.add_argument(
+        "--settings",
+        default="studio,webcam",
+        help="render settings, one drawn per clip: studio, webcam, window (default studio,webcam)",
+    )
+    p.add_argument(
+        "--held-out",
+        default="",
+        metavar="SETTINGS",
+        help="also render every clip in these settings (for evaluation), e.g. window",
+    )
+    p.add_argument(
+        "--rates", default="24,30,30,30,60", help="tracker rates in Hz drawn per clip (24-60)"
+    )
+    p.add_argument(
+        "--webcam-share", type=float, default=0.25, help="share of clips with webcam timing"
+    )
+    p.add_argument("--seed", type=int, default=0, help="same seed, same jobs and scenes")
+    p.add_argument("--shard", default="0/1", metavar="I/N", help="run the I-th of N shards")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes")
+    p.add_argument("--head", metavar="NPZ", help="head mesh (default shared ict_full.npz)")
+    p.add_argument(
+        "--tracker-model", metavar="TASK", help="face_landmarker.task (default ../shared/models)"
+    )
+    p.add_argument("--list", action="store_true", help="print this shard's jobs and stop")
+
+
+def run(args: argparse.Namespace) -> int:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from tqdm import tqdm
+
+    from faceclean.synthetic import engine
+
+    jobs = engine.shard(_plan(args), *_shard(args.shard))
+    out = Path(args.output)
+    if args.list:
+        for job in jobs:
+            print(job.name, "(done)" if engine.done(job, out) else "")
+        return 0
+    head, model = _files(args)
+    todo = [j for j in jobs if not engine.done(j, out)]
+    if out.exists() and not out.is_dir():
+        raise FacecleanError(f"output is not a folder: {out}")
+    worker = engine.Worker(head, model)  # a bad mesh or model file: one line, before any job
+    out.mkdir(parents=True, exist_ok=True)
+    workers = _workers(args.jobs, len(todo))
+    print(f"{len(jobs) - len(todo)} of {len(jobs)} pairs already done; {len(todo)} to make")
+    failed: list[tuple[str, str]] = []
+    bar = tqdm(total=len(todo), unit="pair", file=sys.stderr, desc="pairs", leave=False)
+    with bar:
+        if workers <= 1 and todo:
+            for job in todo:
+                _done(bar, job, _safe(worker.run, job, out), failed)
+        elif todo:
+            del worker
+            spawn = multiprocessing.get_context("spawn")  # never fork a process running MediaPipe
+            with ProcessPoolExecutor(
+                workers, spawn, initializer=_init, initargs=(str(head), str(model))
+            ) as pool:
+                futures = {pool.submit(_job, job, str(out)): job for job in todo}
+                for f in as_completed(futures):
+                    _done(bar, futures[f], f.result(), failed)
+    print(f"made {len(todo) - len(failed)} pairs in {out}")
+    if failed:
+        print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
+        for name, why in failed:
+            print(f"  {name}: {why}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _plan(args: argparse.Namespace) -> list:
+    from faceclean import io, settings
+    from faceclean.batch import plan as files_of
+    from faceclean.synthetic import engine
+    from faceclean.synthetic.scene import SETTINGS
+
+    names = tuple(s.strip() for s in args.settings.split(",") if s.strip())
+    held = tuple(s.strip() for s in args.held_out.split(",") if s.strip())
+    bad = [s for s in names + held if s not in SETTINGS]
+    if bad or not names:
+        raise FacecleanError(
+            f"unknown render setting {bad[0] if bad else '(none)'!r} "
+            f"(one of: {', '.join(SETTINGS)})"
+        )
+    try:
+        rates = tuple(float(r) for r in args.rates.split(","))
+    except ValueError:
+        raise FacecleanError(f"--rates: expected Hz like 24,30,60, got {args.rates!r}") from None
+    if not rates or not all(24.0 <= r <= 60.0 for r in rates):
+        raise FacecleanError(f"--rates must lie in 24-60 Hz, got {args.rates!r}")
+    if not 0.0 <= args.webcam_share <= 1.0:
+        raise FacecleanError(f"--webcam-share must be in [0, 1], got {args.webcam_share}")
+    if not 0 <= args.synthetic <= 100_000:
+        raise FacecleanError(f"--synthetic must be in [0, 100000], got {args.synthetic}")
+    paths = []
+    if args.shared:
+        root = settings.takes_dir()
+        if root is None:
+            raise FacecleanError("--shared: no shared takes folder (set FACECLEAN_DATA)")
+        paths += sorted(root.rglob("*.csv"))
+    for given in args.input:
+        p = Path(given)
+        if p.is_dir():
+            paths += [j.src for j in files_of([given], "/nonexistent-out")]
+        else:
+            paths.append(p)
+    takes = []
+    for p in paths:
+        anim = io.load(p)  # an unreadable take: one line, before any work
+        takes.append((str(p), Path(p).resolve().parent.name, anim.duration))
+    if not takes and args.synthetic == 0:
+        raise FacecleanError("nothing to render: give takes, --shared or --synthetic N")
+    return engine.plan(
+        takes, args.synthetic, args.seconds, names, rates, args.seed, args.webcam_share, held
+    )
+
+
+def _shard(text: str) -> tuple[int, int]:
+    try:
+        i, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise FacecleanError(f"--shard: expected I/N like 0/4, got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise FacecleanError(f"--shard {text}: need 0 <= I < N")
+    return i, n
+
+
+def _files(args: argparse.Namespace) -> tuple[Path, Path]:
+    from faceclean import settings
+
+    head = Path(args.head) if args.head else settings.mesh_file("ict_full.npz")
+    model = Path(args.tracker_model) if args.tracker_model else settings.tracker_model()
+    if head is None:
+        raise FacecleanError("no head mesh: give --head ict_full.npz (or set FACECLEAN_DATA)")
+    if model is None:
+        raise FacecleanError("no tracker model: give --tracker-model face_landmarker.task")
+    return head, model
+
+
+def _workers(requested: int, n_jobs: int) -> int:
+    import os
+
+    if requested < 1:
+        raise FacecleanError(f"--jobs must be at least 1 (got {requested})")
+    cap = max(min(n_jobs, 2 * (os.cpu_count() or 1)), 1)
+    if requested > cap:
+        print(f"--jobs {requested} capped at {cap} (jobs to run, twice the cores)", file=sys.stderr)
+    return min(requested, cap)
+
+
+def _done(bar, job, result: tuple[bool, str], failed: list) -> None:
+    ok, text = result
+    if not ok:
+        bar.write(f"FAILED {job.name}: {text}", file=sys.stdout)
+        failed.append((job.name, text))
+    bar.update(1)
+
+
+def _safe(fn, job, out) -> tuple[bool, str]:
+    try:
+        meta = fn(job, Path(out))
+        return True, f"{job.name}: {meta['frames']} frames, {meta['lost']} lost"
+    except FacecleanError as e:
+        return False, str(e)
+    except (ValueError, RuntimeError, OSError, MemoryError) as e:  # a render or tracking failure
+        return False, f"{type(e).__name__}: {' '.join(str(e).split())[:160]}"
+
+
+_WORKER = None
+
+
+def _init(head: str, model: str) -> None:
+    global _WORKER
+    from faceclean.synthetic import engine
+
+    _WORKER = engine.Worker(head, model)
+
+
+def _job(job, out: str) -> tuple[bool, str]:
+    return _safe(_WORKER.run, job, out)

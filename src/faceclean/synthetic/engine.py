@@ -1,0 +1,238 @@
+"""The data engine: a job is a pure function of (performance clip, seed, render setting, timing).
+
+``plan(...)`` lists jobs in a fixed order; ``shard(jobs, i, n)`` keeps every n-th one, so any
+scheduler can spread them (``--shard i/n``). ``run_job(job, out)`` renders the clip's frames
+at the job's timestamps from the truth weights, tracks them with MediaPipe, and writes one
+pair (docs/FORMATS.md, "Pairs"):
+
+    NAME.tracked.csv   plain CSV: time (s) + MediaPipe's 51 ARKit channels; lost face = empty row
+    NAME.truth.csv     plain CSV: the same times + the 52 ARKit weights that drove the render
+    NAME.json          what made it: job, scene record, tracker, counts (written last)
+
+Each file is written atomically and the JSON last, so a pair with its JSON is whole; a
+rerun skips it (resumable), and a kill leaves at most unfinished temporary files.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.errors import FacecleanError
+from faceclean.timing import resample, stream_times
+
+FORMAT = "faceclean-pair/1"
+SYNTH = "synth:"  # source prefix of a synthetic performer: "synth:SEED"
+POSE = ("HeadYaw", "HeadPitch", "HeadRoll")
+
+
+@dataclass(frozen=True)
+class Job:
+    source: str  # a take's path, or "synth:SEED" (a full-range synthetic performer)
+    group: str  # the performance source (a take's folder, or "synthetic"): the split unit
+    start: float  # s into the source
+    seconds: float
+    seed: int  # the scene: identity, appearance, light, camera, noise
+    setting: str  # render setting (scene.SETTINGS)
+    rate: float  # Hz, the tracker's nominal frame rate
+    webcam: bool  # irregular timing with dropped frames, as a webcam delivers
+
+    @property
+    def name(self) -> str:
+        stem = re.sub(r"[^A-Za-z0-9_-]+", "-", Path(self.source.removeprefix(SYNTH)).stem)
+        key = json.dumps(asdict(self), sort_keys=True).encode()
+        digest = hashlib.sha1(key).hexdigest()[:8]
+        timing = "webcam" if self.webcam else f"{self.rate:g}fps"
+        return f"{self.group}-{stem}-{self.start:g}s-{self.setting}-{timing}-{digest}"
+
+
+def plan(
+    takes: list[tuple[str, str, float]],
+    synthetic: int,
+    seconds: float,
+    settings: tuple[str, ...],
+    rates: tuple[float, ...],
+    seed: int = 0,
+    webcam_share: float = 0.25,
+    held_out: tuple[str, ...] = (),
+) -> list[Job]:
+    """Jobs over ``takes`` [(path, group, duration s)] cut into ``seconds`` clips, and
+    ``synthetic`` full-range performers. Each clip is rendered once in a setting drawn from
+    ``settings`` and once more in each ``held_out`` setting (for evaluation), each time with
+    a new scene (identity, light, camera) and a rate and timing drawn from ``seed``. Same
+    arguments, same list."""
+    if not (0.5 <= seconds <= 3600):
+        raise FacecleanError(f"--seconds must be in [0.5, 3600], got {seconds}")
+    rng = np.random.default_rng(seed)
+    clips = []
+    for path, group, duration in takes:
+        n = max(int(duration // seconds), 1)
+        clips += [(path, group, k * seconds, min(seconds, duration)) for k in range(n)]
+    clips += [(f"{SYNTH}{seed * 100_000 + k}", "synthetic", 0.0, seconds) for k in range(synthetic)]
+    jobs = []
+    for path, group, start, length in clips:
+        drawn = settings[rng.integers(len(settings))]
+        for setting in (drawn, *held_out):
+            jobs.append(
+                Job(
+                    source=path,
+                    group=group,
+                    start=float(start),
+                    seconds=float(length),
+                    seed=int(rng.integers(2**31)),
+                    setting=setting,
+                    rate=float(rates[rng.integers(len(rates))]),
+                    webcam=bool(rng.random() < webcam_share),
+                )
+            )
+    return jobs
+
+
+def shard(jobs: list[Job], i: int, n: int) -> list[Job]:
+    """The i-th of n interleaved shards (0 <= i < n)."""
+    return jobs[i::n]
+
+
+def done(job: Job, out: Path) -> bool:
+    return (out / f"{job.name}.json").is_file()
+
+
+def performance(job: Job) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The clip: (times (N,) s from 0, ARKit weights (N, 52), head pose (N, 3) deg or None)."""
+    from faceclean import io
+
+    if job.source.startswith(SYNTH):
+        from faceclean.evaluation.performer import perform
+
+        anim = perform(job.seconds, int(job.source[len(SYNTH) :]), fps=60.0, full_range=True)
+        return anim.times, anim.values, None
+    anim = io.load(job.source)
+    values, _ = anim.arkit()
+    pose = _pose(anim)
+    t = anim.times - anim.times[0]
+    keep = (t >= job.start - 1e-9) & (t <= job.start + job.seconds + 1e-9)
+    if keep.sum() < 2:
+        raise FacecleanError(
+            f"{job.source}: no frames in {job.start:g}-{job.start + job.seconds:g} s"
+        )
+    p = None if pose is None else pose[keep]
+    return t[keep] - job.start, values[keep], p
+
+
+def _pose(anim: Animation) -> np.ndarray | None:
+    names = anim.meta.get("pose_names")
+    pose = anim.meta.get("pose")
+    if names is None or pose is None:
+        return None
+    cols = [list(names).index(n) for n in POSE if n in names]
+    if len(cols) != 3:
+        return None
+    p = np.degrees(np.asarray(pose, np.float64)[:, cols])
+    if not np.isfinite(p).any() or np.nanmax(np.abs(p)) < 1e-6:
+        return None  # a take that never recorded its head
+    return np.clip(p, -45.0, 45.0)
+
+
+def drift(times: np.ndarray, amplitude: float, seed: int) -> np.ndarray:
+    """(N, 3) deg: a seated person's slow head wander (yaw, pitch, roll), sums of slow sines."""
+    rng = np.random.default_rng([seed, 11])
+    out = np.zeros((len(times), 3))
+    for axis, scale in enumerate((1.0, 0.6, 0.3)):
+        for _ in range(3):
+            f = rng.uniform(0.03, 0.35)  # Hz
+            out[:, axis] += (
+                scale * amplitude / 3 * np.sin(2 * np.pi * f * times + rng.uniform(0, 6.3))
+            )
+    return out
+
+
+def frame_times(job: Job, duration: float) -> np.ndarray:
+    """(K,) s: the tracker's frame instants (regular, or webcam-irregular with drops)."""
+    rng = np.random.default_rng([job.seed, 5])
+    if not job.webcam:
+        return np.arange(int(duration * job.rate) + 1) / job.rate
+    t = stream_times(0.0, duration, job.rate, 0.3, rng)
+    keep = rng.random(len(t)) > 0.05  # 5 % of frames never arrive
+    keep[0] = True
+    return t[keep]
+
+
+class Worker:
+    """Everything a process loads once: the head mesh and the tracker model."""
+
+    def __init__(self, head_path: str | os.PathLike, tracker_path: str | os.PathLike) -> None:
+        from faceclean.synthetic.head import Head
+
+        self.head = Head.load(head_path)
+        self.tracker_path = tracker_path
+        from faceclean.synthetic.tracker import Tracker
+
+        Tracker(tracker_path).close()  # refuse a bad model file before any job runs
+
+    def run(self, job: Job, out: Path) -> dict:
+        """Render, track and write one pair; returns its metadata record."""
+        from faceclean.synthetic.render import Renderer
+        from faceclean.synthetic.scene import Scene
+        from faceclean.synthetic.tracker import NAMES, Tracker
+
+        src_t, src_w, src_pose = performance(job)
+        times = frame_times(job, float(src_t[-1]))
+        truth = resample(src_t, src_w, times)  # (K, 52), NaN across the source's own losses
+        seen = ~np.all(np.isnan(truth), axis=1)
+        times, truth = times[seen], np.clip(np.nan_to_num(truth[seen]), 0.0, 1.0)
+        scene = Scene.draw(job.seed, job.setting, self.head.n_identity)
+        if src_pose is not None:
+            pose = np.nan_to_num(resample(src_t, src_pose, times))
+        else:
+            pose = drift(times, scene.pose_drift, job.seed)
+        renderer = Renderer(self.head, scene)
+        tracked = np.full((len(times), len(NAMES)), np.nan)
+        with Tracker(self.tracker_path) as tracker:
+            for k, t in enumerate(times):
+                y = tracker.track(renderer.frame(truth[k], pose[k], k), float(t))
+                if y is not None:
+                    tracked[k] = y
+        lost = int(np.all(np.isnan(tracked), axis=1).sum())
+        return write_pair(
+            out,
+            job.name,
+            Animation(times, tracked, NAMES, {"format": "csv"}),
+            Animation(times, truth, ARKIT52, {"format": "csv"}),
+            {
+                "format": FORMAT,
+                "job": asdict(job),
+                "scene": scene.record(),
+                "tracker": _tracker_version(),
+                "frames": len(times),
+                "lost": lost,
+                "pose": "take" if src_pose is not None else "drift",
+            },
+        )
+
+
+def write_pair(out: Path, name: str, tracked: Animation, truth: Animation, meta: dict) -> dict:
+    """The three files of one pair, each atomically, the JSON last (the pair's 'done' mark)."""
+    from faceclean import io
+    from faceclean.io.atomic import atomic_write
+
+    io.save(tracked, out / f"{name}.tracked.csv", fmt="csv")
+    io.save(truth, out / f"{name}.truth.csv", fmt="csv")
+    atomic_write(out / f"{name}.json", json.dumps(meta, indent=1) + "\n")
+    return meta
+
+
+def _tracker_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return f"mediapipe {version('mediapipe')} face_landmarker"
+    except Exception:  # pragma: no cover - metadata missing in odd installs
+        return "mediapipe face_landmarker"

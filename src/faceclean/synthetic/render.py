@@ -1,0 +1,114 @@
+"""Render one frame: pose the head, light it, rasterise it, and degrade it like a camera.
+
+Camera at the origin looking down -z (y up), the head's pivot ``scene.distance`` cm in
+front of it. A vertex p (cm, camera space) lands at pixel
+``u = f p_x / -p_z + c_x``, ``v = -f p_y / -p_z + c_y`` with ``f = (size / 2) / tan(fov / 2)``.
+Shading (linear RGB, Gouraud): ``albedo (ambient + key max(0, n.l)) + specular max(0, n.h)^24``,
+then gamma 1/2.2 per vertex (Gouraud in display space). The camera: Gaussian blur, sensor
+noise drawn from (seed, frame), JPEG.
+"""
+
+from __future__ import annotations
+
+import io as bytes_io
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from faceclean.synthetic import head as H
+from faceclean.synthetic.head import Head
+from faceclean.synthetic.raster import rasterise
+from faceclean.synthetic.scene import Scene
+
+
+class Renderer:
+    """Frames of one take: ``frame(weights, pose_deg, index) -> (size, size, 3) uint8``."""
+
+    def __init__(self, head: Head, scene: Scene) -> None:
+        self.head, self.scene = head, scene
+        alpha = np.zeros(head.n_identity, np.float32)
+        k = min(len(scene.identity), head.n_identity)
+        alpha[:k] = scene.identity[:k]
+        self.base = head.identity(alpha)  # (V*3,) cm
+        self.albedo = _albedo(head, scene)  # (V, 3) linear RGB
+        n = scene.resolution
+        self.focal = (n / 2) / np.tan(np.radians(scene.fov) / 2)  # px
+        self.centre = np.array([n / 2 * (1 + scene.offset[0]), n / 2 * (1 + scene.offset[1])])
+        top, bottom = np.array(scene.background[0]), np.array(scene.background[1])
+        ramp = np.linspace(0, 1, n, dtype=np.float32)[:, None, None]
+        sky = (top + ramp * (bottom - top)) ** (1 / 2.2) * 255.0
+        self.background = np.broadcast_to(sky, (n, n, 3)).astype(np.float32)
+        self.light = np.array(scene.light, np.float32)
+        self.half = self.light + np.array([0, 0, 1], np.float32)  # Blinn half vector (view +z)
+        self.half /= np.linalg.norm(self.half)
+
+    def frame(self, weights: np.ndarray, pose_deg: np.ndarray, index: int) -> np.ndarray:
+        s, hd = self.scene, self.head
+        v = hd.vertices(self.base, np.nan_to_num(weights))  # (V, 3) cm, head space
+        r = rotation(*pose_deg)
+        p = (v - hd.pivot) @ r.T
+        p[:, 2] -= s.distance  # camera space, in front of the camera at -z
+        nrm = hd.normals(v) @ r.T
+        depth = -p[:, 2]
+        xy = np.empty((len(p), 2), np.float32)
+        xy[:, 0] = self.focal * p[:, 0] / depth + self.centre[0]
+        xy[:, 1] = -self.focal * p[:, 1] / depth + self.centre[1]
+        lambert = np.maximum(nrm @ self.light, 0.0)[:, None]
+        spec = np.maximum(nrm @ self.half, 0.0)[:, None] ** 24
+        colour = self.albedo * (s.ambient + s.key * lambert) + s.specular * spec
+        colour = np.clip(colour, 0.0, 1.0) ** (1 / 2.2) * 255.0  # gamma per vertex, not pixel
+        img, covered = rasterise(xy, depth, colour, hd.triangles, s.resolution)
+        img = np.where(covered[..., None], img, self.background)
+        return self._camera(img, index)
+
+    def _camera(self, img: np.ndarray, index: int) -> np.ndarray:
+        s = self.scene
+        if s.blur > 0:
+            img = gaussian_filter(img, sigma=(s.blur, s.blur, 0))
+        rng = np.random.default_rng([s.seed, 7, index])
+        img += s.noise * rng.standard_normal(img.shape, dtype=np.float32)
+        frame = np.clip(img + 0.5, 0, 255).astype(np.uint8)
+        return jpeg(frame, s.jpeg)
+
+
+def jpeg(frame: np.ndarray, quality: int) -> np.ndarray:
+    """``frame`` (H, W, 3) uint8 through a JPEG encode and decode at ``quality``."""
+    from PIL import Image
+
+    buf = bytes_io.BytesIO()
+    Image.fromarray(frame).save(buf, format="JPEG", quality=int(quality))
+    buf.seek(0)
+    return np.asarray(Image.open(buf).convert("RGB"))
+
+
+def rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """(3, 3) rotation from degrees: yaw about y, pitch about x, roll about z (R = Ry Rx Rz)."""
+    y, x, z = np.radians([yaw, pitch, roll])
+    cy, sy, cx, sx, cz, sz = np.cos(y), np.sin(y), np.cos(x), np.sin(x), np.cos(z), np.sin(z)
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return (ry @ rx @ rz).astype(np.float32)
+
+
+def _albedo(head: Head, s: Scene) -> np.ndarray:
+    """(V, 3) linear RGB per vertex: the painted regions, with a faint per-vertex mottle."""
+    rng = np.random.default_rng([s.seed, 3])
+    paint = {
+        H.SKIN: s.skin,
+        H.BACK: np.array(s.brows) * 0.8,  # hair
+        H.MOUTH: (0.35, 0.08, 0.08),
+        H.TEETH: (0.75, 0.72, 0.65),
+        H.SCLERA: (0.85, 0.82, 0.80),
+        H.IRIS: s.iris,
+        H.PUPIL: (0.02, 0.02, 0.02),
+        H.LIPS: s.lips,
+        H.BROW: s.brows,
+        H.LID: np.array(s.brows) * 0.6,
+    }
+    table = np.zeros((10, 3), np.float32)
+    for code, rgb in paint.items():
+        table[code] = rgb
+    albedo = table[head.region]
+    mottle = rng.normal(1.0, 0.04, (len(albedo), 1)).astype(np.float32)
+    return albedo * mottle

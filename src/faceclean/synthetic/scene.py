@@ -1,0 +1,155 @@
+"""Scene: every randomised factor of one rendered take, a plain record drawn from a seed.
+
+A scene is fixed for a whole take (a person sits in one room before one camera); what
+changes per frame is the expression (the take's ARKit weights), the head pose and the
+sensor noise, which is drawn from ``(seed, frame index)``, so any frame can be rebuilt
+from the scene and its index alone.
+
+Render settings are families of scenes. Training draws from some and evaluation holds one
+out, so a model is judged on lighting and cameras it never saw:
+
+- ``studio``: soft frontal light, a good camera close by, little noise;
+- ``webcam``: a laptop camera at arm's length, flat light, noise and strong JPEG;
+- ``window``: a hard side light from one window, shadows on half the face, mid noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from faceclean.errors import FacecleanError
+
+# per setting: (light elevation deg range, azimuth deg range, key light, fill/ambient,
+#               distance cm, field of view deg, resolution px, noise sigma /255,
+#               blur sigma px, JPEG quality)
+SETTINGS: dict[str, dict[str, tuple[float, float]]] = {
+    "studio": dict(
+        elevation=(10, 40),
+        azimuth=(-25, 25),
+        key=(0.6, 0.8),
+        ambient=(0.35, 0.5),
+        distance=(45, 70),
+        fov=(35, 50),
+        resolution=(384, 512),
+        noise=(0.5, 2.5),
+        blur=(0.3, 0.8),
+        jpeg=(85, 95),
+    ),
+    "webcam": dict(
+        elevation=(-5, 25),
+        azimuth=(-35, 35),
+        key=(0.45, 0.7),
+        ambient=(0.4, 0.6),
+        distance=(55, 90),
+        fov=(55, 75),
+        resolution=(320, 480),
+        noise=(2.0, 6.0),
+        blur=(0.6, 1.4),
+        jpeg=(45, 75),
+    ),
+    "window": dict(
+        elevation=(0, 30),
+        azimuth=(50, 80),
+        key=(0.8, 1.0),
+        ambient=(0.15, 0.3),
+        distance=(45, 80),
+        fov=(40, 60),
+        resolution=(360, 480),
+        noise=(1.5, 4.0),
+        blur=(0.4, 1.0),
+        jpeg=(65, 90),
+    ),
+}
+TRAIN_SETTINGS = ("studio", "webcam")
+HELD_OUT_SETTING = "window"
+
+# skin albedo (linear RGB) from light to dark: a person's tone is drawn along this line
+SKIN_TONES = np.array(
+    [[0.80, 0.62, 0.52], [0.72, 0.52, 0.40], [0.56, 0.38, 0.27], [0.36, 0.22, 0.15]]
+)
+IRIS_COLOURS = np.array(
+    [[0.30, 0.18, 0.08], [0.15, 0.09, 0.04], [0.25, 0.35, 0.50], [0.30, 0.40, 0.25]]
+)
+
+
+@dataclass(frozen=True)
+class Scene:
+    seed: int
+    setting: str
+    identity: tuple[float, ...]  # ICT identity weights, ~ N(0, 1)
+    skin: tuple[float, float, float]  # linear RGB albedo
+    lips: tuple[float, float, float]
+    brows: tuple[float, float, float]
+    iris: tuple[float, float, float]
+    light: tuple[float, float, float]  # unit vector towards the key light, camera space
+    key: float  # key light intensity
+    ambient: float
+    specular: float
+    background: tuple[tuple[float, float, float], tuple[float, float, float]]  # top, bottom
+    distance: float  # cm, camera to head pivot
+    fov: float  # deg, vertical field of view
+    resolution: int  # px, square frame
+    noise: float  # sensor noise sigma, in 0..255 units
+    blur: float  # px, Gaussian sigma (optics and motion)
+    jpeg: int  # quality 1..100
+    offset: tuple[float, float]  # where the head sits in the frame, fraction of the width
+    pose_drift: float  # deg, amplitude of the head's wander when the take has no pose
+
+    @classmethod
+    def draw(cls, seed: int, setting: str, n_identity: int = 100) -> Scene:
+        if setting not in SETTINGS:
+            raise FacecleanError(
+                f"unknown render setting {setting!r} (one of: {', '.join(SETTINGS)})"
+            )
+        s = SETTINGS[setting]
+        rng = np.random.default_rng([seed, list(SETTINGS).index(setting)])
+
+        def u(key: str) -> float:
+            lo, hi = s[key]
+            return float(rng.uniform(lo, hi))
+
+        tone = rng.uniform(0, len(SKIN_TONES) - 1)
+        i = min(int(tone), len(SKIN_TONES) - 2)
+        skin = SKIN_TONES[i] + (tone - i) * (SKIN_TONES[i + 1] - SKIN_TONES[i])
+        skin = skin * rng.uniform(0.92, 1.08, 3)
+        lips = skin * np.array([1.0, 0.62, 0.62]) * rng.uniform(0.7, 0.95)
+        brows = skin * rng.uniform(0.15, 0.45)
+        iris = IRIS_COLOURS[rng.integers(len(IRIS_COLOURS))] * rng.uniform(0.7, 1.3)
+        el, az = np.radians(u("elevation")), np.radians(u("azimuth")) * rng.choice([-1, 1])
+        light = (np.cos(el) * np.sin(az), np.sin(el), np.cos(el) * np.cos(az))
+        top = rng.uniform(0.1, 0.9, 3)
+        bottom = np.clip(top * rng.uniform(0.5, 1.2, 3), 0, 1)
+        return cls(
+            seed=int(seed),
+            setting=setting,
+            identity=tuple(float(a) for a in rng.standard_normal(n_identity)),
+            skin=_t(skin),
+            lips=_t(lips),
+            brows=_t(brows),
+            iris=_t(np.clip(iris, 0, 1)),
+            light=_t(light),
+            key=u("key"),
+            ambient=u("ambient"),
+            specular=float(rng.uniform(0.02, 0.12)),
+            background=(_t(top), _t(bottom)),
+            distance=u("distance"),
+            fov=u("fov"),
+            resolution=int(round(u("resolution") / 16) * 16),
+            noise=u("noise"),
+            blur=u("blur"),
+            jpeg=int(round(u("jpeg"))),
+            offset=(float(rng.uniform(-0.06, 0.06)), float(rng.uniform(-0.06, 0.06))),
+            pose_drift=float(rng.uniform(3.0, 12.0)),
+        )
+
+    def record(self) -> dict:
+        """The scene as plain JSON-ready values (the pair file's metadata logs it)."""
+        d = asdict(self)
+        d["identity"] = [round(a, 6) for a in self.identity]
+        return d
+
+
+def _t(a) -> tuple[float, ...]:
+    return tuple(float(x) for x in np.asarray(a, np.float64).reshape(-1))

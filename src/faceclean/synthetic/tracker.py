@@ -1,0 +1,90 @@
+"""The tracker in the loop: Google's MediaPipe Face Landmarker, in VIDEO mode.
+
+``Tracker(model_path)`` loads the ``face_landmarker.task`` bundle from a file (never
+downloaded: ``settings.tracker_model()``, ``../shared/models`` by default). ``track(frame,
+t)`` gives the 51 ARKit scores of one RGB frame at ``t`` seconds, in MediaPipe's names
+mapped onto canonical ARKit (``_neutral`` dropped; MediaPipe has no ``tongueOut``), or None
+when no face is found: a lost face is a missing frame. VIDEO mode needs increasing integer
+millisecond timestamps; real frame times are rounded to ms and forced to increase.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from faceclean.channel_map import ChannelMap
+from faceclean.channels import ARKIT52, MEDIAPIPE
+from faceclean.errors import FacecleanError
+from faceclean.io.source import regular
+
+NAMES = tuple(n for n in ARKIT52 if n != "tongueOut")  # what the tracker gives, canonical
+MAX_MODEL = 64 << 20  # bytes: the float16 bundle is 3.8 MB
+
+
+class Tracker:
+    def __init__(self, model_path: str | os.PathLike, threads: int = 1) -> None:
+        path = Path(model_path)
+        size = regular(path, "tracker model file").st_size
+        if size > MAX_MODEL:
+            raise FacecleanError(f"{path}: {size} bytes, not a face_landmarker.task bundle")
+        os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
+        try:
+            from mediapipe.tasks.python import BaseOptions
+            from mediapipe.tasks.python.vision import (
+                FaceLandmarker,
+                FaceLandmarkerOptions,
+                RunningMode,
+            )
+        except ImportError:
+            raise FacecleanError(
+                "the tracker needs mediapipe: pip install 'faceclean[pairs]'"
+            ) from None
+        del threads  # MediaPipe's CPU graph picks its own; the job pool spreads the work
+        options = FaceLandmarkerOptions(
+            base_options=BaseOptions(model_asset_buffer=path.read_bytes()),
+            running_mode=RunningMode.VIDEO,
+            num_faces=1,
+            output_face_blendshapes=True,
+        )
+        try:
+            self._landmarker = FaceLandmarker.create_from_options(options)
+        except (RuntimeError, ValueError) as e:
+            text = " ".join(str(e).split())[:160]
+            raise FacecleanError(f"{path}: not a usable face landmarker model ({text})") from None
+        self._last_ms = -1
+        self._map: tuple[tuple[str, ...], ChannelMap] | None = None
+
+    def track(self, frame: np.ndarray, t: float) -> np.ndarray | None:
+        """(51,) scores in ``NAMES`` order for an (H, W, 3) uint8 RGB frame, or None (no face)."""
+        import mediapipe as mp
+
+        ms = max(int(round(t * 1000.0)), self._last_ms + 1)
+        self._last_ms = ms
+        image = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(frame))
+        result = self._landmarker.detect_for_video(image, ms)
+        if not result.face_blendshapes:
+            return None
+        cats = result.face_blendshapes[0]
+        names = tuple(c.category_name for c in cats)
+        if self._map is None or self._map[0] != names:
+            self._map = (names, ChannelMap(NAMES, names))
+        cmap = self._map[1]
+        scores = np.array([c.score for c in cats], np.float64)
+        out = np.full(len(NAMES), np.nan)
+        out[cmap.have] = scores[cmap.cols]
+        return out
+
+    def close(self) -> None:
+        self._landmarker.close()
+
+    def __enter__(self) -> Tracker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+assert set(NAMES) == set(MEDIAPIPE) - {"_neutral"}
