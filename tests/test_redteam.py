@@ -1464,7 +1464,7 @@ def test_output_symlink_is_written_through_or_refused(tmp_path, take):
 
 def test_output_same_as_input_is_cleaned_in_place(tmp_path, take):
     before = take.read_bytes()
-    ok(fc("clean", take, "-o", take, "--method", "ema"))
+    ok(fc("clean", take, "-o", take, "--method", "ema", "--in-place"))
     after = take.read_bytes()
     assert after != before and after.splitlines()[0] == before.splitlines()[0]
     no_temp_files(tmp_path)

@@ -150,3 +150,42 @@ def test_cli_clean_per_channel_override(tmp_path):
     )
     va, vb = io.load(a).values, io.load(b).values
     assert np.flatnonzero(np.any(va != vb, axis=0)).tolist() == [INDEX["jawOpen"]]
+
+
+def test_one_euro_keys_set_the_filter_under_the_default_model():
+    # issue 19: "--set min_cutoff=2 on the default says unknown setting" although the
+    # default is the tuned One Euro filter in adaptive form
+    t = np.arange(240) / 60.0
+    rng = np.random.default_rng(3)
+    x = np.clip(0.4 + 0.2 * np.sin(3 * t)[:, None] + 0.03 * rng.standard_normal((240, 52)), 0, 1)
+    anim = Animation(t, x, ARKIT52)
+    keys = ["min_cutoff=2", "beta=3", "d_cutoff=1"]
+    default = resolve(None).build(ARKIT52)
+    tuned = resolve(None, keys).build(ARKIT52)
+    assert np.all(tuned.min_cutoff == 2.0) and np.all(tuned.beta == 3.0)
+    ours = tuned.clean(anim).values
+    one_euro = resolve("one-euro", keys).build(ARKIT52).clean(anim).values
+    assert np.abs(ours - default.clean(anim).values).max() > 1e-3  # the key changed it
+    assert np.abs(ours - one_euro).max() < 5e-3  # ... into One Euro with those keys
+    eyes = resolve(None, ["eyeBlink*.min_cutoff=9"]).build(ARKIT52)
+    assert eyes.min_cutoff[INDEX["eyeBlinkLeft"]] == 9.0
+    assert eyes.min_cutoff[INDEX["jawOpen"]] == default.min_cutoff[INDEX["jawOpen"]]
+    with pytest.raises(FacecleanError, match="min_cutoff must be > 0"):
+        resolve(None, ["min_cutoff=0"])
+    with pytest.raises(FacecleanError, match="unknown setting 'min_cutoff'"):
+        resolve("lstm", ["min_cutoff=2"])  # the paper's LSTM is no One Euro filter
+
+
+@pytest.mark.parametrize(
+    ("item", "hint"),
+    [("tongueOut.of", "'tongueOut.off'"), ("tongueOut.offf", "'tongueOut.off'"), ("of", "'off'")],
+)
+def test_a_typo_of_off_gets_a_hint(tmp_path, capsys, item, hint):
+    # issue 19: "tongueOut.of" said only "expected KEY=VALUE"
+    src = tmp_path / "a.csv"
+    src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.9\n0.2,0.1\n")
+    assert main(["clean", str(src), "-o", str(tmp_path / "b.csv"), "--set", item]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"did you mean {hint}?" in err[0], err
+    with pytest.raises(FacecleanError, match="did you mean 'min_cutoff'"):
+        resolve("one-euro", ["min_cutof=2"])

@@ -34,6 +34,14 @@ def plan(inputs: list[str], outdir: str | os.PathLike) -> list[Job]:
     out = Path(outdir)
     if out.exists() and not out.is_dir():
         raise FacecleanError(f"batch output must be a folder, and {out} is a file")
+    slash = os.fspath(outdir).endswith(("/", os.sep))  # "-o x.csv/" is a folder, as asked
+    if not out.exists() and not slash and out.suffix.lower() in EXTENSIONS:  # -o name.csv
+        folder = any(Path(i).is_dir() for i in inputs)
+        what = "a folder input writes" if folder else "several inputs write"
+        raise FacecleanError(
+            f"-o {outdir}: {what} a folder of files, and {out.name} names a file; "
+            f"give a folder (-o {out.with_suffix('')}/)"
+        )
     jobs: list[Job] = []
     for given in inputs:
         root = Path(given)

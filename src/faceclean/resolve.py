@@ -29,6 +29,7 @@ unknown key is a one-line FacecleanError listing the valid ones.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -75,7 +76,13 @@ def parse_item(item: str) -> Item:
     if not key or (dot and not pattern.strip()):
         raise FacecleanError(f"--set {item!r}: expected KEY=VALUE or CHANNEL.KEY=VALUE")
     if not eq and key != "off":
-        raise FacecleanError(f"--set {item!r}: expected KEY=VALUE")
+        near = difflib.get_close_matches(key.lower(), ("off",), n=1, cutoff=0.5)
+        if near:  # "tongueOut.of": a key without a value is only ever "off"
+            fixed = f"{pattern.strip()}.off" if dot else "off"
+            raise FacecleanError(
+                f"--set {item!r}: did you mean {fixed!r}? (expected KEY=VALUE, or CHANNEL.off)"
+            )
+        raise FacecleanError(f"--set {item!r}: expected KEY=VALUE (or CHANNEL.off)")
     return (pattern.strip() or None), key, (parse_value(text) if eq else None)
 
 
@@ -179,6 +186,22 @@ def resolve(
     return dataclasses.replace(choice, levels=levels) if levels else choice
 
 
+def model_file(words: str | os.PathLike) -> Path:
+    """The model file ``words`` name: a shipped model's name (``default``, ``lstm``, ...:
+    its file in the package) or a path; one line when it is neither."""
+    from faceclean.settings import MODELS
+
+    text = str(words)
+    if text in (DEFAULT, *SHIPPED_MODELS):
+        own = MODELS / SHIPPED_MODELS.get(text, "default.npz")
+        return own if own.is_file() else MODELS / "default.npz"
+    path = Path(text)
+    if not _exists(text) or not path.is_file():
+        shipped = ", ".join([DEFAULT, *SHIPPED_MODELS])
+        raise FacecleanError(f"no such model file: {path} (or a shipped model: {shipped})")
+    return path
+
+
 def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
     """A learned model file: the class from its format, settings as keywords."""
     from faceclean.learned import formats
@@ -203,22 +226,27 @@ def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
         raise FacecleanError(f"{path.name}: an ONNX graph runs on backend='onnx'")
     method = formats.method_of(path)
     cls = filters.cleaner_class(method)
-    params = _checked(cls, method, items, per_channel=())
+    per = tuple(getattr(cls, "PER_CHANNEL", ()))  # the adaptive model: One Euro's keys
+    params = _checked(cls, method, items, per_channel=per)
+    _known_patterns(items)
     probe = filters.make(method, {"model": path, **params})  # bad settings fail now
     weights = getattr(probe, "weights", None)  # read once, shared by every build
-    if weights is None:
-        return Choice(
-            method,
-            _shown(f"{method} {path}", items),
-            False,
-            lambda names: cls(model=path, names=names, **params),
-        )
-    return Choice(
-        method,
-        _shown(f"{method} (numpy) {path}", items),
-        False,
-        lambda names: cls(weights=weights, names=names, **params),
-    )
+    source = {"model": path} if weights is None else {"weights": weights}
+
+    def factory(names: Sequence[str]) -> filters.Cleaner:
+        def build(p: dict[str, Any]) -> filters.Cleaner:
+            return cls(names=names, **source, **p)
+
+        kw = dict(params)
+        for pattern, key, value in items:
+            if pattern is not None:
+                kw[key] = _scoped(build, kw, names, pattern, key, value)
+        return build(kw)
+
+    if any(p is not None for p, _, _ in items):
+        factory(ARKIT52)  # bad per-channel values fail now
+    what = f"{method} {path}" if weights is None else f"{method} (numpy) {path}"
+    return Choice(method, _shown(what, items), False, factory)
 
 
 def _classical(text: str, items: list[Item]) -> Choice:
@@ -243,21 +271,19 @@ def _classical(text: str, items: list[Item]) -> Choice:
     cls = filters.cleaner_class(method)
     per = tuple(getattr(cls, "PER_CHANNEL", ()))
     _checked(cls, method, items, per)
-    for pattern, key, _ in items:
-        if pattern is not None and not any(matches(pattern, n) for n in ARKIT52):
-            raise FacecleanError(
-                f"{pattern}.{key}: {pattern!r} names no channel (a channel name, a glob "
-                f"such as 'eyeBlink*', or a group: {', '.join(GROUPS)})"
-            )
+    _known_patterns(items)
 
     def factory(names: Sequence[str]) -> filters.Cleaner:
+        def build(p: dict[str, Any]) -> filters.Cleaner:
+            return filters.make(method, p, names=names)
+
         params: dict[str, Any] = presets.expand(doc, names) if doc else {}
         for pattern, key, value in items:
             if pattern is None:
                 params[key] = value
             else:
-                params[key] = _scoped(cls, params, names, pattern, key, value)
-        return filters.make(method, params, names=names)
+                params[key] = _scoped(build, params, names, pattern, key, value)
+        return build(params)
 
     factory(ARKIT52)  # bad values fail now, with the parameter's reason
     return Choice(method, _shown(what, items), bool(cls.offline), factory)
@@ -268,7 +294,9 @@ def _checked(cls: type, method: str, items: list[Item], per_channel: tuple[str, 
     valid = [k for k in filters.settings_of(cls) if k not in _HIDDEN]
     for pattern, key, _ in items:
         if key not in valid:
-            raise FacecleanError(f"{method}: unknown setting {key!r}; valid: {_valid(valid)}")
+            near = difflib.get_close_matches(key, [*valid, *MAP_KEYS], n=1, cutoff=0.7)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise FacecleanError(f"{method}: unknown setting {key!r}{hint}; valid: {_valid(valid)}")
         if pattern is not None and key not in per_channel:
             scoped = ", ".join(per_channel) or "none"
             raise FacecleanError(
@@ -282,14 +310,29 @@ def _valid(valid: list[str]) -> str:
     return f"{', '.join(valid)}; per channel PATTERN.KEY; levels {', '.join(MAP_KEYS)}"
 
 
+def _known_patterns(items: list[Item]) -> None:
+    for pattern, key, _ in items:
+        if pattern is not None and not any(matches(pattern, n) for n in ARKIT52):
+            raise FacecleanError(
+                f"{pattern}.{key}: {pattern!r} names no channel (a channel name, a glob "
+                f"such as 'eyeBlink*', or a group: {', '.join(GROUPS)})"
+            )
+
+
 def _scoped(
-    cls: type, params: dict[str, Any], names: Sequence[str], pattern: str, key: str, value: Any
+    build: Callable[[dict[str, Any]], filters.Cleaner],
+    params: dict[str, Any],
+    names: Sequence[str],
+    pattern: str,
+    key: str,
+    value: Any,
 ) -> np.ndarray:
     """``key`` as (M,) values with ``value`` on the channels ``pattern`` names (none of
-    these channels: unchanged), the others as ``params`` (or the defaults) give them."""
+    these channels: unchanged), the others as ``params`` (or the defaults) give them;
+    ``build(params)`` makes the cleaner whose ``key`` is read."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise FacecleanError(f"{pattern}.{key}: expected a number (got {value!r})")
-    base = getattr(filters.make(cls.name, params, names=names), key)  # 0-d or (M,)
+    base = getattr(build(params), key)  # 0-d or (M,)
     if base is None:
         raise FacecleanError(f"{pattern}.{key}: set {key} for every channel first ({key}=...)")
     out = np.array(np.broadcast_to(base, (len(names),)), dtype=np.float64)

@@ -75,7 +75,22 @@ def test_clean_in_place_and_set_params(tmp_path, capsys):
         pytest.skip("ema cleaner not written yet")
     take = tmp_path / "take.csv"
     shutil.copyfile(TAKE, take)
-    assert main(["clean", str(take), "-o", str(take), "--method", "ema", "--set", "tau=0.05"]) == 0
+    assert (
+        main(
+            [
+                "clean",
+                str(take),
+                "-o",
+                str(take),
+                "--method",
+                "ema",
+                "--set",
+                "tau=0.05",
+                "--in-place",
+            ]
+        )
+        == 0
+    )
     assert "tau=0.05" in capsys.readouterr().out
     assert _assert_only_values_changed(TAKE, take) > 1000
     assert [p.name for p in tmp_path.iterdir()] == ["take.csv"]  # no temporary left

@@ -159,7 +159,7 @@ def test_corrupt_truth_out_naming_the_input_is_refused(tmp_path, take, capsys):
 
 
 def test_clean_in_place_is_still_allowed(tmp_path, take):
-    assert main(["clean", str(take), "-o", str(take), "--method", "ema"]) == 0
+    assert main(["clean", str(take), "-o", str(take), "--method", "ema", "--in-place"]) == 0
     assert io.load(take).n_frames == 120
 
 

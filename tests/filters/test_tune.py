@@ -87,6 +87,20 @@ def test_align_interpolates_truth_at_noisy_times():
         tune.align(far, clean)
 
 
+def test_tune_on_a_truth_of_only_tracking_loss_is_one_line(tmp_path, capsys):
+    # issue 19: frames all tracking loss, at other times than the noisy take's, ended in
+    # "internal error: IndexError"
+    noisy, _ = _pair(0, seconds=1.0)
+    gone = Animation(noisy.times + 100.0, np.full(noisy.values.shape, np.nan), NAMES)
+    io.save(noisy, tmp_path / "noisy.csv")
+    io.save(gone, tmp_path / "truth.csv")
+    argv = ["tune", str(tmp_path / "noisy.csv"), "--truth", str(tmp_path / "truth.csv")]
+    assert main([*argv, "--method", "one-euro", "-o", str(tmp_path / "p.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tracking loss" in err[0] and "internal error" not in err[0], err
+    assert not (tmp_path / "p.json").exists()
+
+
 def test_preset_round_trip_expands_groups(tmp_path):
     path = tmp_path / "k.json"
     presets.save(

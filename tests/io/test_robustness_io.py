@@ -205,7 +205,7 @@ def test_output_equal_to_input_is_replaced_whole(tmp_path, capsys, method):
     src = tmp_path / "a.csv"
     src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.9\n0.2,0.1\n")
     expect = resolve(method).build(("jawOpen",)).clean(io.load(src))
-    assert main(["clean", str(src), "-o", str(src), "--method", method]) == 0
+    assert main(["clean", str(src), "-o", str(src), "--method", method, "--in-place"]) == 0
     got = io.load(src)
     assert np.array_equal(got.values, expect.values) and np.array_equal(got.times, expect.times)
     assert [p.name for p in tmp_path.iterdir()] == ["a.csv"]  # no temporary left
@@ -216,7 +216,7 @@ def test_refused_in_place_run_keeps_the_input(tmp_path, capsys):
     src = tmp_path / "a.csv"
     rows = b"".join(b"%d,0.5\n" % i for i in range(3 * stream.BLOCK))
     src.write_bytes(b"time,jawOpen\n" + rows + b"x,0.5\n")
-    argv = ["clean", str(src), "-o", str(src), "--method", "one-euro"]
+    argv = ["clean", str(src), "-o", str(src), "--method", "one-euro", "--in-place"]
     _refused(capsys, argv, tmp_path, "not a number")
 
 

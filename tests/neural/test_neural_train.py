@@ -133,3 +133,49 @@ def test_train_command_refuses_bad_arguments(tmp_path, capsys):
     assert main(["train", "--out", str(tmp_path / "m.pt")]) == 2
     err = capsys.readouterr().err
     assert err.count("faceclean: ") == 2 and ".npz" in err and "Traceback" not in err
+
+
+@pytest.fixture
+def tiny_takes(tmp_path):
+    """Two sources of two 3 s synthetic takes each (train --data layout)."""
+    from faceclean import io
+    from faceclean.evaluation.performer import perform
+
+    for source, seeds in (("a", (1, 2)), ("b", (3, 4))):
+        (tmp_path / source).mkdir()
+        for s in seeds:
+            io.save(perform(3.0, seed=s), tmp_path / source / f"t{s}.csv")
+    return tmp_path
+
+
+@pytest.mark.parametrize("words", ["default", "lstm", "copy"])
+def test_train_report_takes_any_model_and_shipped_names(
+    tiny_takes, tmp_path_factory, capsys, words
+):
+    # issue 19: "--report default" said "no such model file"; "--report mine.npz" refused
+    # an adaptive model ("not a faceclean-lstm/1 model")
+    import shutil
+
+    from faceclean.cli import main
+    from faceclean.settings import MODELS
+
+    if words == "copy":  # a user's own adaptive model file
+        words = str(tmp_path_factory.mktemp("models") / "mine.npz")
+        shutil.copyfile(MODELS / "default.npz", words)
+    argv = ["train", "--report", words, "--data", str(tiny_takes), "--val-sources", "b"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "on b (2 takes)" in out
+    rows = [ln for ln in out.splitlines() if ln.startswith("| ") and "fps" in ln]
+    assert len(rows) == 3 and all("nan" not in r for r in rows), out  # 30, 60, 120 fps
+    ratios = [float(r.split("|")[4]) for r in rows]
+    assert all(0.0 < v < 1.5 for v in ratios), rows
+
+
+def test_train_report_refuses_what_is_no_model_in_one_line(tiny_takes, capsys):
+    from faceclean.cli import main
+
+    for words in ("nothere.npz", str(tiny_takes / "a" / "t1.csv")):
+        assert main(["train", "--report", words, "--data", str(tiny_takes)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "model" in err[0] and "internal error" not in err[0], err

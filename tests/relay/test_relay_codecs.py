@@ -304,3 +304,21 @@ def test_truncated_packets_are_malformed_or_partial(cut_vmc, cut_ll):
     except Malformed:
         return
     assert f is None or len(f.names) <= 3  # cut at an element boundary: fewer messages
+
+
+def test_readme_tells_a_wifi_phone_user_to_listen_on_0000_with_the_warning():
+    # issue 19: only docs/RELAY.md said that a phone on Wi-Fi needs --listen 0.0.0.0
+    import re
+
+    from helpers import REPO
+
+    from faceclean.relay.url import parse as parse_url
+
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    section = text.split("### A phone on Wi-Fi", 1)[1].split("\n## ", 1)[0]
+    command = re.search(r"faceclean relay --listen (\S+) --send (\S+)", section)
+    assert command, section
+    listen = parse_url(command.group(1), "listen")
+    assert listen.host == "0.0.0.0" and listen.port == 11112
+    assert parse_url(command.group(2), "send").host == "127.0.0.1"
+    assert "**Warning:**" in section and "anyone" in section and "foreign" in section

@@ -368,6 +368,23 @@ def test_relay_process_stops_cleanly_on_signals(sig):
     assert "stopped: in 1 out 1 dropped 0" in out and "Traceback" not in err
 
 
+def test_an_idle_relay_says_it_has_no_latency_yet_not_nan():
+    # issue 19: a relay stopped before any frame printed "latency p50 nan ms"
+    with raw_receiver() as rx:
+        proc = _start(
+            ["--listen", "vmc://127.0.0.1:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
+            + ["--method", "ema"]
+        )
+        with reaped(proc):
+            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+            assert ready, "relay did not start"
+            proc.stdout.readline()  # the banner: it listens
+            out, err = interrupt(proc)
+    assert proc.returncode == 0, err
+    stopped = next(ln for ln in out.splitlines() if ln.startswith("stopped:"))
+    assert "nan" not in stopped and "latency - (no frames sent yet)" in stopped
+
+
 def test_relay_command_errors_are_one_line(capsys):
     assert main(["relay", "--listen", "vmc://:0", "--send", "ifacialmocap://:4"]) == 2
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:

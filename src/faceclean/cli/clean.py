@@ -12,10 +12,15 @@ with KEY gain, offset, curve, clamp or off, on a channel name, a glob or a group
 ``--set 'eyeBlink*.gain=1.2' --set tongueOut.off --set jawOpen.clamp=0,0.8``.
 
 The output format follows OUT's extension (``--format`` forces one); a ``.csv`` out of a
-Live Link Face CSV stays Live Link, with only the blendshape values changed. OUT may be
-IN: the output replaces it atomically once complete. A causal cleaner on a Live Link or
+Live Link Face CSV stays Live Link, with only the blendshape values changed. Every
+output replaces its file atomically once complete. A causal cleaner on a Live Link or
 plain CSV written to the same format streams the file in blocks (constant memory,
 faceclean.io.stream); anything else is read whole.
+
+A raw take is never replaced by accident: an OUT that is IN (``./IN``, a symlink to it,
+a hard link of it: the same file, ``os.path.samefile``) is refused unless ``--in-place``
+is given, for one file and for a batch into the input folder; ``clean IN --in-place``
+(no ``-o``) replaces IN. A folder input needs a folder output, never ``-o name.csv``.
 """
 
 from __future__ import annotations
@@ -58,8 +63,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "-o",
         "--output",
         metavar="OUT",
-        required=True,
         help="where to write; a folder (OUTDIR/) for several inputs or a folder input",
+    )
+    p.add_argument(
+        "--in-place",
+        action="store_true",
+        help="let OUT be IN (or a folder of inputs): replace the raw take(s), atomically",
     )
     options.add_arguments(p)
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
@@ -69,9 +78,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from faceclean.cli import clean_batch
     from faceclean.errors import FacecleanError
 
+    if args.output is None:
+        if not args.in_place:
+            raise FacecleanError("give -o OUT (or --in-place to replace the input)")
+        if len(args.input) > 1 or Path(args.input[0]).is_dir():
+            raise FacecleanError("--in-place without -o is for one file: give -o OUTDIR/")
+        args.output = args.input[0]
     if clean_batch.is_batch(args.input, args.output):
         return clean_batch.run(args)
     if args.jobs != 1:
@@ -86,11 +103,18 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
 
     from faceclean import io
     from faceclean.adjust import Adjusted
+    from faceclean.errors import FacecleanError
     from faceclean.io import stream
 
     choice = options.choice(args)
     src = Path(input)
-    io.paths.rewritable(src)  # clean IN -o IN replaces IN (atomically, once complete)
+    if same_file(src, output):
+        if not getattr(args, "in_place", False):
+            raise FacecleanError(
+                f"-o {output} is the input {input}: a raw take is never overwritten; "
+                "name another file, or add --in-place to replace it"
+            )
+        io.paths.rewritable(src)  # --in-place: replaces IN atomically, once complete
     fmt_in = io.detect(src) if src.is_file() else None
     fmt_out = io.output_format(output, fmt_in, args.fmt) if fmt_in in stream.FORMATS else None
     if stream.can_stream(fmt_in, fmt_out):
@@ -109,6 +133,16 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
     io.save(cleaned, output, fmt=args.fmt)
     return _line(output, anim.n_frames, int((~anim.valid).sum()), anim.names, what, adjust)
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether paths a and b name one existing file (``./``, symlinks, hard links)."""
+    import os
+
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either one missing: not the same file
+        return False
 
 
 def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...]):

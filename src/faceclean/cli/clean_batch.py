@@ -36,6 +36,16 @@ def run(args: argparse.Namespace) -> int:
     build_cleaner(choice, ARKIT52)
     build_levels(args, choice, ARKIT52)
     jobs = plan(args.input, args.output)
+    if not args.in_place:
+        from faceclean.cli.clean import same_file
+
+        onto = [job for job in jobs if same_file(job.src, job.dst)]
+        if onto:
+            more = f" (and {len(onto) - 1} more)" if len(onto) > 1 else ""
+            raise FacecleanError(
+                f"{onto[0].dst} is the input {onto[0].src}{more}: a batch into the input "
+                "folder would overwrite raw takes; give another -o folder, or --in-place"
+            )
     Path(args.output).mkdir(parents=True, exist_ok=True)
     failed: list[tuple[Job, str]] = []
     bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, desc="cleaning", leave=False)

@@ -156,19 +156,35 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> str:
+    """``--report MODEL``: a model file of any kind, or a shipped model's name ('default',
+    'lstm', 'fc', 'gbt'). The LSTM runs in torch (its training's own validation); every
+    other kind through the runtime that cleans with it."""
+    from faceclean.animation import Animation
+    from faceclean.channels import ARKIT52
     from faceclean.evaluation import dataset, harness
+    from faceclean.learned import formats
     from faceclean.neural import checkpoint
-    from faceclean.neural.validate import evaluate, table
+    from faceclean.neural.validate import evaluate, measure, table
+    from faceclean.resolve import model_file, resolve
 
-    model = checkpoint.load(args.report)
+    path = model_file(args.report)
+    method = formats.method_of(path)  # one line for a file that is not a model
     takes = dataset.load_takes(args.data)
     if args.val_sources:
         _, val = dataset.split(takes, val_sources=args.val_sources)
     else:
         _, val = dataset.split(takes, val_fraction=0.2, seed=args.seed)
-    results = evaluate(model, harness.streams(val, list(harness.CONDITIONS)), lag=True)
+    streams = harness.streams(val, list(harness.CONDITIONS))
+    if method == "lstm":
+        results = evaluate(checkpoint.load(path), streams, lag=True)
+    else:
+        cleaner = resolve(str(path)).build(ARKIT52)
+        noisy = [Animation(s.noisy.times, s.noisy.arkit()[0], ARKIT52) for s in streams]
+        outputs = harness.run_streams(cleaner, noisy)  # (N_i, 52) each
+        results = measure(outputs, streams, ARKIT52, lag=True)
     names = sorted({t.source for t in val})
-    return f"{args.report} on {', '.join(names)} ({len(val)} takes)\n\n{table(results)}"
+    what = f"{args.report} ({method}, {path.name})" if path.name != args.report else args.report
+    return f"{what} on {', '.join(names)} ({len(val)} takes)\n\n{table(results)}"
 
 
 def _adaptive(args: argparse.Namespace) -> int:

@@ -88,6 +88,10 @@ def align(noisy: Animation, clean: Animation) -> Animation:
     if noisy.n_frames == clean.n_frames and np.allclose(noisy.times, clean.times, atol=1e-6):
         return clean
     ok = clean.valid & np.isfinite(clean.times)
+    if not ok.any():  # every truth frame is tracking loss: nothing to align, nothing to score
+        raise FacecleanError(
+            "nothing to tune on: every frame of the truth is tracking loss (no values)"
+        )
     t, v = clean.times[ok], clean.values[ok]
     order = np.argsort(t, kind="stable")
     t, v = t[order], v[order]

@@ -30,6 +30,16 @@ with alpha(fc, dt) = 1 / (1 + 1 / (2 pi fc dt)), the first-order low-pass of One
 time constants in seconds, so the same filter at any frame rate. The time rules
 (missing frames, NaN cells, gaps, backwards time) are filters/base.py's.
 
+An inert network costs nothing (issue 19): when ``head.w`` is all zero, (a, b) are the
+head's bias whatever h is, so the GRU cannot change the result; the model is detected at
+load (``Adaptive.inert``) and stepped without the core, as One Euro with the constant
+cut-off factor exp(a) and slope share sigmoid(b) (bitwise the same numbers). With
+``boost`` also zero the transient gain is zero and the slow level is not kept either.
+The shipped default is such a model: the tuned One Euro filter in this form.
+
+One Euro's own keys set the filter under the core: ``min_cutoff``, ``beta``, ``d_cutoff``
+(Hz, Hz per weight/s, Hz; for every channel or (M,) per channel) replace the model's.
+
 Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "channels": [M],
 "hidden": H, "embed": E, ...training facts}; arrays ``emb`` (M, E), ``gru.w_ih``
 (3H, 7+E), ``gru.w_hh`` (3H, H), ``gru.b_ih``, ``gru.b_hh`` (3H,) in PyTorch's (r, z, n)
@@ -53,6 +63,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import MAX_GAP, State, StreamCleaner, gap_seconds
+from faceclean.filters.params import per_channel
 from faceclean.learned import formats
 from faceclean.learned.formats import ADAPTIVE as FORMAT
 
@@ -202,6 +213,7 @@ class Adaptive(StreamCleaner):
     """
 
     name = "adaptive"
+    PER_CHANNEL = ("min_cutoff", "beta", "d_cutoff")  # One Euro's keys, over the model's
 
     def __init__(
         self,
@@ -210,6 +222,9 @@ class Adaptive(StreamCleaner):
         names: Sequence[str] = ARKIT52,
         weights: AdaptiveWeights | None = None,
         max_gap: float = MAX_GAP,
+        min_cutoff: float | Sequence[float] | None = None,
+        beta: float | Sequence[float] | None = None,
+        d_cutoff: float | Sequence[float] | None = None,
     ) -> None:
         if weights is None:
             if model is None:
@@ -226,8 +241,13 @@ class Adaptive(StreamCleaner):
         mean = {k: float(np.exp(np.log(w[k]).mean())) for k in ("min_cutoff", "d_cutoff")}
         mean["beta"] = float(w["beta"].mean())
         pick = np.maximum(rows, 0)
-        for key in ("min_cutoff", "beta", "d_cutoff"):
-            setattr(self, key, np.where(self._learn, w[key][pick], mean[key]))  # (M,)
+        given = {"min_cutoff": min_cutoff, "beta": beta, "d_cutoff": d_cutoff}
+        for key, value in given.items():
+            own = np.where(self._learn, w[key][pick], mean[key])  # (M,) the model's
+            if value is not None:  # One Euro's key given: it replaces the model's
+                v = per_channel(value, self.names, f"adaptive {key}", open_low=key != "beta")
+                own = np.broadcast_to(v, own.shape).astype(np.float64)
+            setattr(self, key, own)  # (M,)
         self._emb = np.where(self._learn[:, None], w["emb"][pick], 0.0)  # (M, E)
         self._gain = np.where(self._learn, G_MAX * np.tanh(w["boost"][pick]), 0.0)  # (M,)
         self._mirror = mirror_index(self.names)
@@ -237,13 +257,23 @@ class Adaptive(StreamCleaner):
         # The embedding's share of the input product is the same every step: (M, 3H).
         self._emb_gates = self._emb @ self._w_ih[N_FEATURES:] + w["gru.b_ih"]
         self._b_hh, self._head_w, self._head_b = w["gru.b_hh"], w["head.w"].T, w["head.b"]
+        # Inert network: a head blind to h makes (a, b) constants, the core dead weight.
+        self.inert = not np.any(w["head.w"])
+        self._transient = bool(np.any(self._gain))  # a zero gain needs no slow level
+        b = w["head.b"]
+        self._ea = np.where(self._learn, np.exp(np.clip(b[0], A_MIN, A_MAX)), 1.0)  # (M,)
+        self._k = np.where(self._learn, sigmoid(b[1]), 0.0)  # (M,)
         self.reset()
 
     def _start(self, x: np.ndarray) -> State:
         s, m = x.shape
+        if self.inert:  # no core state; the slow level only where a transient gain needs it
+            return (x.copy(), np.zeros_like(x)) + ((x.copy(),) if self._transient else ())
         return x.copy(), np.zeros_like(x), np.zeros((s, m * self._H)), x.copy()
 
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
+        if self.inert:
+            return self._advance_inert(state, x, dt)
         y, edx, h, slow = state  # (S, M), (S, M) weight/s, (S, M*H), (S, M)
         s, m = x.shape
         H = self._H
@@ -283,7 +313,28 @@ class Adaptive(StreamCleaner):
         shown = np.clip(y + self._gain * (y - slow), lo, hi)
         return (y, edx, h.reshape(s, m * H), slow), shown
 
+    def _advance_inert(
+        self, state: State, x: np.ndarray, dt: np.ndarray
+    ) -> tuple[State, np.ndarray]:
+        """The step above with a = a0, k = sigmoid(b0) constants (M,): no core, the same
+        numbers (the same operations in the same order on every value that matters)."""
+        y, edx = state[0], state[1]  # (S, M) weight, (S, M) weight/s
+        dt = np.maximum(dt, DT_MIN)  # (S, 1) s
+        edx = edx + alpha(self.d_cutoff, dt) * ((x - y) / dt - edx)
+        fc = (self.min_cutoff + self.beta * np.abs(edx)) * self._ea  # Hz
+        p = y + self._k * dt * edx
+        y = p + alpha(fc, dt) * (x - p)
+        lo, hi = np.minimum(x, 0.0), np.maximum(x, 1.0)
+        y = np.clip(y, lo, hi)
+        if not self._transient:
+            return (y, edx), y
+        slow = state[2] + alpha(F_SLOW, dt) * (y - state[2])
+        return (y, edx, slow), np.clip(y + self._gain * (y - slow), lo, hi)
+
     @property
     def state_bytes(self) -> int:
-        """Bytes of state per stream: y, edx, the slow level and the core's hidden state."""
+        """Bytes of state per stream: y, edx, the slow level and the core's hidden state
+        (an inert model keeps y and edx, and the slow level only with a transient gain)."""
+        if self.inert:
+            return 8 * len(self.names) * (2 + self._transient)
         return 8 * len(self.names) * (3 + self._H)

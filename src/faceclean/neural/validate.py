@@ -43,6 +43,22 @@ def evaluate(
     blink_closure, raw_blink_closure, (lag_ms, raw_lag_ms), (loss).
     """
     outputs = run(model, [s[2] for s in streams])
+    result = measure(outputs, streams, model.channels, lag)
+    if loss is not None:
+        for cond in result:
+            rows = [s for s in streams if s[0] == cond]
+            result[cond]["loss"] = _loss(model, loss, rows)
+    return result
+
+
+def measure(
+    outputs: Sequence[np.ndarray],
+    streams: Sequence[Stream],
+    channels: Sequence[str],
+    lag: bool = False,
+) -> dict[str, dict[str, float]]:
+    """:func:`evaluate`'s measures for any cleaner's outputs (N_i, M) on ``streams``, the
+    columns named by ``channels`` (no loss: that is the torch model's)."""
     result: dict[str, dict[str, float]] = {}
     for cond in dict.fromkeys(s[0] for s in streams):
         rows = [i for i, s in enumerate(streams) if s[0] == cond]
@@ -52,7 +68,7 @@ def evaluate(
             _, _, noisy, truth = streams[i]
             x, _ = noisy.arkit(ARKIT52)
             g, _ = truth.arkit(ARKIT52)
-            y = _to_arkit(outputs[i], model.channels)
+            y = _to_arkit(outputs[i], channels)
             missing = np.isnan(x).all(1)
             g = np.where(missing[:, None], np.nan, g)
             t = truth.times
@@ -73,8 +89,6 @@ def evaluate(
         w = np.asarray(weights)
         res = {k: _wmean(v, w) for k, v in acc.items()}
         res["mse_ratio"] = res["mse"] / res["raw_mse"]
-        if loss is not None:
-            res["loss"] = _loss(model, loss, [streams[i] for i in rows])
         result[cond] = res
     return result
 

@@ -102,9 +102,13 @@ class Stats:
             f"in {self.frames_in} out {self.frames_out} "
             f"dropped {self.dropped} (order {self.out_of_order}, stale {self.stale}) "
             f"malformed {self.malformed} passthrough {self.passthrough} "
-            f"foreign {self.foreign} own {self.own} "
-            f"latency p50 {self.percentile_ms(50):.3f} ms p99 {self.percentile_ms(99):.3f} ms"
+            f"foreign {self.foreign} own {self.own} " + self._latency()
         )
+
+    def _latency(self) -> str:
+        if not self.n_latency:  # an idle relay has no latency to show, not "nan ms"
+            return "latency - (no frames sent yet)"
+        return f"latency p50 {self.percentile_ms(50):.3f} ms p99 {self.percentile_ms(99):.3f} ms"
 
 
 def warm_up(cleaner: Stepper, frames: int = 6) -> None:
