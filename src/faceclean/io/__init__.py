@@ -24,6 +24,7 @@ from faceclean.io.atomic import atomic_open, writable
 # format name -> module; extensions that select it.
 FORMATS: dict[str, str] = {
     "livelink": "faceclean.io.livelink_csv",
+    "mediapipe": "faceclean.io.mediapipe_csv",
     "csv": "faceclean.io.plain_csv",
     "json": "faceclean.io.json_format",
     "npz": "faceclean.io.npz_format",
@@ -44,7 +45,7 @@ _BAD_INPUT = (
     struct.error,
 )
 EXTENSIONS: dict[str, tuple[str, ...]] = {
-    ".csv": ("livelink", "csv"),
+    ".csv": ("livelink", "mediapipe", "csv"),
     ".json": ("json",),
     ".npz": ("npz",),
     ".gltf": ("gltf",),
@@ -74,7 +75,10 @@ def detect(path: str | os.PathLike) -> str:
     for fmt in candidates:
         if _module(fmt).sniff(head):
             return fmt
-    raise FacecleanError(f"{p.name}: not a Live Link Face CSV nor a plain CSV with a 'time' column")
+    raise FacecleanError(
+        f"{p.name}: not a Live Link Face CSV, a MediaPipe CSV (timestamp_ms) "
+        "nor a plain CSV with a 'time' column"
+    )
 
 
 def load(path: str | os.PathLike, fmt: str | None = None) -> Animation:

@@ -67,8 +67,8 @@ def plan(
     """Jobs over ``takes`` [(path, group, duration s)] cut into ``seconds`` clips, and
     ``synthetic`` full-range performers. Each clip is rendered once in a setting drawn from
     ``settings`` and once more in each ``held_out`` setting (for evaluation), each time with
-    a new scene (identity, light, camera) and a rate and timing drawn from ``seed``. Same
-    arguments, same list."""
+    a new scene (identity, light, camera) and a rate and timing drawn from ``seed``. Clips
+    are dealt round-robin over the sources (``_round_robin``). Same arguments, same list."""
     if not (0.5 <= seconds <= 3600):
         raise FacecleanError(f"--seconds must be in [0.5, 3600], got {seconds}")
     rng = np.random.default_rng(seed)
@@ -78,7 +78,7 @@ def plan(
         clips += [(path, group, k * seconds, min(seconds, duration)) for k in range(n)]
     clips += [(f"{SYNTH}{seed * 100_000 + k}", "synthetic", 0.0, seconds) for k in range(synthetic)]
     jobs = []
-    for path, group, start, length in clips:
+    for path, group, start, length in _round_robin(clips):
         drawn = settings[rng.integers(len(settings))]
         for setting in (drawn, *held_out):
             jobs.append(
@@ -94,6 +94,21 @@ def plan(
                 )
             )
     return jobs
+
+
+def _round_robin(clips: list[tuple]) -> list[tuple]:
+    """Clips dealt one group at a time (a, b, c, a, b, c, ...), so that any prefix of the
+    job list, as a run that is stopped early leaves it, covers every performance source."""
+    by_group: dict[str, list[tuple]] = {}
+    for c in clips:
+        by_group.setdefault(c[1], []).append(c)
+    queues = list(by_group.values())
+    out = []
+    while any(queues):
+        for q in queues:
+            if q:
+                out.append(q.pop(0))
+    return out
 
 
 def shard(jobs: list[Job], i: int, n: int) -> list[Job]:
