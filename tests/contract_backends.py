@@ -135,7 +135,7 @@ BACKENDS: list[Backend] = [
     *(
         Backend(m, m, "method", _method(m), offline=_offline(m))
         for m in METHODS
-        if m != "lstm"  # the LSTM runs once per kernel, below
+        if m not in ("lstm", "tracker-map")  # the LSTM runs once per kernel; the map, below
     ),
     Backend(
         "lstm[numpy]",

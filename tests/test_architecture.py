@@ -29,7 +29,11 @@ MAY_IMPORT: dict[str, set[str]] = {
     "calibration": {"adjust", "filters", "relay"},
     "batch": {"io"},
     "relay": {"io", "faceclean", "filters"},
-    "evaluation": {"filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"},
+    "evaluation": {
+        *("filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"),
+        "synthetic",  # the still real face is tracked by the tracker in the loop
+    },
+    "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
     "report": {"evaluation", "face", "io", "faceclean"},
     "neural": {"filters", "learned", "evaluation", "face", "io", "cli"},
     "cli": {"*"},  # the command line may use anything (heavy imports inside run)

@@ -59,7 +59,7 @@ def _refused(capsys, argv: list[str], folder: Path, message: str) -> None:
 
 BAD_FILES = {
     # case: (file name, bytes, words of the message)
-    "empty csv": ("e.csv", b"", "not a Live Link Face CSV nor a plain CSV"),
+    "empty csv": ("e.csv", b"", "not a Live Link Face CSV, a MediaPipe CSV"),
     "empty json": ("e.json", b"", "not valid JSON"),
     "empty npz": ("e.npz", b"", "not a readable npz"),
     "empty glb": ("e.glb", b"", "glTF"),
@@ -70,7 +70,7 @@ BAD_FILES = {
         b'{"format": "faceclean-animation/1", "channels": ["a"], "times": [], "values": []}',
         "no frames",
     ),
-    "garbage csv": ("g.csv", bytes(range(256)) * 4, "not a Live Link Face CSV nor a plain CSV"),
+    "garbage csv": ("g.csv", bytes(range(256)) * 4, "not a Live Link Face CSV, a MediaPipe CSV"),
     "garbage json": ("g.json", b"\xff\xfe" + bytes(range(200)), "g.json: not"),
     "garbage npz": ("g.npz", b"PK\x03\x04" + bytes(range(200)), "not a readable npz"),
     "garbage glb": ("g.glb", b"glTF" + bytes(range(200)), "GLB"),

@@ -17,6 +17,7 @@ choosing the cleaner (one of --method, --model, --preset; default: the shipped m
   --method lstm | fc | gbt          a shipped learned model
   --model my.npz | my.onnx          a learned model file (also --method my.npz)
   --preset tuned.json | one-euro    a preset file from 'faceclean tune', or a shipped one
+  --tracker mediapipe               the cleaner shipped for MediaPipe's output (levels too)
 settings (--set, repeatable; values: true/false, numbers, JSON lists, else text):
   --set min_cutoff=2                one setting for every channel; the rest of a tuned
                                     preset is kept
@@ -39,6 +40,12 @@ def add_arguments(
         "(default: the shipped model)",
     )
     p.add_argument("--model", metavar="FILE", help="learned model file (.npz or .onnx)")
+    p.add_argument(
+        "--tracker",
+        metavar="NAME",
+        help="what made the input: arkit (iPhone, the default) or mediapipe, whose shipped "
+        "cleaner also maps its levels onto ARKit's (without --method/--model/--preset)",
+    )
     p.add_argument("--preset", metavar="FILE", help="preset file or shipped preset's name")
     p.add_argument(
         "--set",
@@ -75,7 +82,11 @@ def words(args: argparse.Namespace) -> str | None:
     model = getattr(args, "model", None)
     if model and not str(model).lower().endswith((".npz", ".onnx")):
         raise FacecleanError(f"{model}: a model is a .npz or an .onnx file")
-    return getattr(args, given[0]) if given else None
+    if given:
+        return getattr(args, given[0])
+    from faceclean.resolve import tracker_words
+
+    return tracker_words(getattr(args, "tracker", None))
 
 
 def choice(args: argparse.Namespace) -> Choice:

@@ -84,11 +84,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--arch",
-        choices=("adaptive", "lstm", "fc", "gbt"),
-        default="adaptive",
+        choices=("adaptive", "lstm", "fc", "gbt", "map", "ridge"),
+        default=None,
         help="adaptive (default, the shipped kind: a One Euro filter whose cut-off a GRU "
         "shared by all channels sets), lstm (the paper's), or the paper's non-recurrent "
-        "baselines fc / gbt (SPEC section 3; they use --data, --val-sources, --seed, --out)",
+        "baselines fc / gbt (SPEC section 3; they use --data, --val-sources, --seed, --out); "
+        "with --pairs: map (default, the tracker map), lstm or ridge",
+    )
+    p.add_argument(
+        "--pairs",
+        metavar="DIR",
+        help="train on (tracked, truth) pairs instead of simulated artefacts: a folder from "
+        "'faceclean pairs', or a studio's NAME.raw.csv + NAME.clean.csv takes (docs/TRAINING.md)",
     )
     p.add_argument("--out", metavar="MODEL", help="best model (.npz)")
     # fmt: skip
@@ -103,6 +110,13 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.neural.losses import Weights
     from faceclean.neural.train import Config, train
 
+    if args.pairs:
+        from faceclean.cli import train_pairs
+
+        return train_pairs.run(args)
+    args.arch = args.arch or "adaptive"
+    if args.arch in ("map", "ridge"):
+        raise FacecleanError(f"--arch {args.arch} trains on pairs: give --pairs DIR")
     if args.report:
         print(_report(args))
         return 0

@@ -25,6 +25,7 @@ METHODS: dict[str, str] = {
     "lstm": "faceclean.learned.cleaner:Learned",
     "fc": "faceclean.learned.derivative_net:FullyConnected",
     "gbt": "faceclean.learned.derivative_net:BoostedTrees",
+    "tracker-map": "faceclean.learned.tracker_map:TrackerMap",
 }
 
 __all__ = [

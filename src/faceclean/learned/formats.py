@@ -18,12 +18,14 @@ LSTM = "faceclean-lstm/1"  # the recurrent cleaner (learned/checkpoint.py)
 FC = "faceclean-fc/1"  # the fully connected baseline (learned/derivative_net.py)
 GBT = "faceclean-gbt/1"  # the boosted-trees baseline (learned/derivative_net.py)
 ADAPTIVE = "faceclean-adaptive/1"  # the learned adaptive One Euro (learned/adaptive.py)
+TRACKER_MAP = "faceclean-tracker-map/1"  # a tracker's learned level map (learned/tracker_map.py)
 STEP = "faceclean-lstm-step/1"  # ONNX metadata "faceclean.format" of an exported step graph
 METHODS = {
     LSTM: "lstm",
     FC: "fc",
     GBT: "gbt",
     ADAPTIVE: "adaptive",
+    TRACKER_MAP: "tracker-map",
 }  # checkpoint format -> method name
 MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
 

@@ -202,6 +202,8 @@ class Worker:
         times = frame_times(job, float(src_t[-1]))
         truth = resample(src_t, src_w, times)  # (K, 52), NaN across the source's own losses
         seen = ~np.all(np.isnan(truth), axis=1)
+        if seen.sum() < 2:
+            raise FacecleanError(f"{job.source}: fewer than 2 frames with values in the clip")
         times, truth = times[seen], np.clip(np.nan_to_num(truth[seen]), 0.0, 1.0)
         scene = Scene.draw(job.seed, job.setting, self.head.n_identity)
         if src_pose is not None:

@@ -1,0 +1,179 @@
+"""The tracker table of docs/RESULTS.md: cleaners of MediaPipe's output, judged on pairs
+no training saw.
+
+Folds leave one performance source out (``paired.split``): a fold trains on every other
+source in the training render settings and is scored on the left-out source, once in the
+training settings and once in the held-out render setting. Every pair has its own scene
+seed, so test identities, performances and (for the held-out column) lighting and camera
+are all unseen. Rows:
+
+- raw: MediaPipe's scores as they come;
+- one-euro: One Euro tuned on the fold's training pairs (a grid, by MSE);
+- ridge: a per-channel ridge map over all inputs, fitted on the fold's training pairs;
+- lstm: the paper's derivative LSTM trained on the same pairs (optional: slow on a CPU);
+- tracker-map: ours (learned/tracker_map.py).
+
+Columns: MSE (and as a ratio of raw), MSE per channel group, blink closure, jitter ratio
+(vs the truth's), lag in ms. Each is the mean over the fold's pairs, then over folds
+weighted by frames for MSE (plain means for the rest).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.animation import Animation
+from faceclean.channels import GROUPS
+from faceclean.evaluation import paired
+from faceclean.evaluation.metrics import summary
+from faceclean.evaluation.paired import Pair
+from faceclean.filters.base import Cleaner
+
+ONE_EURO_GRID = [(mc, b) for mc in (0.5, 1.0, 2.0, 4.0) for b in (0.0, 0.3, 1.0, 3.0)]
+Build = Callable[[Sequence[str]], Cleaner | None]  # names -> a cleaner (None: raw)
+Report = Callable[[str], None]
+
+
+def scores(build: Build, pairs: Sequence[Pair]) -> dict[str, float]:
+    """Mean measures of one cleaner over ``pairs``; MSE also per group."""
+    rows = []
+    sq = {g: [] for g in GROUPS}
+    for p in pairs:
+        cleaner = build(p.tracked.names)
+        out = p.tracked if cleaner is None else cleaner.clean(p.tracked)
+        s = summary(out, p.truth)
+        s["frames"] = int(out.valid.sum())
+        rows.append(s)
+        for g, members in GROUPS.items():
+            err = _group_err(out, p.truth, members)
+            if err is not None:
+                sq[g].append(err)
+    w = np.array([r["frames"] for r in rows], float)
+    res = {"mse": float(np.average([r["mse"] for r in rows], weights=w))}
+    for key in ("jitter_ratio", "lag_ms", "blink_closure"):
+        res[key] = float(np.nanmean([r[key] for r in rows]))
+    for g, errs in sq.items():
+        if errs:
+            res[f"mse_{g}"] = float(np.mean(errs))
+    res["pairs"] = len(rows)
+    res["frames"] = int(w.sum())
+    return res
+
+
+def _group_err(out: Animation, truth: Animation, members: Sequence[str]) -> float | None:
+    x, px = out.arkit(members)
+    y, _ = truth.arkit(members)
+    if not px.any():
+        return None
+    err = (x[:, px] - y[:, px]) ** 2
+    err = err[np.isfinite(err)]
+    return float(err.mean()) if err.size else None
+
+
+def tune_one_euro(train: Sequence[Pair]) -> tuple[float, float]:
+    """(min_cutoff Hz, beta) of the grid with the lowest training MSE."""
+    from faceclean.filters.one_euro import OneEuro
+
+    best = None
+    for mc, beta in ONE_EURO_GRID:
+        s = scores(lambda n, mc=mc, beta=beta: OneEuro(names=n, min_cutoff=mc, beta=beta), train)
+        if best is None or s["mse"] < best[0]:
+            best = (s["mse"], (mc, beta))
+    assert best is not None
+    return best[1]
+
+
+def evaluate(
+    folder: str | Path,
+    held_out: str = "window",
+    lstm: bool = False,
+    lstm_epochs: int = 6,
+    work: str | Path | None = None,
+    report: Report | None = None,
+) -> dict[str, Any]:
+    """Every fold of the pairs in ``folder``: {"folds": {group: {row: {split: scores}}},
+    "overall": {row: {split: scores}}, "pairs": counts}."""
+    from faceclean.filters.one_euro import OneEuro
+    from faceclean.learned.cleaner import Learned
+    from faceclean.learned.tracker_map import TrackerMap
+    from faceclean.neural import paired as paired_lstm
+    from faceclean.neural import tracker_map as fit
+
+    report = report or (lambda _s: None)
+    pairs = paired.load(folder, require_meta=True)
+    work = Path(work) if work else Path(folder) / ".eval"
+    work.mkdir(parents=True, exist_ok=True)
+    folds: dict[str, Any] = {}
+    for group in paired.groups(pairs):
+        train, test, held = paired.split(pairs, group, held_out)
+        if not train or not (test or held):
+            continue
+        inner_val = [p for p in train if p.group == _largest_other(train)]
+        inner_train = [p for p in train if p not in inner_val]
+        report(f"fold {group}: {len(train)} training pairs, {len(test)} + {len(held)} test")
+        mc, beta = tune_one_euro(train)
+        ridge = fit.fit_ridge(train)
+        mapped = fit.fit(inner_train, inner_val)
+        rows: dict[str, Build] = {
+            "raw": lambda n: None,
+            f"one-euro (tuned {mc:g} Hz, beta {beta:g})": lambda n, mc=mc, beta=beta: OneEuro(
+                names=n, min_cutoff=mc, beta=beta
+            ),
+            "ridge map": lambda n, w=ridge: TrackerMap(weights=w, names=n),
+        }
+        if lstm:
+            path = work / f"lstm-{group}.npz"
+            paired_lstm.train_lstm(inner_train, inner_val, path, epochs=lstm_epochs)
+            rows["paper LSTM on pairs"] = lambda n, path=path: Learned(model=path, names=n)
+        rows["tracker map (ours)"] = lambda n, w=mapped: TrackerMap(weights=w, names=n)
+        folds[group] = {
+            name: {"test": scores(b, test) if test else None,
+                   "held": scores(b, held) if held else None}
+            for name, b in rows.items()
+        }  # fmt: skip
+        report(f"fold {group}: " + _line(folds[group]))
+    return {"folds": folds, "overall": _overall(folds), "pairs": paired.summary_json(pairs)}
+
+
+def _largest_other(train: Sequence[Pair]) -> str:
+    """The training source with the most pairs: the inner validation set for early stops."""
+    counts: dict[str, int] = {}
+    for p in train:
+        counts[p.group] = counts.get(p.group, 0) + 1
+    return max(sorted(counts), key=counts.get)
+
+
+def _line(fold: dict) -> str:
+    raw = fold["raw"]["test"] or fold["raw"]["held"]
+    parts = []
+    for name, r in fold.items():
+        s = r["test"] or r["held"]
+        parts.append(f"{name.split(' (')[0]} {s['mse'] / raw['mse']:.2f}x")
+    return ", ".join(parts)
+
+
+def _overall(folds: dict) -> dict:
+    """Rows by name (the one-euro row's tuning dropped from its name), frame-weighted MSE."""
+    out: dict[str, dict] = {}
+    for fold in folds.values():
+        for name, splits in fold.items():
+            key = name.split(" (tuned")[0]
+            for split, s in splits.items():
+                if s is not None:
+                    out.setdefault(key, {}).setdefault(split, []).append(s)
+    table: dict[str, dict] = {}
+    for key, splits in out.items():
+        table[key] = {}
+        for split, ss in splits.items():
+            w = np.array([s["frames"] for s in ss], float)
+            agg = {"mse": float(np.average([s["mse"] for s in ss], weights=w))}
+            for k in ss[0]:
+                if k not in ("mse", "frames", "pairs"):
+                    agg[k] = float(np.nanmean([s.get(k, np.nan) for s in ss]))
+            agg["pairs"] = int(sum(s["pairs"] for s in ss))
+            table[key][split] = agg
+    return table

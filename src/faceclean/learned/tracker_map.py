@@ -1,0 +1,205 @@
+"""The tracker map: a learned cleaner for one tracker's output, trained on real pairs.
+
+A tracker such as MediaPipe does not only jitter: it under-reads blinks, reads channels
+at the wrong scale, mixes neighbours and sits off zero on a resting face. A filter cannot
+fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, input x
+(K,) in the model's input channels, dt s after the last frame:
+
+    u  = OneEuro(x)                     tuned pre-filter (min_cutoff, beta, d_cutoff), so
+                                        the map sees the tracker's signal, not its noise
+    r  = min(r, u)                      the stream's resting level so far (since reset)
+    z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
+    y  = clip(W2 tanh(W1 z + b1) + b2 + A u + c, 0, 1)                            (M,)
+
+``A u + c`` is a linear map over all inputs (with ``hidden`` 0, no pre-filter and no rest
+feature, exactly the per-channel ridge baseline); the hidden layer adds what is not
+linear (a blink read at 0.6 is a closed eye). The rest feature ``u - r`` lets it take each
+face's own resting reading off (identities differ more than any gain). Why this cannot
+invent motion: y is a function of (u, r) only; on a still face u converges and r is
+constant, so y converges and stays; a missing frame holds u and so y.
+
+Time rules are the pre-filter's (filters/base.py, via OneEuro): a missing frame repeats
+the last output, a gap restarts the filter (the rest level is kept: the same face came
+back). Input columns the model does not know pass through unchanged; model inputs the
+frame lacks are fed 0 (a tracker that never reads them); model outputs the frame has no
+column for (tongueOut for MediaPipe) are not written.
+
+Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "inputs": [K],
+"outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, ...facts}; arrays
+``min_cutoff``, ``beta``, ``d_cutoff`` (K,) Hz; ``mu``, ``sd`` (2K,); ``w1`` (H, 2K),
+``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``c`` (M,).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.channel_map import ChannelMap
+from faceclean.errors import FacecleanError
+from faceclean.filters.base import Cleaner
+from faceclean.filters.one_euro import OneEuro
+from faceclean.learned import formats
+from faceclean.learned.formats import TRACKER_MAP as FORMAT
+
+MAX_WIDTH = 4096
+
+
+@dataclass(frozen=True)
+class MapWeights:
+    """A tracker map's config and arrays (float64), validated."""
+
+    config: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return tuple(self.config["inputs"])
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return tuple(self.config["outputs"])
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MapWeights:
+        config, arrays = formats.read(path)
+        return cls.build(config, arrays, Path(path).name)
+
+    @classmethod
+    def build(cls, config: dict, arrays: dict, label: str = "tracker map") -> MapWeights:
+        if config.get("format") != FORMAT:
+            raise FacecleanError(f"{label}: not a {FORMAT} model")
+        try:
+            k, m = len(config["inputs"]), len(config["outputs"])
+            h = int(config["hidden"])
+            names_ok = all(isinstance(n, str) for n in [*config["inputs"], *config["outputs"]])
+        except (KeyError, TypeError, ValueError):
+            raise FacecleanError(f"{label}: config lacks inputs, outputs or hidden") from None
+        if not (names_ok and 1 <= k <= MAX_WIDTH and 1 <= m <= MAX_WIDTH and 0 <= h <= MAX_WIDTH):
+            raise FacecleanError(f"{label}: bad inputs/outputs/hidden in config")
+        if len(set(config["inputs"])) != k or len(set(config["outputs"])) != m:
+            raise FacecleanError(f"{label}: channel names repeat")
+        shapes = {
+            "min_cutoff": (k,),
+            "beta": (k,),
+            "d_cutoff": (k,),
+            "mu": (2 * k,),
+            "sd": (2 * k,),
+            "w1": (h, 2 * k),
+            "b1": (h,),
+            "w2": (m, h),
+            "b2": (m,),
+            "a": (m, k),
+            "c": (m,),
+        }
+        out = {}
+        for key, shape in shapes.items():
+            a = arrays.get(key)
+            if a is None or tuple(np.shape(a)) != shape or not np.issubdtype(a.dtype, np.number):
+                raise FacecleanError(f"{label}: array {key!r} missing or not of shape {shape}")
+            a = np.asarray(a, np.float64)
+            if not np.isfinite(a).all():
+                raise FacecleanError(f"{label}: array {key!r} is not finite")
+            out[key] = a
+        if (out["sd"] <= 0).any() or (out["min_cutoff"] <= 0).any() or (out["d_cutoff"] <= 0).any():
+            raise FacecleanError(f"{label}: scales and cut-offs must be > 0")
+        if (out["beta"] < 0).any():
+            raise FacecleanError(f"{label}: beta must be >= 0")
+        return cls(dict(config), out)
+
+    def save(self, path: str | os.PathLike) -> None:
+        from faceclean.io.atomic import atomic_open
+
+        with atomic_open(path, "wb") as f:
+            np.savez(f, config=np.array(json.dumps(self.config)), **self.arrays)
+
+
+class TrackerMap(Cleaner):
+    """Tracker map cleaner (module docstring). ``min_cutoff``/``beta``/``d_cutoff`` (Hz)
+    replace the model's pre-filter settings (scalars, or one per model input)."""
+
+    name = "tracker-map"
+    PER_CHANNEL = ()
+
+    def __init__(
+        self,
+        *,
+        model: str | os.PathLike | None = None,
+        weights: MapWeights | None = None,
+        min_cutoff: float | Sequence[float] | None = None,
+        beta: float | Sequence[float] | None = None,
+        d_cutoff: float | Sequence[float] | None = None,
+        names: Sequence[str] | None = None,
+    ) -> None:
+        if weights is None:
+            if model is None:
+                raise FacecleanError("tracker-map needs a model file (--model FILE.npz)")
+            weights = MapWeights.load(model)
+        self.weights = w = weights
+        self.names = tuple(names) if names is not None else w.inputs
+        a = w.arrays
+        self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
+        self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
+        self.prefilter = bool(w.config.get("prefilter", True))
+        self.rest = bool(w.config.get("rest", True))
+        pre = {"min_cutoff": a["min_cutoff"], "beta": a["beta"], "d_cutoff": a["d_cutoff"]}
+        for key, value in (("min_cutoff", min_cutoff), ("beta", beta), ("d_cutoff", d_cutoff)):
+            if value is not None:
+                pre[key] = value
+        pre = {k: np.asarray(v, np.float64).tolist() for k, v in pre.items()}
+        self._filter = OneEuro(names=w.inputs, **pre)
+        self._hidden = int(w.config["hidden"]) > 0
+        self.reset()
+
+    def reset(self) -> None:
+        self._filter.reset()
+        self._r: np.ndarray | None = None  # (S, K) resting level so far
+        self._last: np.ndarray | None = None  # (S, K) last frame (no pre-filter)
+        self._y: np.ndarray | None = None  # (S, M) last output
+
+    def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+        x = np.array(frame, dtype=np.float64, ndmin=1)
+        single = x.ndim == 1
+        x = x.reshape(1, -1) if single else x
+        k = len(self.weights.inputs)
+        xi = np.zeros((len(x), k))
+        xi[:, self._in.have] = x[:, self._in.cols]  # (S, K); absent inputs read 0
+        missing_in = np.isnan(x).all(axis=1)
+        xi[missing_in] = np.nan  # a missing frame stays missing for the pre-filter
+        u = self._filter.step(xi, t) if self.prefilter else self._raw(xi)
+        y = self._map(u)
+        out = x.copy()
+        out[:, self._out.cols] = y[:, self._out.have]
+        if self._y is not None and self._y.shape == out.shape:  # rule 1: the last output
+            out[missing_in] = self._y[missing_in]
+        self._y = out.copy()
+        return out[0] if single else out
+
+    def _raw(self, xi: np.ndarray) -> np.ndarray:
+        """No pre-filter (the ridge baseline): the frame itself, a missing one held."""
+        last = self._last
+        ok = ~np.isnan(xi).all(axis=1)
+        if last is None or last.shape != xi.shape:
+            last = np.full_like(xi, np.nan)
+        last = np.where(ok[:, None], np.nan_to_num(xi), last)
+        self._last = last
+        return last.copy()
+
+    def _map(self, u: np.ndarray) -> np.ndarray:
+        """(S, K) filtered inputs -> (S, M) outputs; rows not started yet stay NaN."""
+        a = self.weights.arrays
+        if self._r is None or self._r.shape != u.shape:
+            self._r = np.full_like(u, np.nan)
+        self._r = np.fmin(self._r, u)  # NaN-aware: the first value starts it
+        lin = u @ a["a"].T + a["c"]
+        if self._hidden:
+            rest = (u - self._r) if self.rest else np.zeros_like(u)
+            z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
+            lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
+        return np.clip(lin, 0.0, 1.0)

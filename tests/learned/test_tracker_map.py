@@ -1,0 +1,106 @@
+"""The tracker map: a learned level map behind a tuned pre-filter, streaming per frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceclean.animation import Animation
+from faceclean.errors import FacecleanError
+from faceclean.learned.formats import TRACKER_MAP
+from faceclean.learned.tracker_map import MapWeights, TrackerMap
+
+NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
+
+
+def weights(hidden=4, seed=0, prefilter=True, rest=True) -> MapWeights:
+    rng = np.random.default_rng(seed)
+    k = len(NAMES)
+    arrays = {
+        "min_cutoff": np.full(k, 1.5),
+        "beta": np.full(k, 0.5),
+        "d_cutoff": np.full(k, 1.0),
+        "mu": np.zeros(2 * k),
+        "sd": np.ones(2 * k),
+        "w1": rng.normal(0, 1, (hidden, 2 * k)),
+        "b1": rng.normal(0, 0.1, hidden),
+        "w2": rng.normal(0, 0.2, (k, hidden)),
+        "b2": np.zeros(k),
+        "a": np.eye(k) * 1.3,
+        "c": np.full(k, -0.05),
+    }
+    config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
+              "hidden": hidden, "prefilter": prefilter, "rest": rest}  # fmt: skip
+    return MapWeights.build(config, arrays)
+
+
+def take(n=120, fps=30.0, seed=1) -> Animation:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fps
+    x = (
+        0.3
+        + 0.2 * np.sin(2 * np.pi * 0.7 * t[:, None] + np.arange(3))
+        + rng.normal(0, 0.02, (n, 3))
+    )
+    return Animation(t, np.clip(x, 0, 1), NAMES)
+
+
+def test_clean_equals_stepping_and_streams_together():
+    a = take()
+    tm = TrackerMap(weights=weights())
+    cleaned = tm.clean(a).values
+    tm.reset()
+    stepped = np.array([tm.step(a.values[i], a.times[i]) for i in range(a.n_frames)])
+    np.testing.assert_allclose(cleaned, stepped, atol=1e-12)
+    tm.reset()  # two streams stepped together give each stream's own result
+    both = np.array([tm.step(np.stack([a.values[i]] * 2), np.array([a.times[i]] * 2))
+                     for i in range(a.n_frames)])  # fmt: skip
+    np.testing.assert_allclose(both[:, 1], stepped, atol=1e-12)
+
+
+def test_a_still_face_stays_still():
+    t = np.arange(300) / 30.0
+    x = np.tile([0.12, 0.1, 0.05], (300, 1))
+    y = TrackerMap(weights=weights()).clean(Animation(t, x, NAMES)).values
+    assert np.ptp(y[5:], axis=0).max() < 1e-9  # constant in, constant out: no invented motion
+    assert np.all((y >= 0) & (y <= 1))
+
+
+def test_levels_change_where_a_filter_cannot():
+    a = take()
+    y = TrackerMap(weights=weights(hidden=0, prefilter=False)).clean(a).values
+    np.testing.assert_allclose(y, np.clip(1.3 * a.values - 0.05, 0, 1), atol=1e-12)
+
+
+def test_missing_frames_hold_and_unknown_columns_pass_through():
+    a = take(20)
+    names = (*NAMES, "HeadYaw")
+    values = np.concatenate([a.values, np.linspace(0, 1, 20)[:, None]], axis=1)
+    values[10] = np.nan
+    out = TrackerMap(weights=weights()).clean(Animation(a.times, values, names)).values
+    assert np.isnan(out[10]).all()  # a missing frame stays missing in a clip
+    np.testing.assert_array_equal(
+        out[:, 3][~np.isnan(out[:, 3])], values[:, 3][~np.isnan(values[:, 3])]
+    )
+    tm = TrackerMap(weights=weights(), names=names)
+    y9 = [tm.step(values[i], a.times[i]) for i in range(10)][-1]
+    np.testing.assert_array_equal(tm.step(values[10], a.times[10]), y9)  # stepped: held
+
+
+def test_a_checkpoint_round_trips_and_bad_ones_are_refused(tmp_path):
+    w = weights()
+    path = tmp_path / "m.npz"
+    w.save(path)
+    a = take()
+    np.testing.assert_array_equal(
+        TrackerMap(model=path).clean(a).values, TrackerMap(weights=w).clean(a).values
+    )
+    bad = dict(w.arrays)
+    bad["w1"] = bad["w1"][:, :2]
+    with pytest.raises(FacecleanError, match="w1"):
+        MapWeights.build(w.config, bad)
+    with pytest.raises(FacecleanError, match="repeat"):
+        MapWeights.build({**w.config, "inputs": ["jawOpen"] * 3}, w.arrays)
+    nan = dict(w.arrays, c=np.array([np.nan, 0, 0]))
+    with pytest.raises(FacecleanError, match="not finite"):
+        MapWeights.build(w.config, nan)

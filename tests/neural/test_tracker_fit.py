@@ -1,0 +1,81 @@
+"""Fitting the tracker map on pairs: ridge recovers a linear map, the hidden layer what is
+not linear, and ``train --pairs`` writes a model ``clean --model`` runs."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+from faceclean import io
+from faceclean.animation import Animation
+from faceclean.evaluation import paired
+from faceclean.evaluation.performer import perform
+from faceclean.learned.tracker_map import TrackerMap
+from faceclean.neural import tracker_map as fit
+
+NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen", "mouthSmileLeft")
+
+
+def pairs(n, seed, tracker):
+    out = []
+    for k in range(n):
+        truth = perform(8.0, seed + k, fps=30.0)
+        y = np.stack([truth.channel(c) for c in NAMES], axis=1)
+        x = tracker(y)
+        group = f"g{k % 2}"
+        out.append(paired.Pair(f"p{k}", Animation(truth.times, x, NAMES),
+                               Animation(truth.times, y, NAMES), group, "studio"))  # fmt: skip
+    return out
+
+
+def test_ridge_recovers_a_gain_and_offset():
+    train = pairs(3, 0, lambda y: 0.6 * y + 0.05)
+    w = fit.fit_ridge(train)
+    test = pairs(1, 50, lambda y: 0.6 * y + 0.05)[0]
+    out = TrackerMap(weights=w, names=NAMES).clean(test.tracked).values
+    np.testing.assert_allclose(out, test.truth.arkit(NAMES)[0], atol=2e-3)
+
+
+def test_the_hidden_layer_learns_what_a_linear_map_cannot():
+    squash = lambda y: np.sqrt(y) * 0.7  # noqa: E731 - a tracker that reads every level too high
+    train, val = pairs(4, 0, squash), pairs(2, 20, squash)
+    test = pairs(2, 40, squash)
+
+    def mse(w):
+        errs = []
+        for p in test:
+            out = TrackerMap(weights=w, names=NAMES).clean(p.tracked).values
+            errs.append(np.mean((out - p.truth.arkit(NAMES)[0]) ** 2))
+        return float(np.mean(errs))
+
+    ridge = fit.fit_ridge(train)
+    mapped = fit.fit(train, val, hidden=16, epochs=40, prefilters=[(30.0, 0.0, 1.0)])
+    raw = float(np.mean([np.mean((p.tracked.values - p.truth.values) ** 2) for p in test]))
+    assert mse(ridge) < raw
+    assert mse(mapped) < 0.5 * mse(ridge)
+
+
+def test_train_pairs_writes_a_model_that_cleans(tmp_path):
+    folder = tmp_path / "pairs"
+    folder.mkdir()
+    for p in pairs(4, 0, lambda y: 0.7 * y + 0.03):
+        io.save(p.tracked, folder / f"{p.name}.raw.csv")
+        io.save(p.truth, folder / f"{p.name}.clean.csv")
+    model = tmp_path / "m.npz"
+    cli = [sys.executable, "-m", "faceclean"]
+    r = subprocess.run([*cli, "train", "--pairs", str(folder), "--arch", "ridge", "--out",
+                        str(model)], capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "o.csv"
+    r = subprocess.run([*cli, "clean", str(folder / "p0.raw.csv"), "-o", str(out), "--model",
+                        str(model)], capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    cleaned = io.load(out).arkit(NAMES)[0]
+    truth = io.load(folder / "p0.clean.csv").arkit(NAMES)[0]
+    np.testing.assert_allclose(cleaned, truth, atol=2e-3)
+    r = subprocess.run([*cli, "train", "--pairs", str(tmp_path / "none"), "--out",
+                        str(model)], capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 2 and "no such folder of pairs" in r.stderr
+    assert "Traceback" not in r.stderr
