@@ -37,9 +37,9 @@ def test_overrides_change_exactly_the_named_channels():
     touched = {ARKIT52[j] for j in np.flatnonzero(np.any((x != y) & ~np.isnan(x), axis=0))}
     assert touched == {"eyeBlinkLeft", "eyeBlinkRight", "tongueOut", "jawOpen"}
     j = INDEX["eyeBlinkLeft"]
-    np.testing.assert_allclose(y[:, j], 1.2 * x[:, j])
+    np.testing.assert_allclose(y[:, j], np.minimum(1.2 * x[:, j], 1.0))  # clamped: issue 19
     assert np.all(y[~np.isnan(x[:, 51]), 51] == 0.0)
-    np.testing.assert_allclose(y[:, INDEX["jawOpen"]], x[:, INDEX["jawOpen"]] - 0.1)
+    np.testing.assert_allclose(y[:, INDEX["jawOpen"]], np.maximum(x[:, INDEX["jawOpen"]] - 0.1, 0))
     assert np.array_equal(np.isnan(y), np.isnan(x))  # NaN stays NaN, off included
 
 
@@ -119,5 +119,5 @@ def test_extreme_levels_and_glitch_values_never_warn(recwarn):
     a = Adjust.from_overrides([("jawOpen", "gain", 1e3), ("jawOpen", "curve", 100)])
     x = np.array([[1e6, 0.5], [0.5, 0.5], [np.nan, 0.5]])
     y = a.apply(x, ("jawOpen", "mouthClose"))
-    assert np.isposinf(y[0, 0]) and np.isnan(y[2, 0]) and list(y[:, 1]) == [0.5] * 3
+    assert y[0, 0] == 1.0 and np.isnan(y[2, 0]) and list(y[:, 1]) == [0.5] * 3
     assert not recwarn.list

@@ -2769,7 +2769,7 @@ def test_relay_absurd_stats_interval_is_refused(value):
         pytest.param(["--send", "vmc://127.0.0.1:9?names=yell"], id="send-bad-names"),
         pytest.param(["--method", "gaussian"], id="offline-method"),
         pytest.param(["--method", "savgol"], id="offline-savgol"),
-        pytest.param(["--set", "beta=1"], id="set-without-method"),
+        pytest.param(["--set", "tau=1"], id="set-without-method"),  # beta: One Euro's, valid
         pytest.param(["--method", "one-euro", "--set", "beta=1e999"], id="set-inf"),
         pytest.param(
             ["--method", "one-euro", "--set", "beta=" + "9" * 400],

@@ -2,13 +2,19 @@
 
 One equation per channel (x the tracker value, y what the cleaner sees)::
 
+    x = scale * x                      # --scale (e.g. 0.01 for a take in percent)
     u = gain * (x - offset)            # zero point and scale
     u = sign(u) * |u| ** curve         # exponent: curve < 1 lifts small values, > 1 damps them
-    y = clip(u, lo, hi)                # clamp = (lo, hi); no clamp unless one is set
+    y = clip(u, lo, hi)                # clamp = (lo, hi); [0, 1] unless one is set
     y = 0  where the channel is off    # muted (a missing frame, NaN, stays NaN)
 
-The identity (gain 1, offset 0, curve 1, no clamp, on) leaves a channel bit-for-bit
-unchanged: the arithmetic is skipped for it, not merely neutral.
+Levels stay in ARKit's range: a channel whose gain, offset, curve or scale is not the
+identity is clamped to [0, 1] after its mapping (``eyeBlink*.gain=1.2`` reads 1.0 at
+full closure, not 1.09). A calibrated overshoot is asked for explicitly: ``clamp=0,1.2``
+(that range), or ``clamp=none`` (no clamp at all; written ``"clamp": false`` in the file).
+
+The identity (scale 1, gain 1, offset 0, curve 1, no rule, on) leaves a channel
+bit-for-bit unchanged: the arithmetic is skipped for it, not merely neutral.
 
 Rules are (pattern, key, value) with key in ``MAP_KEYS``. A pattern is a channel name in
 any spelling ``faceclean.channels`` accepts (``eyeBlinkLeft``, ``EyeBlink_L``), a glob on
@@ -39,14 +45,17 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, GROUPS, channel_key
+from faceclean.channels import ARKIT52, GROUPS, canonical, channel_key
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner
+from faceclean.filters.base import MAX_ABS, Cleaner
 
 MAP_KEYS: tuple[str, ...] = ("gain", "offset", "curve", "clamp", "off")
 FORMAT = "faceclean-adjust/1"
 MAX_LEVEL = 1e3  # |gain|, |offset| at most this (weights live in [0, 1])
 MAX_CURVE = 100.0  # curve exponent in (0, MAX_CURVE]
+RANGE = (0.0, 1.0)  # ARKit's range: the clamp of every channel a rule touches, unless set
+FAR = 1.5  # a take whose values' 99th percentile is beyond this is not in [0, 1] at all
+NO_CLAMP = (-math.inf, math.inf)  # clamp=none
 Rule = tuple[str, str, Any]  # (pattern, key, value), value already validated
 
 
@@ -69,6 +78,7 @@ class Adjust:
 
     rules: tuple[Rule, ...] = ()
     facts: dict[str, Any] = field(default_factory=dict)  # calibration facts, for describe()
+    scale: float = 1.0  # every value times this first (--scale; not part of the file)
 
     # -- building ---------------------------------------------------------------------------
     @classmethod
@@ -128,7 +138,9 @@ class Adjust:
         patterns first appear; a key set twice for one pattern keeps its last value."""
         chans: dict[str, dict[str, Any]] = {}
         for pattern, key, value in self.rules:
-            chans.setdefault(pattern, {})[key] = list(value) if key == "clamp" else value
+            if key == "clamp":
+                value = False if value == NO_CLAMP else list(value)
+            chans.setdefault(pattern, {})[key] = value
         out: dict[str, Any] = {"format": FORMAT, "channels": chans}
         if self.facts:
             out["calibration"] = self.facts
@@ -141,20 +153,30 @@ class Adjust:
 
     def merged(self, other: Adjust) -> Adjust:
         """This mapping with ``other``'s rules on top (other wins where both set a key)."""
-        return Adjust(self.rules + other.rules, {**self.facts, **other.facts})
+        scale = other.scale if other.scale != 1.0 else self.scale
+        return Adjust(self.rules + other.rules, {**self.facts, **other.facts}, scale)
+
+    def scaled(self, scale: float) -> Adjust:
+        """This mapping after every value is multiplied by ``scale`` (``--scale``)."""
+        if not math.isfinite(scale) or scale <= 0:
+            raise FacecleanError(f"--scale must be a finite number > 0 (got {scale:g})")
+        return Adjust(self.rules, self.facts, float(scale))
 
     # -- using ------------------------------------------------------------------------------
     @property
     def is_identity(self) -> bool:
-        return not self.rules
+        return not self.rules and self.scale == 1.0
 
     def levels(self, names: Sequence[str]) -> Levels:
         """The mapping for columns ``names`` (M,)."""
         m = len(names)
         gain, offset, curve = np.ones(m), np.zeros(m), np.ones(m)
         lo, hi, off = np.full(m, -np.inf), np.full(m, np.inf), np.zeros(m, bool)
+        touched, clamped = np.zeros(m, bool), np.zeros(m, bool)
         for pattern, key, value in self.rules:
             cols = [j for j, n in enumerate(names) if matches(pattern, n)]
+            touched[cols] = True
+            clamped[cols] |= key == "clamp"
             if key == "gain":
                 gain[cols] = value
             elif key == "offset":
@@ -165,14 +187,22 @@ class Adjust:
                 lo[cols], hi[cols] = value
             else:
                 off[cols] = value
-        ident = (gain == 1.0) & (offset == 0.0) & (curve == 1.0) & np.isneginf(lo) & np.isposinf(hi)
+        if self.scale != 1.0:  # blendshape columns only (never a head angle's degrees)
+            arkit = np.array([canonical(n) is not None for n in names], dtype=bool)
+            touched |= arkit
+            gain[arkit] *= self.scale  # gain (s x - offset) = gain s (x - offset / s)
+            offset[arkit] /= self.scale
+        moves = (gain != 1.0) | (offset != 0.0) | (curve != 1.0)
+        default = touched & moves & ~clamped  # a level step, no clamp asked: ARKit's range
+        lo[default], hi[default] = RANGE
+        ident = ~moves & np.isneginf(lo) & np.isposinf(hi)
         active = np.flatnonzero(~ident | off)
         return Levels(gain, offset, curve, lo, hi, off, active)
 
     def apply(self, values: np.ndarray, names: Sequence[str]) -> np.ndarray:
         """Mapped values, same shape as ``values`` ((N, M) or (M,)); NaN stays NaN."""
         x = np.asarray(values, dtype=np.float64)
-        if not self.rules:
+        if self.is_identity:
             return x.copy()
         return apply_levels(self.levels(names), x)
 
@@ -191,9 +221,29 @@ class Adjust:
                 f"calibrated from {src}: {facts.get('frames', '?')} frames, "
                 f"neutral {facts.get('neutral_s', '?')} s; "
                 f"{len(facts.get('moved', []))} channels moved, "
-                f"{len(facts.get('lifted', []))} lifted (weak tracker channels)"
+                f"{len(facts.get('lifted', []))} lifted to their top"
             )
         return lines or ["identity (no level mapping)"]
+
+
+def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
+    """FacecleanError (one line, with the fix) when ``values`` (N, M) of ARKit-named
+    columns are far outside [0, 1] as a whole: their 99th percentile of |value| beyond
+    FAR (a take in percent reads 7.5, not 0.075). A rare glitch does not count; the
+    caller skips this when the user gave ``--scale``."""
+    cols = [j for j, n in enumerate(names) if canonical(n) is not None]
+    x = np.abs(np.asarray(values, dtype=np.float64)[..., cols])
+    x = x[x <= MAX_ABS]  # finite, and no absurd glitch (filters/base.py rule 2)
+    if not x.size:
+        return
+    high = float(np.percentile(x, 99))
+    if high > FAR:
+        guess = 0.01 if high <= 100.0 * FAR else 10.0 ** -math.ceil(math.log10(high))
+        raise FacecleanError(
+            f"{where}: blendshape values reach {high:.3g} (99th percentile), far outside "
+            f"ARKit's [0, 1] (percentages?): add --scale {guess:g}, or --scale 1 to clean "
+            "them as they are"
+        )
 
 
 def is_level_file(path: str | os.PathLike) -> bool:
@@ -243,6 +293,8 @@ def _checked(key: str, value: object, where: str) -> Any:
             return False
         raise FacecleanError(f"{where}: expected true or false, got {value!r}")
     if key == "clamp":
+        if value is False or value is None or str(value).strip().lower() in ("none", "off"):
+            return NO_CLAMP  # clamp=none: a calibrated overshoot, unbounded
         pair = value
         if isinstance(value, str):
             pair = value.replace("[", "").replace("]", "").split(",")
@@ -270,7 +322,7 @@ def _show(key: str, value: Any) -> str:
     if key == "off":
         return "off" if value else "on"
     if key == "clamp":
-        return f"clamp [{value[0]:g}, {value[1]:g}]"
+        return "no clamp" if value == NO_CLAMP else f"clamp [{value[0]:g}, {value[1]:g}]"
     return f"{key} {value:.4g}"
 
 

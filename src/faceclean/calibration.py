@@ -8,13 +8,21 @@ shorter) and, optionally, a range-of-motion pass after it. Per ARKit channel pre
     top     = HIGH-th percentile over the whole take           (robust: not the maximum)
     moved   = top - neutral > max(MOVE_MIN, NOISE_K * noise)
 
-    moved:    offset = neutral, gain = 1 / (top - neutral)  (top maps to 1; at most MAX_GAIN)
-    unmoved:  offset = neutral, gain = 1 / (1 - neutral)    (1 still maps to 1)
+    lifted:   offset = neutral, gain = 1 / (top - neutral)  (top maps to 1; at most MAX_GAIN)
+    else:     offset = neutral, gain = 1 / (1 - neutral)    (1 still maps to 1)
     neutral >= 0.5 and unmoved: the identity (a resting level that high is not trusted)
     always:   curve 1, clamp [0, 1]
 
-So neutral maps to 0 and the observed top to 1; a channel a tracker never lifts above a
-few hundredths (MediaPipe's eyeWide, cheekSquint, noseSneer) gets the gain that lifts it.
+A moved channel is lifted only with evidence that its top is the channel's full range
+(issue 19: an iPhone take's real 0.08 jawLeft peak was lifted to 1.0, gain 17):
+- ``rom=True``: the take after the neutral hold is a range-of-motion pass, every
+  expression as far as it goes (``calibrate --rom``): every moved channel is lifted;
+- a tracker profile (``channels.TRACKERS``, ``calibrate --tracker mediapipe``) names the
+  channels that tracker under-reads (MediaPipe's eyeWide, cheekSquint, noseSneer): those
+  are lifted. The default profile, ``arkit``, names none.
+Otherwise the neutral is subtracted and the range kept: a small real movement stays small.
+The gain is capped at MAX_GAIN (noise is lifted with the signal); ``faceclean calibrate``
+prints every channel whose gain exceeds REPORT_GAIN.
 
 Eyelids (eyeBlinkLeft/Right) are blink-aware: their neutral is open (the median of the
 hold, which brief blinks do not move), and their top is not a percentile of all frames
@@ -35,7 +43,7 @@ import numpy as np
 
 from faceclean.adjust import Adjust, apply_levels
 from faceclean.animation import Animation
-from faceclean.channels import ARKIT52
+from faceclean.channels import ARKIT52, DEFAULT_TRACKER, TRACKERS
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import Cleaner
 
@@ -43,8 +51,8 @@ NEUTRAL_S = 1.0  # s, default neutral hold at the start of the take
 HIGH = 99.5  # percentile taken as a channel's top
 MOVE_MIN = 0.01  # a channel whose top is within this of neutral did not move
 NOISE_K = 6.0  # ... nor one within this many noise standard deviations
-LIFTED = 0.2  # a moved channel whose top is below this is a weak tracker channel, lifted
-MAX_GAIN = 50.0  # lifts a channel that peaks at 0.02 to 1, not more
+MAX_GAIN = 10.0  # lifts a channel that peaks at 0.1 over neutral to 1, not more
+REPORT_GAIN = 2.0  # the calibrate command names every channel with a gain above this
 BLINKS = ("eyeBlinkLeft", "eyeBlinkRight")
 BLINK_RISE = 0.25  # a blink rises at least this far above the open eye
 BLINK_Q = 25.0  # percentile of the blink peaks taken as full closure
@@ -57,14 +65,23 @@ def calibrate(
     *,
     tops: Mapping[str, float] | None = None,
     take: str | None = None,
+    rom: bool = False,
+    tracker: str = DEFAULT_TRACKER,
 ) -> Adjust:
     """The mapping of the module docstring for ``anim``'s ARKit channels.
 
     ``tops`` (canonical name -> top) replaces the tops measured here: a live neutral
-    re-measured on top of an earlier full calibration keeps that calibration's range.
+    re-measured on top of an earlier full calibration keeps that calibration's range
+    (that calibration's evidence: those channels are lifted to the tops given).
+    ``rom``: the take holds a range of motion; ``tracker``: a ``channels.TRACKERS`` name.
     """
     if not neutral_s > 0:
         raise FacecleanError(f"calibration: the neutral hold must be > 0 s (got {neutral_s})")
+    if tracker not in TRACKERS:
+        raise FacecleanError(
+            f"calibration: unknown tracker {tracker!r} (known: {', '.join(TRACKERS)})"
+        )
+    weak = set(TRACKERS[tracker])
     values, present = anim.arkit()  # (N, 52), NaN rows for missing frames
     valid = anim.valid
     present &= np.isfinite(values).any(axis=0)  # a column without one value is absent
@@ -89,13 +106,18 @@ def calibrate(
             continue
         n = float(neutral[i])
         hi = _blink_top(x[:, i], n) if name in BLINKS else float(top[i])  # None: no blink
-        if tops is not None and name in tops:
-            hi = float(tops[name])
+        given = tops is not None and name in tops
+        if given:
+            hi = float(tops[name])  # type: ignore[index]
         offset = n
-        if hi is not None and hi - n > max(MOVE_MIN, NOISE_K * float(noise[i])):
-            gain = min(1.0 / (hi - n), MAX_GAIN)  # the observed range onto [0, 1]
+        moves = hi is not None and hi - n > max(MOVE_MIN, NOISE_K * float(noise[i]))
+        if moves:
             moved.append(name)
-            if hi < LIFTED:
+        # evidence that the top is the full range: blinks seen, a range of motion, the
+        # tracker's profile, or an earlier calibration's top
+        if moves and (name in BLINKS or rom or name in weak or given):
+            gain = min(1.0 / (hi - n), MAX_GAIN)  # the observed range onto [0, 1]
+            if hi - n < 1.0 - n - 1e-9 and name not in BLINKS:
                 lifted.append(name)
         elif n < 0.5:
             gain, hi = 1.0 / (1.0 - n), 1.0  # unmoved: [neutral, 1] onto [0, 1]
@@ -103,16 +125,32 @@ def calibrate(
             offset, gain, hi = 0.0, 1.0, 1.0  # a "neutral" this high is no neutral: identity
         rules += [(name, "offset", offset), (name, "gain", gain)]
         rules += [(name, "curve", 1.0), (name, "clamp", (0.0, 1.0))]
-        chans[name] = {"neutral": _r(n), "noise": _r(float(noise[i])), "top": _r(hi)}
+        chans[name] = {
+            "neutral": _r(n), "noise": _r(float(noise[i])), "top": _r(hi), "gain": _r(gain)
+        }  # fmt: skip
     facts = {
         "take": take,
         "frames": int(valid.sum()),
         "neutral_s": float(min(neutral_s, t[-1] - t[0])),
+        "tracker": tracker,
+        "rom": bool(rom),
         "moved": moved,
         "lifted": lifted,
         "channels": chans,
     }
     return Adjust(tuple(rules), facts)
+
+
+def high_gains(adjust: Adjust, above: float = REPORT_GAIN) -> list[tuple[str, float, float]]:
+    """(channel, gain, top) of every calibrated channel whose gain exceeds ``above``."""
+    lv = adjust.levels(ARKIT52)
+    chans = adjust.facts.get("channels", {})
+    out = []
+    for i, name in enumerate(ARKIT52):
+        if lv.gain[i] > above:
+            top = chans.get(name, {}).get("top") if isinstance(chans.get(name), dict) else None
+            out.append((name, float(lv.gain[i]), float("nan") if top is None else float(top)))
+    return out
 
 
 def tops_of(adjust: Adjust) -> dict[str, float]:

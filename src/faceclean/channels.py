@@ -30,6 +30,19 @@ INDEX: dict[str, int] = {n: i for i, n in enumerate(ARKIT52)}
 # MediaPipe's face blendshapes: ARKit names without tongueOut, plus "_neutral".
 MEDIAPIPE: tuple[str, ...] = ("_neutral",) + ARKIT52[:-1]
 
+# Tracker profiles (``calibrate --tracker``): the channels a tracker is known to under-read
+# (they never pass a few hundredths), which calibration may lift to their observed top
+# without a range-of-motion clip. ARKit (iPhone, Live Link Face) reads every channel's
+# full range: a small peak there is a small real movement, never lifted on its own.
+TRACKERS: dict[str, tuple[str, ...]] = {
+    "arkit": (),
+    "mediapipe": (
+        "eyeWideLeft", "eyeWideRight", "cheekSquintLeft", "cheekSquintRight",
+        "noseSneerLeft", "noseSneerRight",
+    ),
+}  # fmt: skip
+DEFAULT_TRACKER = "arkit"
+
 # Groups used for per-group tuning and for the report's figures.
 GROUPS: dict[str, tuple[str, ...]] = {
     "eyes": tuple(n for n in ARKIT52 if n.startswith("eye")),

@@ -114,7 +114,8 @@ def test_level_overrides_on_the_command_line_change_exactly_the_named_channels(t
     changed = {ARKIT52[j] for j in np.flatnonzero(np.any(a != b, axis=0))}
     assert changed == {"eyeBlinkLeft", "eyeBlinkRight", "tongueOut", "jawOpen"}
     assert np.all(b[:, INDEX["tongueOut"]] == 0.0) and b[:, INDEX["jawOpen"]].max() <= 0.2
-    np.testing.assert_allclose(b[:, INDEX["eyeBlinkLeft"]], 1.5 * a[:, INDEX["eyeBlinkLeft"]])
+    j = INDEX["eyeBlinkLeft"]  # lifted, and clamped to [0, 1] before the cleaner (issue 19)
+    assert b[:, j].max() <= 1.0 and b[:, j].mean() > 1.2 * a[:, j].mean()
 
 
 def test_level_overrides_stream_a_livelink_file_like_the_whole_file_path(tmp_path):

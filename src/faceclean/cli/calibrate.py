@@ -2,11 +2,12 @@
 
 Record a short take: hold a neutral face for the first second (blinking is fine), then,
 optionally, move through each expression as far as it goes (range of motion). The file
-maps every channel's neutral to 0 and its observed top to 1 (gain, offset, curve 1,
-clamp [0, 1]); eyelids stay blink-aware, channels the take never moves keep a safe
-near-identity mapping, and weak tracker channels (MediaPipe's eyeWide, cheekSquint,
-noseSneer, which never pass a few hundredths) get the gain that lifts them. Use it with
-``clean --calibration``, ``relay --calibration`` and ``info --calibration``; the
+maps every channel's neutral to 0 (gain, offset, curve 1, clamp [0, 1]) and keeps its
+range, lifting a channel's observed top to 1 only with evidence: ``--rom`` (the take is a
+range of motion: every moved channel is lifted) or ``--tracker mediapipe`` (the channels
+that tracker under-reads: eyeWide, cheekSquint, noseSneer). Eyelids stay blink-aware.
+Gains are capped (calibration.MAX_GAIN) and every gain above 2 is printed. Use the file
+with ``clean --calibration``, ``relay --calibration`` and ``info --calibration``; the
 equations are in faceclean.calibration.
 """
 
@@ -15,18 +16,21 @@ from __future__ import annotations
 import argparse
 
 from faceclean.calibration import NEUTRAL_S
+from faceclean.cli import options
 
 HELP = "measure a per-channel level mapping (neutral, range) from a short take"
 EPILOG = """\
 record a take: hold a neutral face for the first second (blinking is fine), then,
 optionally, move through each expression as far as it goes. Then:
-  faceclean calibrate rom.csv -o calib.json
+  faceclean calibrate neutral.csv -o calib.json         neutral only: ranges are kept
+  faceclean calibrate rom.csv -o calib.json --rom       a range of motion: tops map to 1
+  faceclean calibrate take.csv -o calib.json --tracker mediapipe   lift MediaPipe's weak ones
   faceclean clean take.csv -o out.csv --calibration calib.json
   faceclean info take.csv --calibration calib.json    (its effect; 'info calib.json': the file)
   faceclean relay ... --calibration calib.json
-neutral maps to 0 and each channel's observed top (99.5th percentile) to 1; eyelids stay
-blink-aware (blinks still close fully), channels the take never moves keep a near-identity
-mapping, weak channels (a few hundredths at most, as MediaPipe's eyeWide) are lifted.
+neutral maps to 0; with --rom (or for a tracker's weak channels) each channel's observed
+top (99.5th percentile) maps to 1, the gain capped; eyelids stay blink-aware (blinks still
+close fully); every channel whose gain exceeds 2 is printed.
 """
 
 
@@ -40,13 +44,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help=f"length of the neutral hold at the start of the take (default {NEUTRAL_S:g})",
     )
+    p.add_argument(
+        "--rom",
+        action="store_true",
+        help="after the neutral hold the take is a range of motion (every expression as far "
+        "as it goes): lift each moved channel's observed top to 1",
+    )
+    options.add_tracker_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean import io
-    from faceclean.calibration import calibrate
+    from faceclean.calibration import MAX_GAIN, REPORT_GAIN, calibrate, high_gains
     from faceclean.errors import FacecleanError
 
     out = Path(args.output)
@@ -55,12 +66,20 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and Path(args.take).exists() and out.samefile(args.take):
         raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
     anim = io.load(args.take)
-    adjust = calibrate(anim, args.neutral, take=Path(args.take).name)
+    adjust = calibrate(
+        anim, args.neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker
+    )
     adjust.save(args.output)
     facts = adjust.facts
     print(
         f"wrote {args.output}: {len(facts['channels'])} channels, neutral from the first "
-        f"{facts['neutral_s']:.2f} s; {len(facts['moved'])} moved"
-        + (f", lifted {', '.join(facts['lifted'])}" if facts["lifted"] else "")
+        f"{facts['neutral_s']:.2f} s; {len(facts['moved'])} moved, {len(facts['lifted'])} "
+        f"lifted to their top ({'range of motion' if args.rom else f'tracker {args.tracker}'})"
     )
+    high = high_gains(adjust)
+    if high:
+        print(f"gain above {REPORT_GAIN:g} on {len(high)} channel{'s' * (len(high) > 1)}:")
+    for name, gain, top in high:
+        capped = " (capped)" if gain >= MAX_GAIN - 1e-9 else ""
+        print(f"  {name:<20} gain {gain:5.2f}{capped}  top {top:.3f}")
     return 0

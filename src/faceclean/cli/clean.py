@@ -73,6 +73,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     options.add_arguments(p)
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
     p.add_argument(
+        "--scale",
+        type=float,
+        metavar="FACTOR",
+        help="multiply the blendshape values by FACTOR first (0.01: a take in percent); "
+        "without it a take far outside [0, 1] is refused",
+    )
+    p.add_argument(
         "--jobs", type=int, default=1, metavar="N", help="batch: clean N files at once (processes)"
     )
 
@@ -102,7 +109,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     from pathlib import Path
 
     from faceclean import io
-    from faceclean.adjust import Adjusted
+    from faceclean.adjust import Adjusted, check_range
     from faceclean.errors import FacecleanError
     from faceclean.io import stream
 
@@ -124,9 +131,13 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
             adjust = build_levels(args, choice, names)
             if not adjust.is_identity:
                 cleaner = Adjusted(cleaner, adjust, names)
-            frames, missing = _stream(src, output, cleaner, fmt_in, progress)
+            guard = None if args.scale is not None else (names, input)
+            frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard)
             return _line(output, frames, missing, names, what, adjust)
     anim = io.load(src)
+    if args.scale is None:  # the same judgement as the stream's, block by block
+        for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
+            check_range(anim.values[a : a + stream.BLOCK], anim.names, input)
     cleaner, what = build_cleaner(choice, anim.names)
     adjust = build_levels(args, choice, anim.names)
     mapped = anim.with_values(adjust.apply(anim.values, anim.names))
@@ -150,7 +161,9 @@ def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...
     from faceclean.adjust import Adjust
 
     base = options.calibration(args) or Adjust()
-    return base.merged(choice.adjust(names))
+    levels = base.merged(choice.adjust(names))
+    scale = getattr(args, "scale", None)
+    return levels if scale is None else levels.scaled(scale)
 
 
 def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Cleaner, str]:
@@ -169,18 +182,28 @@ def _line(out: str, frames: int, missing: int, names: tuple[str, ...], what: str
 
 
 def _stream(
-    src: Path, out: str, cleaner: Cleaner, fmt: str, progress: bool = True
+    src: Path,
+    out: str,
+    cleaner: Cleaner,
+    fmt: str,
+    progress: bool = True,
+    guard: tuple[tuple[str, ...], str] | None = None,
 ) -> tuple[int, int]:
-    """``stream.clean_file`` with a progress bar (bytes) on stderr for big files."""
-    import functools
-
+    """``stream.clean_file`` with a progress bar (bytes) on stderr for big files;
+    ``guard`` (names, label): refuse a block of values far outside [0, 1]."""
     from tqdm import tqdm
 
+    from faceclean.adjust import check_range
     from faceclean.filters.base import check_finite
     from faceclean.io import stream
 
     cleaner.reset()
-    check = functools.partial(check_finite, name=cleaner.name)
+
+    def check(inp, outp) -> None:
+        if guard is not None:
+            check_range(inp, *guard)
+        check_finite(inp, outp, cleaner.name)
+
     size = src.stat().st_size
     if size < PROGRESS_BYTES or not progress:
         return stream.clean_file(src, out, cleaner.step, fmt, check=check)

@@ -13,6 +13,7 @@ import numpy as np
 
 HELP = "describe an animation file (channels, rate, gaps, ranges) or a calibration file"
 GAP_FACTOR = 1.5  # a step longer than this many median steps has dropped frames
+SHOWN = 8  # level rules listed before "... and N more"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -104,11 +105,18 @@ def run(args: argparse.Namespace) -> int:
     if facts["pose_channels"]:
         lines.append(("passthrough", ", ".join(facts["pose_channels"])))
     if adjust is not None:
-        rules = facts["levels"]["rules"]
-        lines.append(("calibration", f"{args.calibration}: {len(adjust.rules)} rules"))
-        lines += [("", r) for r in rules[:8]]
-        if len(rules) > 8:
-            lines.append(("", f"... and {len(rules) - 8} more"))
+        rules = list(facts["levels"]["rules"])
+        about = rules.pop() if adjust.facts else None  # describe()'s facts line comes last
+        touched = len(adjust.levels(anim.names).active)
+        lines.append(
+            ("calibration", f"{args.calibration}: levels on {touched} of {anim.n_channels} "
+             f"channels ({len(rules)} patterns)")
+        )  # fmt: skip
+        lines += [("", r) for r in rules[:SHOWN]]
+        if len(rules) > SHOWN:  # SHOWN + this = every pattern line
+            lines.append(("", f"... and {len(rules) - SHOWN} more"))
+        if about:
+            lines.append(("", about))
         lines.append(("after", "range " + _range(after)))
     for key, text in lines:
         print(f"{key:<12}{text}")

@@ -62,6 +62,20 @@ def add_arguments(
     )
 
 
+def add_tracker_argument(p: argparse.ArgumentParser) -> None:
+    """``--tracker NAME``: which tracker made the take (``channels.TRACKERS``, the one list
+    of tracker profiles; default ``arkit``). Any command that needs it adds it here."""
+    from faceclean.channels import DEFAULT_TRACKER, TRACKERS
+
+    p.add_argument(
+        "--tracker",
+        choices=tuple(TRACKERS),
+        default=DEFAULT_TRACKER,
+        help=f"the tracker that made the take (default {DEFAULT_TRACKER}); its profile "
+        "names the channels it under-reads (mediapipe: eyeWide, cheekSquint, noseSneer)",
+    )
+
+
 def calibration(args: argparse.Namespace):
     """The ``--calibration`` level mapping (faceclean.adjust.Adjust), None without one."""
     from faceclean.adjust import Adjust
