@@ -146,3 +146,65 @@ def _shipped():
     from faceclean.settings import MODELS
 
     return MODELS / "default.npz"
+
+
+# -- issue 19 section 5: a network whose output cannot change the result costs nothing --
+
+
+def _full(cleaner):
+    """The same cleaner forced through the whole step (the GRU core run)."""
+    cleaner.inert, cleaner._kernel = False, None
+    return cleaner
+
+
+def test_the_shipped_default_is_inert_and_its_fast_step_gives_the_same_numbers():
+    from faceclean.learned import jit
+
+    fast, numpy_only, full = Adaptive(), Adaptive(), _full(Adaptive())
+    numpy_only._kernel = None
+    assert fast.inert and numpy_only.inert and fast.state_bytes == 8 * 52 * 2
+    assert (fast._kernel is not None) == jit.available()
+    rng = np.random.default_rng(4)
+    t = np.cumsum(rng.uniform(0.3, 2.0, (400, 3)) / 60.0, axis=0)  # irregular, 3 streams
+    x = np.clip(0.5 + np.cumsum(rng.normal(0, 0.03, (400, 3, 52)), axis=0), -0.2, 1.3)
+    x[50, 1] = np.nan  # tracking loss in one stream
+    x[90, 0, 7] = np.inf  # a glitch cell
+    for i in range(400):
+        want = full.step(x[i], t[i])
+        assert np.array_equal(fast.step(x[i], t[i]), want, equal_nan=True), i
+        assert np.array_equal(numpy_only.step(x[i], t[i]), want, equal_nan=True), i
+
+
+def test_a_live_network_is_not_taken_for_an_inert_one(tmp_path):
+    from faceclean.settings import MODELS
+
+    w = AdaptiveWeights.load(MODELS / "default.npz")
+    arrays = dict(w.arrays)
+    arrays["head.w"] = arrays["head.w"].copy()
+    arrays["head.w"][0, 0] = 0.5  # the core now sets the cut-off
+    live = Adaptive(weights=AdaptiveWeights.from_arrays(w.config, arrays))
+    assert not live.inert and live.state_bytes == 8 * 52 * (3 + w.hidden)
+    boosted = dict(w.arrays, boost=np.full(52, 0.3))  # inert core, a transient gain
+    b = Adaptive(weights=AdaptiveWeights.from_arrays(w.config, boosted))
+    assert b.inert and b._transient and b.state_bytes == 8 * 52 * 3
+    full = _full(Adaptive(weights=AdaptiveWeights.from_arrays(w.config, boosted)))
+    rng = np.random.default_rng(5)
+    for i in range(120):
+        x = rng.uniform(0, 1, 52)
+        np.testing.assert_array_equal(b.step(x, i / 60.0), full.step(x, i / 60.0))
+
+
+def test_the_bench_reference_for_the_default_computes_the_same_function():
+    pytest.importorskip("torch")
+    from faceclean.neural.reference import AdaptiveReference
+    from faceclean.settings import MODELS
+
+    w = AdaptiveWeights.load(MODELS / "default.npz")
+    ref, ours = AdaptiveReference(w), Adaptive(weights=w)
+    rng = np.random.default_rng(6)
+    x = np.clip(0.4 + np.cumsum(rng.normal(0, 0.02, (200, 52)), axis=0), 0, 1)
+    ref.start(x[:1])
+    ours.step(x[0], 0.0)
+    for n in range(1, 200):
+        a = ref.step(x[n : n + 1], np.array([1 / 60]))[0]
+        np.testing.assert_allclose(a, ours.step(x[n], n / 60), atol=2e-5)  # float32 torch

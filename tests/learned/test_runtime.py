@@ -367,3 +367,12 @@ def test_bench_quick_structure(tmp_path, capsys):
     assert text.startswith("# Title\n\nprose\n") and text.endswith("tail\n") and "old" not in text
     assert "| lstm-numpy |" in text and "Machine:" in text
     assert "| lstm-numpy |" in capsys.readouterr().out
+    # issue 19: the shipped default has its own reference, eager torch on its network
+    if result["reference"] is not None:
+        default = rows["default (adaptive)"]
+        assert default["ref"] == "reference-adaptive" and "inert network" in default["note"]
+        ref = rows["reference adaptive (eager torch)"]
+        assert ref["key"] == "reference-adaptive" and ref["p50_us"] > 0
+        line = next(ln for ln in text.splitlines() if ln.startswith("| default (adaptive) |"))
+        ratio = default["p50_us"] / ref["p50_us"]
+        assert f"{default['p50_us']:.1f} ({ratio:.2f}x)" in line  # its ratio, to its reference

@@ -123,13 +123,15 @@ def _ratio(ours: float | None, ref: float | None) -> str:
 def markdown(result: dict[str, Any]) -> str:
     """The results table (GitHub markdown) with the machine, ratios to the reference."""
     rows = [*result["rows"]] + ([result["reference"]] if result["reference"] else [])
-    ref = result["reference"] or {}
+    refs = {"reference": result["reference"] or {}}
+    refs.update({r["key"]: r for r in result["rows"] if r.get("key")})  # other references
     streams = [int(s) for s in result["sizes"]["streams"]]
     head = ["cleaner", "step p50 us", "p99 us"]
     head += [f"{s} stream{'s' * (s > 1)}: us/stream-frame" for s in streams]
     head += ["1 h of 60 fps: s", "state B/stream", "note"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
+        ref = refs.get(r.get("ref", "reference")) or {}
         cells = [r["name"]]
         if r["p50_us"] is None:
             cells += ["", ""]

@@ -7,8 +7,10 @@ Per cleaner, in one process (the CLI pins it to one core with one BLAS thread):
 - hour: seconds to clean one hour of 60 fps animation offline (``clean``), measured on a
   20 s clip (best of 5) and scaled linearly (the cost per frame is constant), said so;
 - state: bytes of per-stream state the cleaner holds (all per-stream arrays).
-The reference is faceclean.neural.reference (the same weights, eager PyTorch); every
-figure also appears as a cost ratio to it: our time / its time (< 1 is faster).
+The references are faceclean.neural.reference (the same weights, eager PyTorch): the
+paper's LSTM, and the shipped default's adaptive network with its core run; every figure
+also appears as a cost ratio to the reference on the same network (the row's ``ref``):
+our time / its time (< 1 is faster).
 Inputs are a seeded random walk in [0, 1] at 60 fps; speed does not depend on values.
 """
 
@@ -55,6 +57,8 @@ class Row:
     hour_s: float | None = None
     state_bytes: int | None = None
     note: str = ""
+    ref: str = "reference"  # the row its ratios are to: eager torch on the same network
+    key: str = ""  # a reference row's own name for ``ref``
 
 
 def _walk(n: int, S: int, seed: int) -> np.ndarray:
@@ -196,6 +200,13 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
             f"numba kernel <= {Learned.jit_max_streams} streams, numpy above",
         )
     out["lstm-numpy"] = (lambda: Learned(weights=model, kernel="numpy"), "numpy + BLAS only")
+    from faceclean.learned.adaptive import Adaptive, AdaptiveWeights
+    from faceclean.settings import MODELS
+
+    default = AdaptiveWeights.load(MODELS / "default.npz")
+    kind = "inert network: One Euro form" if Adaptive(weights=default).inert else "GRU core"
+    how = "numba" if jit.available() else "numpy"
+    out["default (adaptive)"] = (lambda: Adaptive(weights=default), f"shipped; {kind}, {how}")
     try:
         from faceclean.learned.export import build
         from faceclean.learned.onnx import OnnxLearned
@@ -236,11 +247,20 @@ def run(
         cleans[name] = make(name).clean
     reference = None
     try:
-        from faceclean.neural.reference import NaiveReference, single_thread
+        from faceclean.learned.adaptive import AdaptiveWeights
+        from faceclean.neural.reference import AdaptiveReference, NaiveReference, single_thread
+        from faceclean.settings import MODELS
 
         reference = Row(NaiveReference.name, note=f"torch {single_thread()}, 1 thread")
         steppers["reference"] = _Stepper(lambda: NaiveReference(model), reference=True)
         cleans["reference"] = _reference_clean(lambda: NaiveReference(model))
+        default = AdaptiveWeights.load(MODELS / "default.npz")
+        name = "reference-adaptive"
+        rows[name] = Row(AdaptiveReference.name, note="the default's network, core run")
+        rows[name].ref = rows[name].key = name
+        steppers[name] = _Stepper(lambda: AdaptiveReference(default), reference=True)
+        cleans[name] = _reference_clean(lambda: AdaptiveReference(default))
+        rows["default (adaptive)"].ref = name
     except ImportError:
         pass
     row_of = dict(rows, reference=reference)
@@ -254,7 +274,7 @@ def run(
             row_of[name].throughput[n] = value
     last = sizes.streams[-1]  # the cleaners now hold this many streams
     for name, st in steppers.items():
-        ref_bytes = getattr(st.cleaner, "state_bytes", None) if st.reference else None
+        ref_bytes = st.cleaner.state_bytes if st.reference else None
         row_of[name].state_bytes = ref_bytes or _state_bytes(st.cleaner, last)
     say("one hour")
     for name, value in _hours(cleans, sizes).items():

@@ -91,3 +91,68 @@ class NaiveReference:
         y = (y + dtt * d).clamp(self.lo, self.hi)
         self.state = (y, d, new)
         return y.numpy()
+
+
+class AdaptiveReference:
+    """The adaptive model (learned/adaptive.py) stepped naively in eager PyTorch: the loop
+    body of ``neural.adaptive.AdaptiveNet`` (its GRUCell and head, the features, the One
+    Euro arithmetic) once per frame, ``torch.no_grad()``, the core always run, as a
+    straightforward port would. Same ``start``/``step(x, dt)`` interface as above."""
+
+    name = "reference adaptive (eager torch)"
+
+    def __init__(self, weights) -> None:
+        from faceclean.neural.adaptive import AdaptiveNet
+
+        self.net = AdaptiveNet.from_weights(weights).eval()
+        self.M, self.H = self.net.M, self.net.H
+        self.state: tuple | None = None
+
+    @property
+    def state_bytes(self) -> int:
+        """Per stream: y, edx, the slow level and the GRU state, float32."""
+        return 4 * self.M * (3 + self.H)
+
+    def start(self, x: np.ndarray) -> None:
+        y = torch.from_numpy(np.asarray(x, np.float32))
+        h = torch.zeros(y.shape[0] * self.M, self.H)
+        self.state = (y, torch.zeros_like(y), h, y.clone())
+
+    @torch.no_grad()
+    def step(self, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
+        from faceclean.learned import adaptive as A
+        from faceclean.neural.adaptive import _alpha
+
+        net, (y, edx, h, slow) = self.net, self.state
+        S, M = y.shape
+        xn = torch.from_numpy(np.asarray(x, np.float32))
+        dtt = torch.from_numpy(np.asarray(dt, np.float32)).reshape(-1, 1).clamp_min(A.DT_MIN)
+        e = xn - y
+        edx = edx + _alpha(net.d_cutoff, dtt) * (e / dtt - edx)
+        en = e / A.E0
+        f = torch.stack(
+            [
+                en,
+                (edx / A.V0).clamp(-4.0, 4.0),
+                en.abs(),
+                en.abs() @ net.group.T,
+                en.abs().mean(1, keepdim=True).expand(-1, M),
+                en[:, net.mirror],
+                torch.log(60.0 * dtt).expand(-1, M),
+            ],
+            -1,
+        ).clamp(-A.F_MAX, A.F_MAX)
+        f = torch.cat([f, net.emb.expand(S, M, -1)], -1).reshape(S * M, -1)
+        h = net.cell(f, h)
+        o = net.head(h).reshape(S, M, 2)
+        mc, be = net.log_min_cutoff.exp(), net.log_beta.exp()
+        fc = (mc + be * edx.abs()) * torch.exp(o[..., 0].clamp(A.A_MIN, A.A_MAX))
+        p = y + torch.sigmoid(o[..., 1]) * dtt * edx
+        y = p + _alpha(fc, dtt) * (xn - p)
+        lo, hi = xn.clamp(max=0.0), xn.clamp(min=1.0)
+        y = torch.minimum(torch.maximum(y, lo), hi)
+        slow = slow + _alpha(torch.tensor(A.F_SLOW), dtt) * (y - slow)
+        shown = y + A.G_MAX * torch.tanh(net.boost) * (y - slow)
+        shown = torch.minimum(torch.maximum(shown, lo), hi)
+        self.state = (y, edx, h, slow)
+        return shown.numpy()
