@@ -149,3 +149,23 @@ def test_tiny_training_run_writes_a_working_model(tmp_path):
     y = gbt.clean(clip).values
     assert y.shape == clip.values.shape and np.isfinite(y).all()
     assert main([*argv, "--out", str(tmp_path / "x.txt")]) == 2  # bad --out: exit 2
+
+
+@pytest.mark.parametrize("method", ["fc", "gbt"])
+def test_the_bench_reference_for_a_baseline_computes_the_same_function(method):
+    # issue 19: each shipped learned cleaner is timed against eager torch on its own model
+    pytest.importorskip("torch")
+    from faceclean.filters import make
+    from faceclean.neural.reference import DerivativeReference
+
+    ours = make(method)
+    ref = DerivativeReference(make(method))
+    rng = np.random.default_rng(7)
+    x = np.clip(0.4 + np.cumsum(rng.normal(0, 0.02, (150, 2, 52)), axis=0), 0, 1)
+    dt = rng.uniform(0.5, 1.5, (150, 2)) / 60.0
+    t = np.cumsum(dt, axis=0)
+    ref.start(x[0])
+    ours.step(x[0], t[0])
+    for n in range(1, 150):
+        want = ours.step(x[n], t[n])
+        np.testing.assert_allclose(ref.step(x[n], t[n] - t[n - 1]), want, atol=1e-9)

@@ -207,6 +207,8 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
     kind = "inert network: One Euro form" if Adaptive(weights=default).inert else "GRU core"
     how = "numba" if jit.available() else "numpy"
     out["default (adaptive)"] = (lambda: Adaptive(weights=default), f"shipped; {kind}, {how}")
+    for name, note in (("fc", "shipped FC baseline, numpy"), ("gbt", "shipped GBT, numpy")):
+        out[name] = (lambda n=name: make(n), note)
     try:
         from faceclean.learned.export import build
         from faceclean.learned.onnx import OnnxLearned
@@ -261,6 +263,15 @@ def run(
         steppers[name] = _Stepper(lambda: AdaptiveReference(default), reference=True)
         cleans[name] = _reference_clean(lambda: AdaptiveReference(default))
         rows["default (adaptive)"].ref = name
+        from faceclean.neural.reference import DerivativeReference
+
+        for base in ("fc", "gbt"):
+            name = f"reference-{base}"
+            probe = DerivativeReference(make(base))
+            rows[name] = Row(probe.name, note=f"the shipped {base}'s model, float64")
+            rows[name].ref = rows[name].key = rows[base].ref = name
+            steppers[name] = _Stepper(lambda b=base: DerivativeReference(make(b)), reference=True)
+            cleans[name] = _reference_clean(lambda b=base: DerivativeReference(make(b)))
     except ImportError:
         pass
     row_of = dict(rows, reference=reference)

@@ -9,7 +9,7 @@ rename), and ``atomic`` asks ``target`` here first:
 - inside a command (``command()``, entered by the CLI), every file the command read
   (``io.source`` notes them) is protected: an output naming one is refused (``tune -o``
   naming the truth, ``corrupt --truth-out`` naming the input), unless the command declared
-  it rewritable (``clean IN -o IN``: the documented in-place clean);
+  it rewritable (``clean IN -o IN --in-place``: the in-place clean the user asked for);
 - two outputs of one command never name the same file (``distinct``).
 
 Refusals are one line; nothing is created or changed.

@@ -156,3 +156,88 @@ class AdaptiveReference:
         shown = torch.minimum(torch.maximum(shown, lo), hi)
         self.state = (y, edx, h, slow)
         return shown.numpy()
+
+
+class DerivativeReference:
+    """The paper's FC or GBT baseline (learned/derivative_net.py) stepped naively in eager
+    PyTorch: backward-difference features, the model (the MLP as ``nn.Linear`` layers; the
+    trees as one gather-and-compare per level over every tree), the complementary blend,
+    once per frame. Same ``start``/``step(x, dt)`` interface as above. Float64, as the
+    runtime (a tree's threshold compare must see the same numbers)."""
+
+    def __init__(self, cleaner) -> None:
+        from faceclean.learned.derivative_net import BoostedTrees, group_index
+
+        self.K, self.alpha, self.lo, self.hi = cleaner.K, cleaner.alpha, cleaner.lo, cleaner.hi
+        self.M = len(cleaner.channels)
+        self.trees = isinstance(cleaner, BoostedTrees)
+        self.name = f"reference {cleaner.name} (eager torch)"
+        t64 = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float64))  # noqa: E731
+        if self.trees:
+            c = cleaner
+            self.feat = torch.from_numpy(c._feat.ravel().astype(np.int64))
+            self.thr, self.val = t64(c._thr.ravel()), t64(c._val.ravel())
+            self.in_off = torch.from_numpy(c._in_off.astype(np.int64))
+            self.leaf_off = torch.from_numpy(c._leaf_off.astype(np.int64))
+            self.depth = c._depth
+            self.onehot = t64(np.eye(self.K)[c._order])  # (T, K): tree -> its order
+            self.base, self.ostd = t64(c._base), t64(c._ostd)
+            self.groups = t64(group_index(c.channels))
+        else:
+            layers = []
+            for i, (w, b) in enumerate(zip(cleaner._w, cleaner._b, strict=True)):
+                lin = nn.Linear(w.shape[1], w.shape[0]).double()
+                with torch.no_grad():
+                    lin.weight.copy_(t64(w))
+                    lin.bias.copy_(t64(b))
+                layers += [lin] + ([nn.ReLU()] if i < len(cleaner._w) - 1 else [])
+            self.mlp = nn.Sequential(*layers)
+            self.fm, self.fs = t64(cleaner._fm), t64(cleaner._fs)
+            self.om, self.os = t64(cleaner._om), t64(cleaner._os)
+            self.clip = float(cleaner.config.get("feat_clip", np.inf))
+        self.state: tuple | None = None
+
+    @property
+    def state_bytes(self) -> int:
+        """Per stream: the input's K + 1 derivatives and the K blended ones, float64."""
+        return 8 * self.M * (2 * self.K + 1)
+
+    def start(self, x: np.ndarray) -> None:
+        xt = torch.from_numpy(np.asarray(x, np.float64))
+        zero = torch.zeros_like(xt)
+        self.state = ([xt, *[zero] * self.K], [xt, *[zero] * (self.K - 1)])
+
+    def _predict(self, feats):
+        """(S, M, 1 + 2K) features -> (S, M, K) derivative predictions."""
+        S, M, F = feats.shape
+        if not self.trees:
+            h = ((feats.transpose(1, 2).reshape(S, F * M) - self.fm) / self.fs).clamp(
+                -self.clip, self.clip
+            )
+            out = self.mlp(h) * self.os + self.om  # (S, K M) order-major
+            return out.reshape(S, self.K, M).transpose(1, 2)
+        x = torch.cat([feats, self.groups.expand(S, M)[..., None]], -1).reshape(S * M, -1)
+        pos = torch.zeros(S * M, len(self.in_off), dtype=torch.int64)  # (n, T)
+        for _ in range(self.depth):
+            flat = pos + self.in_off
+            right = torch.gather(x, 1, self.feat[flat]) > self.thr[flat]
+            pos = 2 * pos + 1 + right
+        leaf = self.val[pos + self.leaf_off]  # (n, T)
+        return ((leaf @ self.onehot + self.base) * self.ostd).reshape(S, M, self.K)
+
+    @torch.no_grad()
+    def step(self, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
+        from faceclean.learned.derivative_net import ALPHA_RATE, BIG
+
+        d_old, r_old = self.state
+        dtt = torch.from_numpy(np.asarray(dt, np.float64)).reshape(-1, 1)
+        d_new = [torch.from_numpy(np.asarray(x, np.float64))]
+        for k in range(1, self.K + 1):  # backward differences ending at the new frame
+            d_new.append(((d_new[k - 1] - d_old[k - 1]) / dtt).clamp(-BIG, BIG))
+        pred = self._predict(torch.stack([*d_new, *d_old[1:]], -1))
+        a = self.alpha ** (dtt * ALPHA_RATE)  # (S, 1)
+        target = [d_new[0], *pred.unbind(-1)]
+        r_new = [a * (r_old[k] + dtt * target[k + 1]) + (1 - a) * target[k] for k in range(self.K)]
+        r_new[0] = r_new[0].clamp(self.lo, self.hi)
+        self.state = (d_new, r_new)
+        return r_new[0].numpy()
