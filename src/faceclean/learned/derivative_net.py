@@ -152,7 +152,7 @@ class _DerivativeNet(StreamCleaner):
         d_new = [self._model_frame(x)]
         for k in range(1, K + 1):  # backward differences ending at the new frame
             d = (d_new[k - 1] - d_old[k - 1]) / dt  # finite inputs: at worst +-inf
-            d_new.append(np.clip(d, -BIG, BIG, out=d))  # finite for any dt
+            d_new.append(_clip(d, -BIG, BIG))  # finite for any dt
         feats = np.stack([d_new[0], *d_new[1:], *d_old[1:]], axis=-1)  # (S, M, 1 + 2K)
         if self._record is not None:
             self._record.append(feats)
@@ -165,7 +165,7 @@ class _DerivativeNet(StreamCleaner):
         # α per frame at ALPHA_RATE, as a time constant: the same blend at every rate.
         alpha = self.alpha if self.per_frame else self.alpha ** (dt * ALPHA_RATE)  # (S, 1)
         r_new = blend(r_old, [pred[..., k] for k in range(K)], d_new[0], dt, alpha)
-        r_new[0] = np.clip(r_new[0], self.lo, self.hi)
+        r_new[0] = _clip(r_new[0], self.lo, self.hi)
         y = x.copy()
         y[:, self._cols[self._have]] = r_new[0][:, self._have]
         return (*d_new, *r_new, age + 1.0), y
@@ -211,6 +211,12 @@ class _DerivativeNet(StreamCleaner):
             self._ages = []
 
 
+def _clip(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``np.clip(a, lo, hi, out=a)`` as two ufuncs, the same numbers (NaN stays NaN):
+    np.clip's Python wrapper costs more than the clipping on one stream's (1, M)."""
+    return np.minimum(np.maximum(a, lo, out=a), hi, out=a)
+
+
 def _fills(values: np.ndarray) -> bool:
     """Whether rule 2 (filters.base) fills a value of (N, M) ``values`` from the output:
     a non-finite or absurd value in a frame that has a good one."""
@@ -237,7 +243,7 @@ class FullyConnected(_DerivativeNet):
         n, m, f = feats.shape
         h = (feats.transpose(0, 2, 1).reshape(n, f * m) - self._fm) / self._fs  # feature-major
         clip = float(self.config.get("feat_clip", np.inf))  # scaled features kept in +-clip
-        h = np.clip(h, -clip, clip)
+        h = _clip(h, -clip, clip)
         for i, (w, b) in enumerate(zip(self._w, self._b, strict=True)):
             h = h @ w.T + b
             if i < len(self._w) - 1:
@@ -266,6 +272,7 @@ class BoostedTrees(_DerivativeNet):
         self._in_off = np.arange(t) * n_in  # (T,) first internal node of each tree
         self._leaf_off = np.arange(t) * (n_in + 1) - n_in  # leaf position -> flat index
         self._groups: np.ndarray | None = None
+        self._by_order = [np.flatnonzero(self._order == k) for k in range(len(self._base))]
 
     def predict(self, feats: np.ndarray) -> np.ndarray:
         n, m, _ = feats.shape
@@ -291,8 +298,8 @@ class BoostedTrees(_DerivativeNet):
             pos = 2 * pos + 1 + right
         leaf = self._val.ravel().take(pos + self._leaf_off)  # (n, T)
         out = np.zeros((len(x), self.K))
-        for k in range(self.K):  # each row summed alone: the same bits for any n
-            out[:, k] = leaf[:, self._order == k].sum(axis=1)
+        for k, trees in enumerate(self._by_order):  # each row summed alone: same bits, any n
+            out[:, k] = leaf[:, trees].sum(axis=1)
         return (out + self._base) * self._ostd
 
 
