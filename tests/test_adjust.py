@@ -100,9 +100,9 @@ def test_file_round_trip_and_bad_files(tmp_path):
     with pytest.raises(FacecleanError, match="unknown level key 'gian'"):
         Adjust.load(path)
     path.write_text("[1, 2")
-    with pytest.raises(FacecleanError, match="not a readable level file"):
+    with pytest.raises(FacecleanError, match="levels.json: not valid JSON"):
         Adjust.load(path)
-    with pytest.raises(FacecleanError, match="no such file"):
+    with pytest.raises(FacecleanError, match="no such calibration file"):
         Adjust.load(tmp_path / "absent.json")
 
 

@@ -580,6 +580,139 @@ def test_preset_with_method_too_is_refused(tmp_path, take):
 
 
 # --------------------------------------------------------------------------------------
+# B2. Every file an option names goes through the one bounded reader (issue 21)
+
+LEVELS = "faceclean-adjust/1"  # the level file's format (docs: faceclean calibrate)
+
+
+def _levels(channels="{}", facts=None) -> str:
+    doc = '{"format": "' + LEVELS + '", "channels": ' + channels
+    return doc + (', "calibration": ' + facts if facts is not None else "") + "}"
+
+
+# option -> argv that gives the file ``f`` to it (``take``: a good take, ``out``: -o)
+NAMED_INPUTS = {
+    "clean-calibration": (
+        "c.json", lambda take, f, out: ["clean", take, "-o", out, "--calibration", f]
+    ),
+    "info-calibration": ("c.json", lambda take, f, out: ["info", take, "--calibration", f]),
+    "relay-calibration": (
+        "c.json",
+        lambda take, f, out: ["relay", "--listen", "vmc://127.0.0.1:0",
+                              "--send", "vmc://127.0.0.1:9", "--calibration", f],
+    ),
+    "plot-calibration": (
+        "c.json",
+        lambda take, f, out: ["plot", take, "-o", out.with_suffix(".png"), "--method", "ema",
+                              "--calibration", f],
+    ),
+    "clean-preset": ("p.json", lambda take, f, out: ["clean", take, "-o", out, "--preset", f]),
+    "clean-model-npz": ("m.npz", lambda take, f, out: ["clean", take, "-o", out, "--model", f]),
+    "clean-model-onnx": ("m.onnx", lambda take, f, out: ["clean", take, "-o", out, "--model", f]),
+    "clean-set-model": (
+        "m.npz",
+        lambda take, f, out: ["clean", take, "-o", out, "--method", "lstm", "--set", f"model={f}"],
+    ),
+    "export-model": ("m.npz", lambda take, f, out: ["export", f, "-o", out.with_suffix(".onnx")]),
+    "convert-mesh": (
+        "mesh.glb",
+        lambda take, f, out: ["convert", take, "-o", out.with_suffix(".glb"), "--mesh", f],
+    ),
+    "report-mesh": (
+        "mesh.npz",
+        lambda take, f, out: ["report", take, "-o", out.with_suffix(".html"), "--method", "ema",
+                              "--mesh", f],
+    ),
+    "replay-recording": (
+        "r.gesichter", lambda take, f, out: ["replay", f, "--send", "vmc://127.0.0.1:9"]
+    ),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("option", list(NAMED_INPUTS))
+def test_named_file_that_is_a_fifo_says_so_and_does_not_hang(tmp_path, take, option):
+    name, argv = NAMED_INPUTS[option]
+    fifo = tmp_path / name
+    os.mkfifo(fifo)
+    r = fc(*argv(take, fifo, tmp_path / "out.csv"), timeout=HANG)
+    refused(r)
+    assert "FIFO" in r.stderr and "no such" not in r.stderr, r.stderr  # the message is true
+    _still(fifo, "fifo")
+
+
+@pytest.mark.parametrize("option", ["clean-calibration", "clean-preset", "clean-model-npz"])
+def test_named_file_that_is_a_folder_or_missing_says_which(tmp_path, take, option):
+    name, argv = NAMED_INPUTS[option]
+    folder = tmp_path / name
+    folder.mkdir()
+    r = fc(*argv(take, folder, tmp_path / "out.csv"), timeout=HANG)
+    refused(r)
+    assert "folder" in r.stderr, r.stderr
+    r = fc(*argv(take, tmp_path / ("absent-" + name), tmp_path / "out.csv"), timeout=HANG)
+    refused(r)
+    assert "no such" in r.stderr, r.stderr
+
+
+CALIBRATION_REFUSED = [
+    pytest.param(_levels(DEEP), id="channels-nested-100000"),
+    pytest.param("[" * 100_000 + "]" * 100_000, id="array-nested-100000"),
+    pytest.param(_levels(facts="[" * 2000 + "]" * 2000), id="facts-nested-2000"),
+    pytest.param(_levels(facts='{"a": ' * 200 + "1" + "}" * 200), id="facts-nested-200"),
+    pytest.param(_levels('{"jawOpen": {"gain": NaN}}'), id="nan-gain"),
+    pytest.param(_levels('{"jawOpen": {"gain": Infinity}}'), id="infinity-gain"),
+    pytest.param(_levels('{"jawOpen": {"offset": 1e999}}'), id="overflow-offset"),
+    pytest.param(_levels('{"jawOpen": {"gain": ' + "9" * 400 + "}}"), id="huge-int"),
+    pytest.param(b"\xff\xfe" + _levels().encode("utf-16-le"), id="utf16"),
+    pytest.param(b"\xc3\x28" + _levels().encode(), id="not-utf8"),
+    pytest.param("", id="empty"),
+]
+
+
+@pytest.mark.parametrize("body", CALIBRATION_REFUSED)
+@pytest.mark.parametrize("command", ["clean", "info"])
+def test_calibration_is_refused_in_one_line(tmp_path, take, body, command):
+    p = preset(tmp_path, body, "c.json")
+    out = tmp_path / "out.csv"
+    args = ["clean", take, "-o", out] if command == "clean" else ["info", take]
+    refused(fc(*args, "--calibration", p))
+    assert not out.exists()
+
+
+def test_calibration_read_by_info_alone_is_refused_in_one_line(tmp_path):
+    refused(fc("info", preset(tmp_path, _levels(DEEP), "c.json")))
+
+
+def test_calibration_symlink_to_dev_zero_is_refused(tmp_path, take):
+    link = tmp_path / "c.json"
+    link.symlink_to("/dev/zero")
+    refused(fc("clean", take, "-o", tmp_path / "o.csv", "--calibration", link, timeout=HANG))
+
+
+def test_calibration_larger_than_any_level_file_is_refused_unread(tmp_path, take):
+    p = tmp_path / "c.json"
+    with open(p, "wb") as f:  # sparse: 2 GiB on paper, nothing on disk
+        f.write(_levels().encode())
+        f.truncate(2 << 30)
+    r = fc("clean", take, "-o", tmp_path / "o.csv", "--calibration", p, timeout=HANG, mem=MEM)
+    refused(r)
+    assert "limit" in r.stderr, r.stderr
+
+
+def test_recording_that_unpacks_without_end_is_refused(tmp_path, sink):
+    """A .gesichter recording is gzip: 300 MiB of zeros in ~300 KB is refused, not read
+    into memory whole (the cap here is 1 GiB of address space)."""
+    p = tmp_path / "bomb.gesichter"
+    z = zlib.compressobj(9, zlib.DEFLATED, 31)  # gzip framing
+    block = bytes(MiB)
+    with open(p, "wb") as f:
+        f.write(z.compress(b"\x06" + struct.pack(">I", 1) + struct.pack(">I", 300 * MiB)))
+        for _ in range(300):
+            f.write(z.compress(block))
+        f.write(z.flush())
+    refused(fc("replay", p, "--send", sink))
+
+
+# --------------------------------------------------------------------------------------
 # C. Live Link Face CSV: both readers (in memory: info; in blocks: clean --method ema)
 
 
@@ -1447,6 +1580,80 @@ def test_other_commands_refuse_a_fifo_output(tmp_path, take, args, name):
     out = _special(tmp_path, "fifo", name)
     refused(fc(*args(take, out), timeout=TIMEOUT))
     _still(out, "fifo")
+
+
+# Outputs a long-running command writes at its end are checked at its start (issue 21):
+# refused with nothing else printed (a relay that started prints its address and runs
+# until stopped; training, eval, bench and tune print progress as they go).
+LATE_OUTPUTS = {
+    "relay-record": (
+        "r.csv",
+        lambda take, out: ["relay", "--listen", "vmc://127.0.0.1:0", "--send",
+                           "vmc://127.0.0.1:9", "--method", "ema", "--record", out],
+    ),
+    "relay-record-clean-sibling": (
+        "r.clean.csv",
+        lambda take, out: ["relay", "--listen", "vmc://127.0.0.1:0", "--send",
+                           "vmc://127.0.0.1:9", "--method", "ema",
+                           "--record", out.with_name("r.csv")],
+    ),
+    "train-out": ("m.npz", lambda take, out: ["train", "--data", take.parent, "--out", out]),
+    "train-out-last": (
+        "m.last.npz",
+        lambda take, out: ["train", "--data", take.parent, "--out", out.with_name("m.npz")],
+    ),
+    "train-fc-out": (
+        "m.npz", lambda take, out: ["train", "--arch", "fc", "--data", take.parent, "--out", out]
+    ),
+    "tune-o": (
+        "p.json",
+        lambda take, out: ["tune", take, "--truth", take, "--method", "one-euro", "-o", out],
+    ),
+    "eval-json": ("e.json", lambda take, out: ["eval", "--data", take.parent, "--json", out]),
+    "eval-markdown": (
+        "e.md", lambda take, out: ["eval", "--data", take.parent, "--markdown", out]
+    ),
+    "bench-json": ("b.json", lambda take, out: ["bench", "--json", out]),
+    "bench-markdown": ("b.md", lambda take, out: ["bench", "--markdown", out]),
+    "report-o": ("o.html", lambda take, out: ["report", take, "-o", out, "--method", "ema"]),
+    "plot-o": ("o.png", lambda take, out: ["plot", take, "-o", out, "--method", "ema"]),
+    "fuzz-save": ("f.csv", lambda take, out: ["fuzz", "--seconds", "60", "--save", out]),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+@pytest.mark.parametrize("command", list(LATE_OUTPUTS))
+def test_late_output_that_is_not_a_regular_file_is_refused_at_start(tmp_path, command, kind):
+    data = tmp_path / "takes" / "me"
+    data.mkdir(parents=True)
+    take = data / "take.csv"
+    take.write_bytes(livelink_text())
+    name, argv = LATE_OUTPUTS[command]
+    out = _special(tmp_path, kind, name)
+    r = fc(*argv(take, out))
+    refused(r)  # one line on stderr: no progress line came before it
+    assert "regular files only" in r.stderr and not r.stdout, (r.stdout, r.stderr)
+    _still(out, kind)
+
+
+@pytest.mark.parametrize("command", ["relay-record", "train-out", "eval-json", "report-o"])
+def test_late_output_in_a_missing_folder_is_refused_at_start(tmp_path, command):
+    take = tmp_path / "takes" / "take.csv"
+    take.parent.mkdir()
+    take.write_bytes(livelink_text())
+    name, argv = LATE_OUTPUTS[command]
+    r = fc(*argv(take, tmp_path / "missing" / name))
+    refused(r)
+    assert not r.stdout and not (tmp_path / "missing").exists()
+
+
+def test_train_out_inside_its_data_is_refused_at_start(tmp_path):
+    take = tmp_path / "takes" / "me" / "take.csv"
+    take.parent.mkdir(parents=True)
+    take.write_bytes(livelink_text())
+    r = fc("train", "--data", tmp_path / "takes", "--out", take.parent / "m.npz")
+    refused(r)
+    assert not r.stdout and not (take.parent / "m.npz").exists()
 
 
 def test_output_symlink_is_written_through_or_refused(tmp_path, take):

@@ -124,14 +124,10 @@ class Adjust:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Adjust:
-        try:
-            with open(path, encoding="utf-8") as f:
-                data = json.load(f)
-        except FileNotFoundError:
-            raise FacecleanError(f"{path}: no such file") from None
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise FacecleanError(f"{path}: not a readable level file ({e})") from None
-        return cls.from_dict(data, str(path))
+        """A level file (``--calibration``): through the bounded reader, strict JSON."""
+        from faceclean.io.source import read_json
+
+        return cls.from_dict(read_json(path, "calibration file"), str(path))
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document. Keys of one pattern are written together, in the order the
@@ -247,11 +243,17 @@ def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
 
 
 def is_level_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a JSON file in this module's format (looks at its start only)."""
+    """Whether ``path`` is a JSON file in this module's format (looks at its start only;
+    False for anything but a regular file, which its reader then refuses)."""
+    from faceclean.io import source
+
     if not str(path).lower().endswith(".json") or not os.path.isfile(path):
         return False
-    with open(path, "rb") as f:
-        head = f.read(4096)
+    try:
+        with source.open_binary(path) as f:
+            head = f.read(4096)
+    except (FacecleanError, OSError):
+        return False
     return FORMAT.encode() in head
 
 

@@ -226,8 +226,7 @@ def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
     """A learned model file: the class from its format, settings as keywords."""
     from faceclean.learned import formats
 
-    if not _exists(str(path)) or not path.is_file():
-        raise FacecleanError(f"no such model file: {path}")
+    formats.model_file(path)  # missing, a FIFO, a device or a folder: one line saying so
     onnx = path.suffix.lower() == ".onnx"
     backend = backend or ("onnx" if onnx else "numpy")
     if backend == "onnx":

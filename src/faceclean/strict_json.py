@@ -38,23 +38,30 @@ def _int(text: str) -> int | float:
     return int(text) if len(digits) <= MAX_INT_DIGITS else _float(text)
 
 
-def loads(text: str | bytes, label: str, *, numbers: bool = True) -> Any:
+def loads(
+    text: str | bytes, label: str, *, numbers: bool = True, max_depth: int | None = None
+) -> Any:
     """Parse strict JSON; FacecleanError ``<label>: not valid JSON (reason)`` otherwise.
 
     ``numbers=False`` (animation files: their readers check the arrays with numpy, and a
     NaN or infinite cell is read as it is) skips the per-number checks and accepts the
-    ``NaN``/``Infinity`` spellings Python writes; depth is bounded either way.
+    ``NaN``/``Infinity`` spellings Python writes; depth is bounded either way (by the
+    parser's recursion limit; ``max_depth``: by that many levels of lists and objects, so
+    that code walking the value recursively never meets a RecursionError).
     """
     hooks: dict[str, Any] = {"parse_float": _float, "parse_int": _int} if numbers else {}
     if numbers:
         hooks["parse_constant"] = _constant
     try:
-        return json.loads(text, **hooks)
+        doc = json.loads(text, **hooks)
     except RecursionError:
         raise FacecleanError(f"{label}: not valid JSON (nested too deep)") from None
     except (ValueError, UnicodeDecodeError) as e:  # JSONDecodeError is a ValueError
         reason = " ".join(str(e).split())[:120]
         raise FacecleanError(f"{label}: not valid JSON ({reason})") from None
+    if max_depth is not None and depth(doc, max_depth + 1) > max_depth:
+        raise FacecleanError(f"{label}: nested deeper than {max_depth} levels")
+    return doc
 
 
 def value(text: str) -> Any:

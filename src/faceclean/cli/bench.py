@@ -64,7 +64,9 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from faceclean.evaluation import bench
-    from faceclean.io.atomic import atomic_write
+    from faceclean.io.atomic import atomic_write, check_writable
+
+    check_writable(args.json, args.markdown)  # now, not after the measurements
 
     if not args.no_pin and hasattr(os, "sched_setaffinity"):
         cores = sorted(os.sched_getaffinity(0))
@@ -96,9 +98,12 @@ def _spliced(path: str, table: str) -> str:
     """FILE's text with the block between the markers replaced (or a new document)."""
     from pathlib import Path
 
+    from faceclean.io import paths, source
+
     p = Path(path)
     block = f"{BEGIN}\n{table}{END}\n"
-    text = p.read_text(encoding="utf-8") if p.is_file() else ""
+    text = source.read_text(p, "markdown file") if source.named(p) else ""
+    paths.rewritable(p)  # read to be spliced: this command replaces it
     if BEGIN in text and END in text:
         head, rest = text.split(BEGIN, 1)
         return head + block + rest.split(END, 1)[1].lstrip("\n")

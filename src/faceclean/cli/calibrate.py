@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(f"-o {out.name}: a calibration is a .json file")
     if out.exists() and Path(args.take).exists() and out.samefile(args.take):
         raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
+    io.atomic.check_writable(out)
     anim = io.load(args.take)
     adjust = calibrate(
         anim, args.neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker

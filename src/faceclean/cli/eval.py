@@ -30,11 +30,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from faceclean.evaluation import evaluate
     from faceclean.evaluation import results as results_md
-    from faceclean.io.atomic import atomic_write
+    from faceclean.io.atomic import atomic_write, check_writable
 
     def progress(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
+    check_writable(args.json, args.markdown)  # now, not after the evaluation
     seed = evaluate.SEED if args.seed is None else args.seed
     results = evaluate.evaluate(
         data=args.data, models=args.models, seed=seed, quick=args.quick, progress=progress

@@ -24,10 +24,12 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean.errors import FacecleanError
+    from faceclean.io.atomic import check_writable
     from faceclean.learned.export import export
 
     if Path(args.model).resolve() == Path(args.output).resolve():
         raise FacecleanError("OUT must not be the model file")
+    check_writable(args.output)
     facts = export(args.model, args.output)
     print(
         f"wrote {args.output}: {facts['channels']} channels, {facts['layers']} x "

@@ -32,8 +32,9 @@ def run(args: argparse.Namespace) -> int:
 
     from faceclean.errors import FacecleanError
     from faceclean.evaluation import fuzz
-    from faceclean.io.atomic import atomic_write
+    from faceclean.io.atomic import atomic_write, check_writable
 
+    check_writable(args.save)  # now, not when a failing input turns up
     examples, seconds = args.examples, args.seconds
     if examples is None and seconds is None:
         examples = 10_000

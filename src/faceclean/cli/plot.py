@@ -52,8 +52,10 @@ def comparison_from(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from faceclean.io.atomic import check_writable
     from faceclean.report import plot
 
+    check_writable(args.output)  # now, not after cleaning
     comp = comparison_from(args)
     channels = [c for c in (args.channels or "").split(",") if c.strip()] or None
     plot.save_figure(comp, args.output, channels, args.start, args.end)

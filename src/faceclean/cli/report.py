@@ -29,9 +29,11 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.cli.plot import comparison_from
     from faceclean.errors import FacecleanError
     from faceclean.face import mesh
+    from faceclean.io.atomic import check_writable
 
     if Path(args.output).suffix.lower() not in (".html", ".htm"):
         raise FacecleanError(f"{args.output}: the report must be an .html file")
+    check_writable(args.output)  # now, not after cleaning and building the page
     face = mesh.load(args.mesh) if args.mesh else None
     comp = comparison_from(args)
     size = report.write(comp, args.output, face, source=Path(args.input).name)

@@ -104,11 +104,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from tqdm import tqdm
-
     from faceclean.errors import FacecleanError
-    from faceclean.neural.losses import Weights
-    from faceclean.neural.train import Config, train
 
     if args.pairs:
         from faceclean.cli import train_pairs
@@ -122,6 +118,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
+    _check_outputs(args)  # before torch is imported: a refusal is immediate
+
+    from tqdm import tqdm
+
+    from faceclean.neural.losses import Weights
+    from faceclean.neural.train import Config, train
     if args.arch == "adaptive":
         return _adaptive(args)
     if args.arch != "lstm":
@@ -167,6 +169,29 @@ def run(args: argparse.Namespace) -> int:
     if best:
         print(f"best epoch {best['epoch']}: {args.out}", file=sys.stderr)
     return 0
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """--out (and the resumable MODEL.last.npz beside it) checked now with the -o policy,
+    not after the training; never inside --data (a model there would be read as a take).
+    A run may replace the files it writes even when it resumes from one of them
+    (``--resume X.last.npz``, or fine-tuning X in place), atomically as always."""
+    import os
+    from pathlib import Path
+
+    from faceclean.errors import FacecleanError
+    from faceclean.io import atomic, paths
+
+    out = Path(args.out)
+    last = None if args.arch in ("fc", "gbt") else out.with_name(out.stem + ".last.npz")
+    atomic.check_writable(out, last)
+    if args.data:
+        data = os.path.realpath(args.data)
+        if os.path.realpath(out).startswith(data.rstrip(os.sep) + os.sep):
+            raise FacecleanError(f"--out {out} is inside --data {args.data}: name another place")
+    for p in (out, last):
+        if p is not None:
+            paths.rewritable(p)
 
 
 def _report(args: argparse.Namespace) -> str:

@@ -31,7 +31,7 @@ from faceclean.channels import ARKIT52, GROUPS, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters import METHODS, Cleaner, make
 from faceclean.io.atomic import atomic_write
-from faceclean.io.source import read_bytes
+from faceclean.io.source import named, read_json
 from faceclean.settings import PRESETS
 
 FORMAT = "faceclean-preset/1"
@@ -46,7 +46,7 @@ def shipped() -> list[str]:
 def locate(preset: str | os.PathLike) -> Path:
     """A preset file: an existing path, else the shipped preset of that name."""
     p = Path(preset)
-    if p.is_file():
+    if named(p):  # the user's file, whatever it is: the reader says what is wrong with it
         return p
     if isinstance(preset, str) and os.sep not in preset and not preset.endswith(".json"):
         q = PRESETS / f"{preset}.json"
@@ -107,7 +107,7 @@ def validate(doc: Any, source: str = "preset") -> dict[str, Any]:
 def read(preset: str | os.PathLike) -> dict[str, Any]:
     """Load and validate a preset (a path or a shipped name)."""
     p = locate(preset)
-    return validate(strict_json.loads(read_bytes(p, 1 << 20, "preset"), p.name), p.name)
+    return validate(read_json(p, "preset file", 1 << 20), p.name)
 
 
 def expand(doc: Mapping[str, Any], names: Sequence[str]) -> dict[str, float | np.ndarray]:

@@ -31,6 +31,17 @@ def writable(path: str | os.PathLike) -> Path:
     return paths.target(path)
 
 
+def check_writable(*outputs: str | os.PathLike | None) -> None:
+    """Refuse now, before any work, what a later write to each output would refuse (the
+    ``-o`` policy: ``writable``), and two outputs naming one file. A command that writes
+    at its end (a relay's ``--record``, ``train --out``, ``eval --json``) calls this at
+    its start; None entries (options not given) are skipped."""
+    paths.distinct(*outputs)
+    for out in outputs:
+        if out is not None:
+            writable(out)
+
+
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file for writing; on success it replaces ``path`` atomically."""

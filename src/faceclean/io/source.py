@@ -15,7 +15,21 @@ proportion to the input whatever its content:
 - an npz animation unpacks to at most ``MAX_UNPACKED`` bytes (model files: 64 MiB,
   ``npz_safe``); a glTF ``data:`` URI decodes to at most ``MAX_FILE`` bytes.
 
-Each refusal is one line naming the file and the bound.
+Each refusal is one line naming the file and the bound, and says what the file is
+(``what``: "no such calibration file: c.json", "p.json: a FIFO, not a regular file").
+
+The API every reader uses (a new file type, e.g. a pairs shard or a tracker model,
+takes the same path; nothing opens a user's file any other way):
+
+- ``regular(path, what)``: the stat of a regular file, else one line; notes the input
+  (``io.paths``: no output of this command may replace it);
+- ``open_binary(path, what)``: a file object, once ``regular`` accepts the path;
+- ``read_bytes(path, limit, what)``: the whole file, at most ``limit`` bytes;
+- ``read_text(path, what, limit=MAX_DOC)``: the whole file as UTF-8 text;
+- ``read_json(path, what, limit=MAX_DOC, max_depth=MAX_DEPTH)``: a document in strict
+  JSON (``strict_json``: finite numbers, bounded nesting);
+- ``named(path)``: whether a path names something that exists (a dangling link too), so
+  a caller that falls back to a shipped name lets ``regular`` say what is wrong instead.
 """
 
 from __future__ import annotations
@@ -23,13 +37,16 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
+from faceclean import strict_json
 from faceclean.errors import FacecleanError
 from faceclean.io import paths
 
 MiB = 1 << 20
 MAX_FILE = 1024 * MiB  # bytes of a file read whole
+MAX_DOC = 16 * MiB  # bytes of a settings document (calibration, levels, preset, pairs)
+MAX_DEPTH = strict_json.MAX_DEPTH  # nesting of a settings document
 MAX_UNPACKED = 512 * MiB  # bytes an npz animation may unpack to
 MAX_CELL = 64  # bytes of one CSV data cell (a number needs at most ~25)
 MAX_NAME = 256  # bytes of one CSV header cell (a channel name)
@@ -47,6 +64,8 @@ def regular(path: str | os.PathLike, what: str = "file") -> os.stat_result:
         raise FacecleanError(f"no such {what}: {p}") from None
     except OSError as e:
         raise FacecleanError(f"cannot read {p}: {e.strerror or e}") from None
+    except ValueError:  # a NUL byte in the name (argv has none; a JSON string may)
+        raise FacecleanError(f"no such {what}: {os.fspath(path)!r}") from None
     if stat.S_ISDIR(st.st_mode):
         raise FacecleanError(f"is a folder, not a file: {p}")
     if not stat.S_ISREG(st.st_mode):
@@ -92,6 +111,38 @@ def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file
     if total > limit:
         raise FacecleanError(f"{p.name}: over the {size_text(limit)} limit")
     return b"".join(parts) if len(parts) != 1 else parts[0]
+
+
+def read_text(path: str | os.PathLike, what: str = "file", limit: int = MAX_DOC) -> str:
+    """The whole of a regular UTF-8 text file (a leading BOM dropped), at most ``limit``."""
+    data = read_bytes(path, limit, what).removeprefix(BOM)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise FacecleanError(f"{Path(path).name}: not UTF-8 text (byte {e.start})") from None
+
+
+def read_json(
+    path: str | os.PathLike,
+    what: str = "file",
+    limit: int = MAX_DOC,
+    *,
+    max_depth: int | None = MAX_DEPTH,
+    numbers: bool = True,
+) -> Any:
+    """A strict JSON document (UTF-8, RFC 8259) from a regular file of at most ``limit``
+    bytes, nested at most ``max_depth`` deep (None: the parser's own bound)."""
+    text = read_text(path, what, limit)
+    return strict_json.loads(text, Path(path).name, numbers=numbers, max_depth=max_depth)
+
+
+def named(path: str | os.PathLike) -> bool:
+    """Whether ``path`` names an existing entry (a dangling symlink counts): the user
+    meant that file, and ``regular`` will say what is wrong with it."""
+    try:
+        return os.path.lexists(path)
+    except (OSError, ValueError):  # a NUL byte
+        return False
 
 
 def check_cells(fields: list[bytes], label: str, limit: int = MAX_CELL) -> None:

@@ -6,13 +6,14 @@ from here. A checkpoint's ``config`` (a 0-d JSON string) carries its ``format``.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
 
+from faceclean import strict_json
 from faceclean.errors import FacecleanError
 from faceclean.io.npz_safe import MiB, load_arrays
+from faceclean.io.source import open_binary, regular
 
 LSTM = "faceclean-lstm/1"  # the recurrent cleaner (learned/checkpoint.py)
 FC = "faceclean-fc/1"  # the fully connected baseline (learned/derivative_net.py)
@@ -30,14 +31,19 @@ METHODS = {
 MAX_MODEL_BYTES = 64 * MiB  # a bigger file (or one unpacking bigger) is refused
 
 
+def model_file(path: str | os.PathLike) -> Path:
+    """``path`` when it names a regular file (the bounded reader's check), else one line:
+    "no such model file: m.npz", "m.npz: a FIFO, not a regular file"."""
+    regular(path, "model file")
+    return Path(path)
+
+
 def read_arrays(path: str | os.PathLike) -> dict[str, Any]:
     """Every array of a checkpoint file by name (``config`` among them): the one reader
     of model files. Never unpickles; size-checked (``MAX_MODEL_BYTES``); one-line
     FacecleanError for a missing file or one that is not a readable .npz."""
     p = Path(path)
-    if not p.is_file():
-        raise FacecleanError(f"no such model file: {p}")
-    with open(p, "rb") as f:
+    with open_binary(p, "model file") as f:  # a regular file, else one true line
         if f.read(4) != b"PK\x03\x04":  # an .npz is a zip archive
             raise FacecleanError(f"{p.name}: not a model .npz (not a zip archive)")
     return load_arrays(p, MAX_MODEL_BYTES, "model .npz")
@@ -49,9 +55,10 @@ def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict]:
     p = Path(path)
     arrays = read_arrays(p)
     try:
-        config = json.loads(str(arrays.pop("config")[()]))
-    except (KeyError, ValueError, TypeError, RecursionError) as e:
+        raw = str(arrays.pop("config")[()])
+    except (KeyError, ValueError, TypeError, IndexError) as e:
         raise FacecleanError(f"{p.name}: no readable 'config' ({e})") from None
+    config = strict_json.loads(raw, f"{p.name}: config", max_depth=strict_json.MAX_DEPTH)
     if not isinstance(config, dict):
         raise FacecleanError(f"{p.name}: 'config' is not a JSON object")
     return config, arrays

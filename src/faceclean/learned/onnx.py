@@ -41,15 +41,16 @@ def _session(model: bytes, threads: int) -> Any:
 
 def model_bytes(path: str | os.PathLike) -> bytes:
     """The step graph of ``path``: an exported .onnx as is, or a .npz checkpoint built now."""
-    p = Path(path)
-    if not p.is_file():
-        raise FacecleanError(f"no such model file: {p}")
+    from faceclean.io.source import read_bytes
+    from faceclean.learned.formats import MAX_MODEL_BYTES, model_file
+
+    p = model_file(path)  # a FIFO or folder: one true line
     if p.suffix.lower() == ".npz":
         from faceclean.learned.checkpoint import LSTMWeights
         from faceclean.learned.export import build  # needs onnx, not torch
 
         return build(LSTMWeights.load(p)).SerializeToString()
-    return p.read_bytes()
+    return read_bytes(p, MAX_MODEL_BYTES, "model file")
 
 
 class OnnxLearned(StreamCleaner):

@@ -23,7 +23,6 @@ the epoch for ``--resume`` of an interrupted run.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -35,6 +34,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from faceclean import strict_json
 from faceclean.channels import ARKIT52
 from faceclean.evaluation import dataset, harness, metrics
 from faceclean.filters import make
@@ -321,7 +321,7 @@ def _save_last(w: AdaptiveWeights, opt: torch.optim.Adam, net: AdaptiveNet, path
         if "step" in st:
             arrays[f"optim.{i}.step"] = np.array(float(st["step"]))
     with atomic_open(path, "wb") as f:
-        np.savez(f, config=np.array(json.dumps(w.config)), **arrays)
+        np.savez(f, config=np.array(strict_json.dumps(w.config)), **arrays)  # NaN: null
 
 
 def _optimizer_arrays(path: str) -> dict[str, np.ndarray]:

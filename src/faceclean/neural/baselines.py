@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import json
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -37,6 +36,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from faceclean import strict_json
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import dataset, simulate
@@ -135,7 +135,7 @@ def _std(a: np.ndarray, axis) -> np.ndarray:
 
 def _save(path: str | os.PathLike, config: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
     buf = io.BytesIO()
-    np.savez_compressed(buf, config=np.array(json.dumps(config)), **arrays)
+    np.savez_compressed(buf, config=np.array(strict_json.dumps(config)), **arrays)  # NaN: null
     atomic_write(path, buf.getvalue())
 
 

@@ -10,17 +10,17 @@ runtime).
 from __future__ import annotations
 
 import io
-import json
 import os
-import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
+from faceclean import strict_json
 from faceclean.errors import FacecleanError
 from faceclean.io.atomic import atomic_write
+from faceclean.learned import formats
 from faceclean.learned.formats import LSTM as FORMAT
 from faceclean.neural.model import LSTMCleaner
 
@@ -55,7 +55,7 @@ def save(
     """
     config = {"format": FORMAT, **model.config(), **(extra or {})}
     data = arrays(model)
-    data["config"] = np.array(json.dumps(config))
+    data["config"] = np.array(strict_json.dumps(config))  # NaN: null (configs are read strictly)
     if optimizer is not None:
         data.update(_optimizer_arrays(model, optimizer))
     buf = io.BytesIO()
@@ -66,18 +66,8 @@ def save(
 def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """(config, arrays) of a checkpoint file; a foreign or malformed file is a FacecleanError."""
     p = Path(path)
-    if not p.is_file():
-        raise FacecleanError(f"no such model file: {p}")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise FacecleanError(f"{p.name}: not a faceclean model ({e})") from None
-    try:
-        config = json.loads(str(data.pop("config")[()]))
-    except (KeyError, ValueError, TypeError, IndexError):
-        raise FacecleanError(f"{p.name}: not a faceclean model (no config)") from None
-    if not isinstance(config, dict) or config.get("format") != FORMAT:
+    config, data = formats.read(p)  # the one model-file reader: bounded, never unpickles
+    if config.get("format") != FORMAT:
         raise FacecleanError(f"{p.name}: not a {FORMAT} model")
     return config, data
 

@@ -223,9 +223,11 @@ def _train(cfg: Config, report: Report, rank: int, world: int, device) -> dict[s
         if distributed.agree(stop, device):
             break
     if start_model is not None and not best_record:  # nothing beat it: out is the start
-        import shutil
+        from faceclean.io.atomic import atomic_write
+        from faceclean.io.source import read_bytes
 
-        shutil.copyfile(start_model, cfg.out)
+        if not Path(cfg.out).exists() or not Path(cfg.out).samefile(start_model):
+            atomic_write(cfg.out, read_bytes(start_model, what="model file"))
         best_record = {"epoch": -1, "score": best, "start": True}
         report({"event": "stop", "best": best_record, "note": "no epoch beat the start"})
         return best_record

@@ -12,8 +12,10 @@ Time of a packet: t = (frame_number + sub_frame) * denominator / numerator secon
 from __future__ import annotations
 
 import gzip
+import io
 import os
 import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -118,15 +120,23 @@ class Encoder:
         return head + timing + floats.astype(_BE_F32).tobytes()
 
 
+MAX_RECORDING = 256 << 20  # bytes a recording may unpack to (an hour at 60 fps: ~60 MB)
+
+
 def read_recording(path: str | os.PathLike) -> list[bytes]:
     """The packets of a ``.gesichter`` recording (gzip: u8 version, u32 count, then
     per packet u32 size + the packet exactly as sent)."""
+    from faceclean.io import source
+
     p = Path(path)
-    try:
-        with gzip.open(p, "rb") as f:
-            blob = f.read()
-    except (OSError, EOFError) as e:
+    raw = source.read_bytes(p, what="recording")  # a regular file, bounded
+    try:  # unpacked bounded too (a gzip bomb)
+        with gzip.GzipFile(fileobj=io.BytesIO(raw)) as f:
+            blob = f.read(MAX_RECORDING + 1)
+    except (OSError, EOFError, zlib.error) as e:
         raise FacecleanError(f"{p.name}: not a gzip .gesichter recording ({e})") from None
+    if len(blob) > MAX_RECORDING:
+        raise FacecleanError(f"{p.name}: unpacks to over {source.size_text(MAX_RECORDING)}")
     if len(blob) < 5:
         raise FacecleanError(f"{p.name}: truncated recording")
     (count,) = struct.unpack_from(">I", blob, 1)

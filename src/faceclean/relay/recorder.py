@@ -26,6 +26,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
+from faceclean.io.atomic import check_writable
 from faceclean.relay.frame import POSE_NAMES
 
 GAP = 1.0  # s between two streams in one recording
@@ -48,12 +49,10 @@ class Recorder:
             raise FacecleanError(
                 f"--record {self.path.name}: give a .csv (Live Link) or .npz file name"
             )
-        folder = self.path.parent if str(self.path.parent) else Path(".")
-        for p in (self.path, clean_path(self.path)):
-            if p.is_dir():
-                raise FacecleanError(f"--record: {p} is a folder")
-        if not folder.is_dir():
-            raise FacecleanError(f"--record: the folder {folder} does not exist")
+        try:  # now, not when the session ends: the -o policy for both files
+            check_writable(self.path, clean_path(self.path))
+        except FacecleanError as e:
+            raise FacecleanError(f"--record: {e}") from None
         self._t: list[float] = []
         self._x: list[np.ndarray] = []  # (52,) float64 each
         self._y: list[np.ndarray] = []  # (52,) float32 each

@@ -73,8 +73,6 @@ def frames_from_recording(path: str | os.PathLike) -> list[Frame]:
 def load_frames(path: str | os.PathLike) -> list[Frame]:
     """Frames of any take ``faceclean.io.load`` reads, or of a ``.gesichter`` recording."""
     if Path(path).suffix.lower() == ".gesichter":
-        if not Path(path).is_file():
-            raise FacecleanError(f"no such file: {path}")
         frames = frames_from_recording(path)
     else:
         from faceclean.io import load
