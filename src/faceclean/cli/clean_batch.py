@@ -3,7 +3,8 @@
 One progress bar (files) on stderr, one line per file on stdout as it finishes, then a
 summary naming each failed file and why; exit 1 when any file failed. Every output is
 written atomically, so a failed file leaves nothing behind (nor a folder made for it).
-``--jobs N`` runs N worker processes, each cleaning whole files.
+``--jobs N`` runs N worker processes (``faceclean.workers``: at most one per file and two
+per core, said when capped; they die with this process), each cleaning whole files.
 """
 
 from __future__ import annotations
@@ -19,16 +20,16 @@ __all__ = ["is_batch", "run"]
 
 
 def run(args: argparse.Namespace) -> int:
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
     from tqdm import tqdm
 
+    from faceclean import workers
     from faceclean.channels import ARKIT52
     from faceclean.cli import options
     from faceclean.cli.clean import build_cleaner, build_levels
 
-    if args.jobs < 1:
-        raise FacecleanError(f"--jobs must be at least 1 (got {args.jobs})")
+    workers.count(args.jobs, None)  # --jobs 0: refused before anything is read
     if args.fmt is not None:
         raise FacecleanError("a batch keeps each file's format: --format is for one file")
     # bad options fail once, here, not once per file
@@ -46,16 +47,19 @@ def run(args: argparse.Namespace) -> int:
                 f"{onto[0].dst} is the input {onto[0].src}{more}: a batch into the input "
                 "folder would overwrite raw takes; give another -o folder, or --in-place"
             )
+    n, note = workers.count(args.jobs, len(jobs), "files" if len(jobs) != 1 else "file")
+    if note:
+        print(note, file=sys.stderr)
     Path(args.output).mkdir(parents=True, exist_ok=True)
     failed: list[tuple[Job, str]] = []
     bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, desc="cleaning", leave=False)
     with bar:
-        if args.jobs == 1:
+        if n == 1:
             results = ((job, _clean(args, job)) for job in jobs)
             for job, (ok, text) in results:
                 _done(bar, job, ok, text, failed)
-        else:
-            with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        else:  # workers that die with this process, stopped at once by Ctrl-C
+            with workers.Pool(n) as pool:
                 futures = {pool.submit(_clean, args, job): job for job in jobs}
                 for future in as_completed(futures):
                     _done(bar, futures[future], *future.result(), failed)

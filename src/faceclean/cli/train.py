@@ -104,6 +104,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
+    from faceclean import workers
     from faceclean.errors import FacecleanError
 
     if args.pairs:
@@ -119,11 +120,15 @@ def run(args: argparse.Namespace) -> int:
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
     _check_outputs(args)  # before torch is imported: a refusal is immediate
+    args.threads, note = workers.count(args.threads, None, flag="--threads")
+    if note:
+        print(note, file=sys.stderr)
 
     from tqdm import tqdm
 
     from faceclean.neural.losses import Weights
     from faceclean.neural.train import Config, train
+
     if args.arch == "adaptive":
         return _adaptive(args)
     if args.arch != "lstm":

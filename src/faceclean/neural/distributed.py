@@ -1,7 +1,8 @@
 """Data-parallel plumbing: torchrun's environment -> process group, DDP, agreement.
 
 One process (no WORLD_SIZE, or 1) needs none of it. Under torchrun, gloo on CPU, NCCL
-when CUDA is there (one GPU per local rank).
+when CUDA is there (one GPU per local rank). Each rank dies with the agent that started it
+(``faceclean.workers.die_with_parent``).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import torch
 import torch.distributed as dist
 from torch import nn
 
+from faceclean import workers
+
 
 def setup() -> tuple[int, int, torch.device]:
     """(rank, world size, device), initialising the process group under torchrun."""
@@ -20,6 +23,7 @@ def setup() -> tuple[int, int, torch.device]:
     if world <= 1 or dist.is_initialized():
         rank = dist.get_rank() if dist.is_initialized() else 0
         return rank, max(world, 1), _device()
+    workers.die_with_parent()  # a rank stops when torchrun's agent dies, SIGKILL included
     cuda = torch.cuda.is_available()
     if cuda:
         torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", "0")))
