@@ -132,8 +132,12 @@ def read_json(
 ) -> Any:
     """A strict JSON document (UTF-8, RFC 8259) from a regular file of at most ``limit``
     bytes, nested at most ``max_depth`` deep (None: the parser's own bound)."""
-    text = read_text(path, what, limit)
-    return strict_json.loads(text, Path(path).name, numbers=numbers, max_depth=max_depth)
+    p = Path(path)
+    try:
+        text = read_bytes(p, limit, what).removeprefix(BOM).decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise FacecleanError(f"{p.name}: not valid JSON (not UTF-8: byte {e.start})") from None
+    return strict_json.loads(text, p.name, numbers=numbers, max_depth=max_depth)
 
 
 def named(path: str | os.PathLike) -> bool:
