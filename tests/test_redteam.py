@@ -34,6 +34,7 @@ import struct
 import subprocess
 import sys
 import threading
+import time
 import zlib
 from pathlib import Path
 
@@ -2129,6 +2130,115 @@ def test_tune_absurd_input_is_refused(tmp_path, case):
     truth = write_json(tmp_path / "truth.json", truth_doc)
     refused(fc("tune", noisy, *extra, "--truth", truth, "--method", method, "-o", out))
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------
+# I2. Parallelism is bounded, and workers die with their parent (issue 21)
+
+
+def test_batch_jobs_beyond_the_files_is_capped_and_said(tmp_path, take):
+    out = tmp_path / "out"
+    r = fc("clean", take, "-o", f"{out}/", "--jobs", "100000", "--method", "ema")
+    ok(r)
+    assert "capped at 1" in r.stderr, r.stderr
+    assert (out / take.name).is_file()
+
+
+def test_batch_jobs_beyond_the_cores_is_capped_at_a_small_multiple(tmp_path):
+    cores = len(os.sched_getaffinity(0))
+    n = 2 * cores + 3
+    src = tmp_path / "takes"
+    src.mkdir()
+    for i in range(n):
+        (src / f"t{i}.csv").write_bytes(livelink_text(20))
+    out = tmp_path / "out"
+    r = fc("clean", src, "-o", out, "--jobs", "100000", "--method", "ema")
+    ok(r)
+    got = re.search(r"capped at (\d+)", r.stderr)
+    assert got and int(got.group(1)) <= 4 * cores, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == sorted(f"t{i}.csv" for i in range(n))
+
+
+@pytest.mark.parametrize("jobs", ["0", "-1", "-100000"])
+def test_batch_jobs_below_one_is_refused(tmp_path, take, jobs):
+    refused(fc("clean", take, "-o", f"{tmp_path / 'out'}/", "--jobs", jobs, timeout=HANG))
+    assert not (tmp_path / "out").exists()
+
+
+def _children(pid: int) -> dict[int, tuple[str, bytes]]:
+    """pid -> (start time, command line) of every process whose parent is ``pid``."""
+    out = {}
+    for d in Path("/proc").iterdir():
+        with contextlib.suppress(OSError, IndexError, ValueError):
+            if d.name.isdigit():
+                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+                if int(fields[1]) == pid:
+                    out[int(d.name)] = (fields[19], (d / "cmdline").read_bytes())
+    return out
+
+
+def _running(pid: int, start: str) -> bool:
+    """The same process (pid and start time) still runs (a zombie does not: the
+    container's init may never reap it)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return False
+    return fields[19] == start and fields[0] not in ("Z", "X")
+
+
+def _until(condition, deadline: float = TIMEOUT) -> bool:
+    """Poll ``condition`` every 0.1 s until it holds or ``deadline`` s pass."""
+    end = time.monotonic() + deadline
+    while not condition() and time.monotonic() < end:
+        time.sleep(0.1)
+    return condition()
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+@pytest.mark.parametrize(
+    "sig",
+    [signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT],
+    ids=["kill", "term", "hup", "ctrl-c"],
+)
+def test_batch_workers_die_with_their_parent(tmp_path, sig):
+    """``clean DIR -o OUT/ --jobs 2`` killed while its workers run: every worker is gone
+    soon after (polled, bounded), and no temporary output is left behind."""
+    src = tmp_path / "takes"
+    src.mkdir()
+    for i in range(3):  # ~13 MB each: the workers are still busy when the signal comes
+        (src / f"t{i}.csv").write_bytes(livelink_text(16_000))
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "faceclean", "clean", str(src), "-o", f"{out}/", "--jobs", "2"]
+    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=_limits(MEM))  # fmt: skip
+    kids: dict[int, tuple[str, bytes]] = {}
+
+    def workers() -> int:  # python processes it started (worker, resource tracker, ...)
+        kids.update(_children(proc.pid))
+        return sum(b"python" in cmd for _, cmd in kids.values())
+
+    try:
+        assert _until(lambda: workers() >= 2), kids
+        if sig == signal.SIGINT:
+            os.killpg(proc.pid, sig)  # Ctrl-C: the terminal signals the whole group
+        else:
+            os.kill(proc.pid, sig)  # the parent alone (kill, a closed terminal, SIGTERM)
+        _, err = proc.communicate(timeout=TIMEOUT)
+        left = lambda: [p for p, (start, _) in kids.items() if _running(p, start)]  # noqa: E731
+        assert _until(lambda: not left()), f"workers outlived their parent: {left()}"
+        assert "Traceback" not in err.decode(), err.decode()[-800:]
+        if sig != signal.SIGKILL:
+            assert proc.returncode in (130, 143), (proc.returncode, err.decode()[-300:])
+        if out.exists():
+            no_temp_files(out)
+    finally:
+        for p, start in [(proc.pid, None), *((k, v[0]) for k, v in kids.items())]:
+            if start is None or _running(p, start):
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(p, signal.SIGKILL)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.communicate(timeout=TIMEOUT)
 
 
 # --------------------------------------------------------------------------------------
