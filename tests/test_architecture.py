@@ -38,6 +38,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     },
     "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
     "report": {"evaluation", "face", "io", "faceclean"},
+    "ui": {"resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"},
     "neural": {"filters", "learned", "evaluation", "face", "io", "cli"},
     "cli": {"*"},  # the command line may use anything (heavy imports inside run)
     "faceclean": {"io", "cleaner"},  # the package's public face

@@ -26,7 +26,7 @@ COMMANDS: tuple[str, ...] = (
     "corrupt", "synth",
     "pairs", "train", "eval", "plot", "export", "bench",
     "relay", "replay",
-    "report", "face-mesh",
+    "report", "face-mesh", "ui",
     "fuzz",
 )  # fmt: skip
 

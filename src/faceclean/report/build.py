@@ -27,6 +27,7 @@ from faceclean.report import payload
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]  # src/faceclean/report -> the repository root
 VENDOR = HERE / "vendor"  # in a built wheel only: vendor/three/build/*.js (setup.py)
+FACE_JS = HERE / "face.js"  # the 3D face view, shared with the tuning page (faceclean.ui)
 NPM_HINT = "run `make venv` (or `npm ci`) in the faceclean repository"
 
 TRUTH_COLUMNS = (
@@ -54,7 +55,7 @@ def _data_url(source: str) -> str:
 
 
 def import_map() -> tuple[str, str]:
-    """(import map JSON with three.js as data: modules, three.js version)."""
+    """(import map JSON with three.js and face.js as data: modules, three.js version)."""
     three = node_modules() / "three"
     build = three / "build"
     version = json.loads((three / "package.json").read_text()).get("version", "?")
@@ -69,6 +70,7 @@ def import_map() -> tuple[str, str]:
         source = re.sub(r"""(['"])\./three\.core(\.min)?\.js\1""", '"three/core"', source)
         imports["three/core"] = _data_url(core.read_text(encoding="utf-8"))
     imports["three"] = _data_url(source)
+    imports["faceclean/face"] = _data_url(FACE_JS.read_text(encoding="utf-8"))  # the face view
     return json.dumps({"imports": imports}), version
 
 

@@ -1,8 +1,8 @@
 // faceclean report viewer: two faces (input, cleaned) played in sync, and the curves.
-// Reads the JSON in #fc-data (written by faceclean/report/build.py); three.js is inlined
-// into the page through the import map. Times in seconds; weights stored as
-// round(value * data.scale) integers, null where missing.
-import * as THREE from "three";
+// Reads the JSON in #fc-data (written by faceclean/report/build.py); three.js and
+// report/face.js (the face view) are inlined into the page through the import map. Times
+// in seconds; weights stored as round(value * data.scale) integers, null where missing.
+import { faceView } from "faceclean/face";
 
 const data = JSON.parse(document.getElementById("fc-data").textContent);
 const times = data.times; // (N,) s from the first frame
@@ -11,20 +11,13 @@ const duration = times[N - 1];
 const COLORS = { input: "#8d949c", truth: "#111111" };
 const OTHER = ["#1f6fd1", "#e8710a", "#2ca02c", "#9334e6", "#d62728", "#8c564b", "#e52592"];
 
-const state = { t: 0, playing: false, speed: 1, last: null, renders: 0, w0: 0, span: duration };
+const state = { t: 0, playing: false, speed: 1, last: null, w0: 0, span: duration };
 const api = {
   ready: false, seek, play, pause, duration,
   get time() { return state.t; },
-  get renders() { return state.renders; },
+  get renders() { return view.face ? view.face.renders : 0; },
 };
 window.faceclean = api;
-
-function decode(b64, Type) {
-  const bin = atob(b64);
-  const bytes = new Uint8Array(bin.length);
-  for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
-  return new Type(bytes.buffer);
-}
 
 // Largest i with times[i] <= t (0 before the start).
 function frameAt(t) {
@@ -53,95 +46,13 @@ function valueAt(s, col, t) {
   return i >= 0 ? v[i] / data.scale : 0;
 }
 
-// ---- the 3D view -------------------------------------------------------------------
-const view = { faces: [] };
+// ---- the 3D view (report/face.js, shared with the tuning page) ----------------------
+const view = { face: null };
 
 function setupView() {
   const canvas = document.getElementById("fc-canvas");
-  const m = data.mesh;
-  const base = decode(m.positions, Float32Array); // (V*3) mesh units
-  const index = decode(m.indices, Uint32Array);
-  const colors = m.colors ? decode(m.colors, Uint8Array) : null;
-  const tidx = decode(m.target_index, Uint32Array); // concatenated vertex indices
-  const tdel = decode(m.target_delta, Int16Array); // (sum n, 3) deltas / q
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
-  renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
-  renderer.setClearColor(0xe9edf2);
-  const scene = new THREE.Scene();
-  scene.add(new THREE.HemisphereLight(0xffffff, 0x8d7f78, 1.4));
-  const key = new THREE.DirectionalLight(0xffffff, 2.2);
-  key.position.set(-0.6, 0.8, 1.2);
-  scene.add(key);
-  const fill = new THREE.DirectionalLight(0xdfe8ff, 0.7);
-  fill.position.set(0.9, 0.1, 0.6);
-  scene.add(fill);
-
-  let min = [Infinity, Infinity, Infinity], max = [-Infinity, -Infinity, -Infinity];
-  for (let i = 0; i < base.length; i += 3) {
-    for (let k = 0; k < 3; k++) {
-      min[k] = Math.min(min[k], base[i + k]);
-      max[k] = Math.max(max[k], base[i + k]);
-    }
-  }
-  const size = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
-  const centre = [(max[0] + min[0]) / 2, (max[1] + min[1]) / 2, (max[2] + min[2]) / 2];
-  const material = new THREE.MeshStandardMaterial({
-    vertexColors: !!colors, color: colors ? 0xffffff : 0xe8bfa8,
-    roughness: 0.62, metalness: 0.0, side: THREE.DoubleSide,
-  });
-  for (const side of [-1, 1]) {
-    const geometry = new THREE.BufferGeometry();
-    const pos = new Float32Array(base);
-    geometry.setAttribute("position", new THREE.BufferAttribute(pos, 3));
-    if (colors) geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3, true));
-    geometry.setIndex(new THREE.BufferAttribute(index, 1));
-    geometry.computeVertexNormals();
-    const mesh = new THREE.Mesh(geometry, material);
-    scene.add(mesh);
-    view.faces.push({ geometry, pos, weights: null, mesh, side });
-  }
-  const camera = new THREE.PerspectiveCamera(24, 2, size[1] * 0.05, size[1] * 60);
-  view.fit = () => {
-    const w = canvas.clientWidth, h = canvas.clientHeight;
-    renderer.setSize(w, h, false);
-    camera.aspect = w / h;
-    // Each face fills its half of the view: height and half the width both fit.
-    const tan = Math.tan((camera.fov * Math.PI) / 360);
-    const dist = Math.max((size[1] * 1.08) / (2 * tan), (size[0] * 2.3) / (2 * tan * camera.aspect));
-    const width = 2 * dist * tan * camera.aspect; // visible width at the faces' plane
-    for (const f of view.faces) {
-      const x = (f.side * width) / 4;
-      f.mesh.position.set(x - centre[0], -centre[1], -centre[2]);
-      f.mesh.rotation.y = -Math.atan2(x, dist + size[2] / 2); // face the camera squarely
-    }
-    camera.position.set(0, size[1] * 0.03, dist + size[2] / 2);
-    camera.lookAt(0, 0, 0);
-    camera.updateProjectionMatrix();
-    render();
-  };
-  view.render = () => { renderer.render(scene, camera); state.renders++; };
-  view.pose = (face, w) => {
-    if (face.weights && face.weights.every((x, j) => Math.abs(x - w[j]) < 1e-5)) return;
-    face.weights = w.slice();
-    const p = face.pos;
-    p.set(base);
-    let start = 0;
-    for (const tg of m.targets) {
-      const wj = w[tg.ch];
-      if (Math.abs(wj) > 1e-4) {
-        const s = wj * tg.q;
-        for (let i = start; i < start + tg.n; i++) {
-          const v = 3 * tidx[i];
-          p[v] += s * tdel[3 * i];
-          p[v + 1] += s * tdel[3 * i + 1];
-          p[v + 2] += s * tdel[3 * i + 2];
-        }
-      }
-      start += tg.n;
-    }
-    face.geometry.attributes.position.needsUpdate = true;
-    face.geometry.computeVertexNormals();
-  };
+  view.face = faceView(canvas, data.mesh);
+  view.fit = () => { view.face.fit(); render(); };
   new ResizeObserver(() => view.fit()).observe(canvas);
 }
 
@@ -152,9 +63,8 @@ function faceWeights(s, t) {
 }
 
 function render() {
-  if (!view.render) return;
-  view.faces.forEach((face, k) => view.pose(face, faceWeights(data.series[data.face[k]], state.t)));
-  view.render();
+  if (!view.face) return;
+  view.face.show(data.face.map((k) => faceWeights(data.series[k], state.t)));
 }
 
 // ---- curves -------------------------------------------------------------------------

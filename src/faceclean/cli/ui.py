@@ -1,0 +1,81 @@
+"""``faceclean ui take.csv``: the tuning page on a recorded take (``relay --ui`` is live).
+
+Serves the page on 127.0.0.1 (``--host`` to change; ``--port``, else a free one), prints
+its URL with the per-start token and opens it in a browser when one is there. The page
+takes the cleaner options of ``clean`` as its starting point; its controls are the same
+words (``--method``, ``--set``, ``--calibration``), saved as the files the CLI reads.
+Ctrl-C stops it. See faceclean.ui.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from faceclean.cli import options
+
+HELP = "tune a take in the browser: sliders, calibrate, curves and faces; save settings"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("take", metavar="TAKE", help="the take to tune on (any format clean reads)")
+    options.add_arguments(p, "the cleaner to start from")
+    add_page_arguments(p)
+
+
+def add_page_arguments(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """--host/--port/--no-browser (``relay`` names them --ui-host, --ui-port)."""
+    p.add_argument(
+        f"--{prefix}host",
+        default="127.0.0.1",
+        metavar="HOST",
+        help="address the page listens on (default 127.0.0.1, loopback only)",
+    )
+    p.add_argument(
+        f"--{prefix}port", type=int, default=0, metavar="PORT", help="port (default: a free one)"
+    )
+    p.add_argument("--no-browser", action="store_true", help="print the URL, open no browser")
+
+
+def tuning(args: argparse.Namespace):
+    """The page's starting state: the options, as the CLI reads them."""
+    from faceclean.ui.tuning import Tuning
+
+    calibration = options.calibration(args)
+    return Tuning(options.words(args), tuple(args.params), calibration, args.calibration)
+
+
+def serve(session, host: str, port: int, no_browser: bool):
+    """The started server, its URL printed (and opened in a browser unless told not to)."""
+    from faceclean.errors import FacecleanError
+    from faceclean.ui.server import Server
+
+    if not 0 <= port <= 65535:
+        raise FacecleanError(f"--port must be in 0..65535 (got {port})")
+    server = Server(session, host, port).start()
+    print(f"tuning page: {server.url}", flush=True)
+    if host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"faceclean: the page listens on {host}: anyone with the URL can use it", flush=True)
+    if not no_browser:
+        import contextlib
+        import webbrowser
+
+        with contextlib.suppress(Exception):  # no browser here: the printed URL is enough
+            webbrowser.open(server.url)
+    return server
+
+
+def run(args: argparse.Namespace) -> int:
+    import threading
+
+    from faceclean.ui.offline import Offline
+
+    session = Offline(args.take, tuning(args))
+    server = serve(session, args.host, args.port, args.no_browser)
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+    print("stopped", flush=True)
+    return 0

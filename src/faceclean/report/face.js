@@ -1,0 +1,113 @@
+// faceclean's 3D face view: one mesh drawn twice side by side (input left, cleaned
+// right), posed by ARKit-52 weights. Shared by the HTML report (report/viewer.js, inlined
+// as the "faceclean/face" module) and the tuning page (ui/static/ui.js, served).
+// The mesh is report/payload.py's: base64 float32 positions, uint32 triangles, uint8
+// colours, and per target the vertices it moves with int16 deltas times a scale q.
+import * as THREE from "three";
+
+export function decode(b64, Type) {
+  const bin = atob(b64);
+  const bytes = new Uint8Array(bin.length);
+  for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+  return new Type(bytes.buffer);
+}
+
+// The view on `canvas`: fit() after a resize, show([w_left, w_right]) poses and draws
+// both faces ((52,) weights each), renders counts the frames drawn.
+export function faceView(canvas, m, background = 0xe9edf2) {
+  const base = decode(m.positions, Float32Array); // (V*3) mesh units
+  const index = decode(m.indices, Uint32Array);
+  const colors = m.colors ? decode(m.colors, Uint8Array) : null;
+  const tidx = decode(m.target_index, Uint32Array); // concatenated vertex indices
+  const tdel = decode(m.target_delta, Int16Array); // (sum n, 3) deltas / q
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+  renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+  renderer.setClearColor(background);
+  const scene = new THREE.Scene();
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x8d7f78, 1.4));
+  const key = new THREE.DirectionalLight(0xffffff, 2.2);
+  key.position.set(-0.6, 0.8, 1.2);
+  scene.add(key);
+  const fill = new THREE.DirectionalLight(0xdfe8ff, 0.7);
+  fill.position.set(0.9, 0.1, 0.6);
+  scene.add(fill);
+
+  const min = [Infinity, Infinity, Infinity], max = [-Infinity, -Infinity, -Infinity];
+  for (let i = 0; i < base.length; i += 3) {
+    for (let k = 0; k < 3; k++) {
+      min[k] = Math.min(min[k], base[i + k]);
+      max[k] = Math.max(max[k], base[i + k]);
+    }
+  }
+  const size = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
+  const centre = [(max[0] + min[0]) / 2, (max[1] + min[1]) / 2, (max[2] + min[2]) / 2];
+  const material = new THREE.MeshStandardMaterial({
+    vertexColors: !!colors, color: colors ? 0xffffff : 0xe8bfa8,
+    roughness: 0.62, metalness: 0.0, side: THREE.DoubleSide,
+  });
+  const faces = [];
+  for (const side of [-1, 1]) {
+    const geometry = new THREE.BufferGeometry();
+    const pos = new Float32Array(base);
+    geometry.setAttribute("position", new THREE.BufferAttribute(pos, 3));
+    if (colors) geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3, true));
+    geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    geometry.computeVertexNormals();
+    const mesh = new THREE.Mesh(geometry, material);
+    scene.add(mesh);
+    faces.push({ geometry, pos, weights: null, mesh, side });
+  }
+  const camera = new THREE.PerspectiveCamera(24, 2, size[1] * 0.05, size[1] * 60);
+  let renders = 0;
+  const draw = () => { renderer.render(scene, camera); renders++; };
+
+  function pose(face, w) {
+    if (face.weights && face.weights.every((x, j) => Math.abs(x - w[j]) < 1e-5)) return;
+    face.weights = Array.from(w);
+    const p = face.pos;
+    p.set(base);
+    let start = 0;
+    for (const tg of m.targets) {
+      const wj = w[tg.ch];
+      if (Math.abs(wj) > 1e-4) {
+        const s = wj * tg.q;
+        for (let i = start; i < start + tg.n; i++) {
+          const v = 3 * tidx[i];
+          p[v] += s * tdel[3 * i];
+          p[v + 1] += s * tdel[3 * i + 1];
+          p[v + 2] += s * tdel[3 * i + 2];
+        }
+      }
+      start += tg.n;
+    }
+    face.geometry.attributes.position.needsUpdate = true;
+    face.geometry.computeVertexNormals();
+  }
+
+  return {
+    fit() {
+      const w = canvas.clientWidth, h = canvas.clientHeight;
+      if (!w || !h) return;
+      renderer.setSize(w, h, false);
+      camera.aspect = w / h;
+      // Each face fills its half of the view: height and half the width both fit.
+      const tan = Math.tan((camera.fov * Math.PI) / 360);
+      const dist = Math.max((size[1] * 1.08) / (2 * tan), (size[0] * 2.3) / (2 * tan * camera.aspect));
+      const width = 2 * dist * tan * camera.aspect; // visible width at the faces' plane
+      for (const f of faces) {
+        const x = (f.side * width) / 4;
+        f.mesh.position.set(x - centre[0], -centre[1], -centre[2]);
+        f.mesh.rotation.y = -Math.atan2(x, dist + size[2] / 2); // face the camera squarely
+      }
+      camera.position.set(0, size[1] * 0.03, dist + size[2] / 2);
+      camera.lookAt(0, 0, 0);
+      camera.updateProjectionMatrix();
+      draw();
+    },
+    show(weights) {
+      faces.forEach((face, k) => pose(face, weights[k]));
+      draw();
+    },
+    get renders() { return renders; },
+  };
+}

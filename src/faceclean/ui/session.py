@@ -1,0 +1,166 @@
+"""The messages both pages share: choose the cleaner and its settings, save and load the
+CLI's files, drop the calibration. ``Offline`` (ui/offline.py) and ``Live``
+(ui/live.py) add what their mode does with a new ``Tuning`` (``apply``) and their own
+messages (``on_<type>``).
+
+Every message is a JSON object ``{"type": ..., "seq": n, ...}``; each field is checked
+here (kind, length, range) before anything acts on it, and a refusal is the CLI's own
+one-line FacecleanError, sent back as ``{"type": "error", "for": type, "message": ...}``.
+A change is answered by a ``state`` message to every open page (``Tuning.describe``).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from typing import Any
+
+from faceclean.adjust import Adjust
+from faceclean.channels import ARKIT52, GROUPS
+from faceclean.errors import FacecleanError
+from faceclean.ui.server import Client
+from faceclean.ui.tuning import MAX_ITEMS, MAX_TEXT, Tuning
+
+MAX_PATH = 4096  # characters of a file name from the page
+
+
+class Base:
+    """Clients, the current ``Tuning`` and the shared messages."""
+
+    mode = "?"
+    MESSAGES: tuple[str, ...] = ("set", "save", "load", "uncalibrate")
+
+    def __init__(self, tuning: Tuning) -> None:
+        self.tuning = tuning.with_choice()
+        self.lock = threading.RLock()  # the tuning and the clients
+        self.clients: list[Client] = []
+
+    # -- clients ------------------------------------------------------------------------
+    def attach(self, client: Client) -> None:
+        with self.lock:
+            self.clients.append(client)
+        client.send(self.hello())
+
+    def detach(self, client: Client) -> None:
+        with self.lock:
+            if client in self.clients:
+                self.clients.remove(client)
+
+    def broadcast(self, message: dict[str, Any]) -> None:
+        for client in list(self.clients):
+            client.send(message)
+
+    def broadcast_bytes(self, data: bytes) -> None:
+        for client in list(self.clients):
+            client.send_bytes(data)
+
+    def hello(self) -> dict[str, Any]:
+        """The first message: what the page needs to draw itself."""
+        from faceclean import filters
+        from faceclean.face.mesh import stylised
+        from faceclean.filters import presets
+        from faceclean.report import payload
+
+        return {
+            "type": "hello",
+            "mode": self.mode,
+            "channels": list(ARKIT52),
+            "groups": {g: sorted(m, key=ARKIT52.index) for g, m in GROUPS.items()},
+            "methods": [m for m in filters.METHODS],
+            "presets": presets.shipped(),
+            "state": self.tuning.describe(),
+            "mesh": payload.mesh(stylised()),
+        }
+
+    # -- messages -----------------------------------------------------------------------
+    def handle(self, client: Client, message: dict[str, Any]) -> None:
+        kind = message["type"]
+        if kind not in self.MESSAGES:
+            raise FacecleanError(
+                f"unknown message {kind[:40]!r} (known: {', '.join(self.MESSAGES)})"
+            )
+        getattr(self, "on_" + kind)(client, message)
+
+    def use(self, tuning: Tuning, seq: int | None = None) -> None:
+        """Make ``tuning`` current (already checked), let the mode act on it, tell the pages."""
+        with self.lock:
+            self.apply(tuning)
+            self.tuning = tuning
+        self.broadcast({"type": "state", "seq": seq, **tuning.describe()})
+
+    def apply(self, tuning: Tuning) -> None:
+        """What the mode does with a new tuning (raise FacecleanError to refuse it)."""
+
+    def on_set(self, client: Client, m: dict[str, Any]) -> None:
+        words = text(m, "words", optional=True)
+        items = texts(m, "items")
+        self.use(self.tuning.changed(words, items), seq(m))
+
+    def on_save(self, client: Client, m: dict[str, Any]) -> None:
+        what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
+        with self.lock:
+            tuning = self.tuning
+        rest: list[str] = []
+        if what == "preset":
+            rest = tuning.save_preset(path)
+        else:
+            tuning.save_levels(path)
+            if tuning.calibration is not None:
+                tuning = tuning.calibrated(tuning.calibration, path)
+                with self.lock:
+                    self.tuning = tuning
+        client.send({"type": "saved", "seq": seq(m), "what": what, "path": path, "rest": rest})
+        self.broadcast({"type": "state", "seq": seq(m), **tuning.describe()})
+
+    def on_load(self, client: Client, m: dict[str, Any]) -> None:
+        what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
+        if what == "preset":
+            self.use(self.tuning.changed(path, []), seq(m))
+        else:
+            adjust = Adjust.load(path)
+            self.use(self.tuning.calibrated(adjust, path).with_choice(), seq(m))
+
+    def on_uncalibrate(self, client: Client, m: dict[str, Any]) -> None:
+        self.use(self.tuning.calibrated(None).with_choice(), seq(m))
+
+
+# -- field checks ----------------------------------------------------------------------------
+def seq(m: dict[str, Any]) -> int | None:
+    s = m.get("seq")
+    return s if isinstance(s, int) and not isinstance(s, bool) and abs(s) < 2**53 else None
+
+
+def text(m: dict[str, Any], key: str, *, optional: bool = False, limit: int = MAX_TEXT) -> Any:
+    v = m.get(key)
+    if v is None and optional:
+        return None
+    if not isinstance(v, str) or not v.strip():
+        raise FacecleanError(f"{key}: expected a text")
+    if len(v) > limit or "\x00" in v:
+        raise FacecleanError(f"{key}: at most {limit} characters, no NUL")
+    return v.strip()
+
+
+def texts(m: dict[str, Any], key: str) -> list[str]:
+    v = m.get(key, [])
+    if not isinstance(v, list) or len(v) > MAX_ITEMS:
+        raise FacecleanError(f"{key}: expected a list of at most {MAX_ITEMS} texts")
+    return [text({key: x}, key) for x in v]
+
+
+def number(
+    m: dict[str, Any], key: str, lo: float, hi: float, default: float | None = None
+) -> float:
+    v = m.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise FacecleanError(f"{key}: expected a number")
+    if not lo <= v <= hi:
+        raise FacecleanError(f"{key}: must be between {lo:g} and {hi:g} (got {v:g})")
+    return float(v)
+
+
+def choice(m: dict[str, Any], key: str, allowed: tuple[str, ...]) -> str:
+    v = m.get(key)
+    if v not in allowed:
+        raise FacecleanError(f"{key}: one of {', '.join(allowed)}")
+    return v

@@ -1,0 +1,161 @@
+"""The tuning page's server over real loopback sockets: the token, the Host and Origin
+checks, only its own files, bounded messages, the CLI's refusals (no browser here:
+tests/ui/test_ui_page.py drives Chromium)."""
+
+from __future__ import annotations
+
+import contextlib
+import http.client
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("websockets")
+from websockets.exceptions import ConnectionClosed, InvalidStatus  # noqa: E402
+from websockets.sync.client import connect  # noqa: E402
+
+from faceclean.animation import Animation  # noqa: E402
+from faceclean.cli import main  # noqa: E402
+from faceclean.io import save  # noqa: E402
+from faceclean.ui.offline import Offline  # noqa: E402
+from faceclean.ui.server import MAX_MESSAGE, Server  # noqa: E402
+from faceclean.ui.tuning import Tuning  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("ui")
+    t = np.arange(120) / 60.0
+    x = 0.4 + 0.3 * np.sin(2 * np.pi * t[:, None] + np.arange(52)) / 2
+    path = folder / "take.csv"
+    save(Animation.from_arkit(t, x), path, fmt="csv")
+    return path
+
+
+@pytest.fixture(scope="module")
+def server(take):
+    with Server(Offline(str(take), Tuning("one-euro"))) as s:
+        yield s
+
+
+def _get(server, target: str, headers: dict | None = None) -> tuple[int, dict, bytes]:
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=10)
+    conn.putrequest("GET", target, skip_host=True, skip_accept_encoding=True)
+    for k, v in {"Host": f"127.0.0.1:{server.port}", **(headers or {})}.items():
+        conn.putheader(k, v)
+    conn.endheaders()
+    r = conn.getresponse()
+    out = r.status, dict(r.getheaders()), r.read()
+    conn.close()
+    return out
+
+
+def test_the_page_needs_the_token_and_sets_it_as_a_strict_cookie(server):
+    assert _get(server, "/")[0] == 403
+    assert _get(server, "/?token=wrong")[0] == 403
+    assert _get(server, "/ui.js")[0] == 403  # every file, not only the page
+    status, headers, body = _get(server, f"/?token={server.token}")
+    assert status == 200 and b'<script type="module" src="/ui.js">' in body
+    cookie = headers["Set-Cookie"]
+    assert cookie.startswith(f"{server.cookie}={server.token};")
+    assert "HttpOnly" in cookie and "SameSite=Strict" in cookie
+    assert "default-src 'none'" in headers["Content-Security-Policy"]
+    status, _, body = _get(server, "/ui.js", {"Cookie": f"{server.cookie}={server.token}"})
+    assert status == 200 and b"faceclean tuning page" in body
+    assert _get(server, "/ui.js", {"Cookie": f"{server.cookie}=x{server.token}"})[0] == 403
+
+
+def test_another_host_or_another_site_is_refused_even_with_the_token(server):
+    ok = f"/?token={server.token}"
+    assert _get(server, ok, {"Host": f"evil.example:{server.port}"})[0] == 403  # DNS rebinding
+    assert _get(server, ok, {"Host": f"localhost:{server.port}"})[0] == 200
+    assert _get(server, ok, {"Origin": "http://evil.example"})[0] == 403  # CSRF
+    assert _get(server, ok, {"Sec-Fetch-Site": "cross-site"})[0] == 403
+    assert _get(server, ok, {"Origin": f"http://127.0.0.1:{server.port}"})[0] == 200
+
+
+@pytest.mark.parametrize(
+    "target",
+    [
+        "/../setup.py",
+        "/%2e%2e/%2e%2e/pyproject.toml",
+        "/static/ui.js",
+        "/ui/../tuning.py",
+        "/three/../package.json",
+        "/three/three.module.js/../../../../etc/passwd",
+        "//etc/passwd",
+        "/tuning.py",
+    ],
+)
+def test_only_the_pages_own_files_are_served(server, target):
+    sep = "&" if "?" in target else "?"
+    status, _, body = _get(server, f"{target}{sep}token={server.token}")
+    assert status == 404 and b"not a file of the tuning page" in body
+
+
+def _uri(server, token: str | None = None) -> str:
+    q = "" if token is None else f"?token={token}"
+    return f"ws://127.0.0.1:{server.port}/live{q}"
+
+
+def test_the_live_channel_needs_the_token_and_this_origin(server):
+    with pytest.raises(InvalidStatus, match="403"):
+        connect(_uri(server)).close()
+    with pytest.raises(InvalidStatus, match="403"):
+        connect(_uri(server, server.token), origin="http://evil.example").close()
+    origin = f"http://127.0.0.1:{server.port}"
+    with connect(_uri(server, server.token), origin=origin, max_size=None) as ws:
+        hello = json.loads(ws.recv(timeout=10))
+        assert hello["type"] == "hello" and hello["mode"] == "offline"
+        assert hello["state"]["method"] == "one-euro" and len(hello["channels"]) == 52
+
+
+@contextlib.contextmanager
+def _open(server):
+    with connect(_uri(server, server.token), max_size=None) as ws:
+        while True:  # hello, then the take's arrays (binary), until the first cleaned take
+            m = ws.recv(timeout=30)
+            if isinstance(m, bytes) and b'"cleaned"' in m[:200]:
+                break
+        yield ws
+
+
+def _reply(ws) -> dict:
+    while True:
+        m = ws.recv(timeout=30)
+        if isinstance(m, str):
+            return json.loads(m)
+
+
+def test_bad_values_get_the_clis_own_one_line_refusal(server, take, tmp_path, capsys):
+    for item in ("min_cutof=2", "eyes.gain=abc", "jawOpen.clamp=0.9,0.1", "nobody.beta=1"):
+        code = main(["clean", str(take), "-o", str(tmp_path / "o.csv"), "--method", "one-euro",
+                     "--set", item])  # fmt: skip
+        cli = capsys.readouterr().err.strip()
+        assert code == 2 and cli.count("\n") == 0
+        with _open(server) as ws:
+            ws.send(json.dumps({"type": "set", "words": "one-euro", "items": [item], "seq": 7}))
+            got = _reply(ws)
+        assert got == {"type": "error", "message": cli, "for": "set", "seq": 7}
+    with _open(server) as ws:  # and the page's state did not change
+        ws.send(json.dumps({"type": "set", "words": "one-euro", "items": [], "seq": 8}))
+        assert _reply(ws)["type"] == "state"
+
+
+def test_messages_are_bounded_and_checked(server):
+    with _open(server) as ws:
+        ws.send(json.dumps({"type": "set", "items": ["min_cutoff=1"] * 300}))
+        assert "at most 256" in _reply(ws)["message"]
+        ws.send(json.dumps({"type": "view", "t0": "x"}))
+        assert _reply(ws)["message"] == "faceclean: t0: expected a number"
+        ws.send("[1, 2]")
+        assert _reply(ws)["message"] == "faceclean: a message is an object"
+        ws.send('{"type": "set", "items": [NaN]}')
+        assert "not valid JSON" in _reply(ws)["message"]
+        ws.send(json.dumps({"type": "shutdown"}))
+        assert "unknown message 'shutdown'" in _reply(ws)["message"]
+        ws.send("x" * (MAX_MESSAGE + 1))
+        with pytest.raises(ConnectionClosed):
+            _reply(ws)
+        assert ws.close_code == 1009  # message too big
