@@ -143,3 +143,179 @@ def test_offline_page_tunes_calibrates_and_saves_what_clean_reproduces(browser, 
     gap = np.abs(out[:, present] - page[:, present])
     assert np.nanmax(gap) < 1e-6  # the files give what the page showed
     assert np.array_equal(np.isnan(out[:, present]), np.isnan(page[:, present]))
+
+
+class Receiver:
+    """A Live Link UDP receiver on loopback: every frame the relay sends, in order."""
+
+    def __init__(self) -> None:
+        import socket
+        import threading
+
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.2)
+        self.port = self.sock.getsockname()[1]
+        self.frames: list[tuple[float, np.ndarray]] = []  # (sender time s, (52,) weights)
+        self.arrived = threading.Event()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from faceclean.relay import livelink
+
+        while not self._stop.is_set():
+            try:
+                data = self.sock.recv(65535)
+            except TimeoutError:
+                continue
+            f = livelink.decode(data)
+            self.frames.append((float(f.t), np.asarray(f.values[:52], np.float64)))
+            self.arrived.set()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+        self.sock.close()
+
+
+@pytest.fixture(scope="module")
+def live(browser, tmp_path_factory):
+    """``relay --ui`` (one-euro, light smoothing) fed by ``replay`` of a shared take, a
+    Live Link receiver behind it, the page open: (tab, receiver, take frames, folder)."""
+    from helpers import free_port
+
+    from faceclean.relay.replay import load_frames
+
+    folder = tmp_path_factory.mktemp("live")
+    take = first_take("neurosync")
+    port, receiver = free_port(), Receiver()
+    relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}",
+                        "--send", f"livelink://127.0.0.1:{receiver.port}", "--method", "one-euro",
+                        "--set", "min_cutoff=30", "--set", "beta=0", "--ui",
+                        "--record", str(folder / "session.csv")])  # fmt: skip
+    replay = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "faceclean",
+            "replay",
+            str(take),
+            "--send",
+            f"vmc://127.0.0.1:{port}",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=ENV,
+    )
+    with reaped(relay), reaped(replay):
+        while not receiver.frames:  # the stream is on before the page opens
+            assert replay.poll() is None and relay.poll() is None
+            receiver.arrived.wait(0.1)
+        tab = Tab(browser, url)
+        yield tab, receiver, load_frames(take), folder, url
+        tab.page.close()
+        replay.kill()
+        out, err = interrupt(relay)
+        assert "stopped:" in out and "recorded" in out, err
+    receiver.close()
+
+
+def test_live_page_shows_the_stream_as_it_comes(live):
+    tab, receiver, *_ = live
+    tab.until("window.faceclean.frames > 0 && window.faceclean.stats")
+    # the page shows the stream as it comes (no timed assertion here: the time from the
+    # live channel's opening to its first frames is measured in benchmarks/ui_latency.py)
+    assert tab.js("window.faceclean.firstFrameMs") >= tab.js("window.faceclean.openMs")
+    tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 30}")
+    stats = tab.js("window.faceclean.stats")
+    assert stats["frames_out"] > 0 and stats["sender"].startswith("127.0.0.1:")
+    assert "sender 127.0.0.1:" in tab.page.inner_text("#fc-status")
+    assert tab.errors() == []
+    if os.environ.get("FACECLEAN_SCREENSHOTS"):  # docs/ui-live.png
+        tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 240}")
+        tab.page.screenshot(path=os.environ["FACECLEAN_SCREENSHOTS"] + "/ui-live.png")
+
+
+def _sent(take_frames, t: float):
+    """The take's frame that ``replay --loop`` sent at sender time t (s): a pass lasts
+    the take plus one median frame period."""
+    times = np.array([f.t for f in take_frames])
+    cycle = times[-1] - times[0] + np.median(np.diff(times))
+    return take_frames[int(np.argmin(np.abs(times - (t % cycle))))]
+
+
+def _deviation(frames, take_frames, first: int, last: int) -> float:
+    """Mean |received - input sent| over received frames first..last-1, matched by time."""
+    from faceclean.channels import INDEX
+
+    gaps = []
+    for t, y in frames[first:last]:
+        f = _sent(take_frames, t)
+        gaps.append(np.abs(y[[INDEX[n] for n in f.names]] - f.values).mean())
+    return float(np.mean(gaps))
+
+
+def test_moving_a_smoothing_slider_changes_what_the_receiver_gets(live):
+    tab, receiver, take_frames, *_ = live
+    tab.until("window.faceclean.frames > 30")
+    before = len(receiver.frames)
+    seq = tab.slide("min_cutoff", 0.0)  # 0.01 Hz: the heaviest smoothing
+    tab.until(f"window.faceclean.state.seq >= {seq} || window.faceclean.errors.length")
+    assert tab.js("window.faceclean.errors") == []
+    assert tab.js("window.faceclean.state.items")[-1] == "min_cutoff=0.01"
+    swapped = len(receiver.frames)
+    tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 60}")
+    light = _deviation(receiver.frames, take_frames, max(0, before - 60), before)
+    heavy = _deviation(receiver.frames, take_frames, swapped + 5, len(receiver.frames))
+    assert heavy > 0.002 and heavy > 10 * light, (light, heavy)  # weight units
+
+
+def test_calibrate_sets_the_neutral_from_the_held_seconds(live):
+    tab, receiver, take_frames, folder, _ = live
+    tab.page.fill("#fc-hold", "1")
+    tab.page.click("#fc-calibrate")
+    tab.until("window.faceclean.state.calibration || window.faceclean.errors.length")
+    assert tab.js("window.faceclean.errors") == []
+    facts = tab.js("window.faceclean.state.calibration")
+    assert "calibrated" in tab.page.inner_text("#fc-calibration")
+    assert tab.js("window.faceclean.countdown")[0].startswith("hold a neutral face… 1.0 s")
+    t0, t1 = facts["hold"]  # sender times s of the first and last frame held
+    assert 1.0 <= t1 - t0 < 1.2
+    # the neutral is the median of the input over the held second: the frames the relay
+    # cleaned then (those the receiver got; a relay that lags skips stale ones)
+    got = [t for t, _ in receiver.frames if t0 - 1e-4 <= t <= t1 + 1e-4]
+    held = [_sent(take_frames, t) for t in got]
+    assert len(held) == facts["frames"]
+    for name in ("jawOpen", "eyeBlinkLeft", "mouthSmileLeft", "browInnerUp"):
+        column = [f.values[f.names.index(name)] for f in held]
+        assert facts["channels"][name]["neutral"] == pytest.approx(np.median(column), abs=1e-6)
+    # ... and the levels file saved from the page maps it to 0 (--calibration reads it)
+    tab.page.fill("#fc-path", str(folder / "neutral.json"))
+    tab.note_after("#fc-save-levels", "saved levels")
+    from faceclean.adjust import Adjust
+
+    rules = Adjust.load(folder / "neutral.json").rules
+    offsets = {p: v for p, k, v in rules if k == "offset"}
+    assert offsets["jawOpen"] == facts["channels"]["jawOpen"]["neutral"]
+
+
+def test_the_page_records_the_session(live):
+    tab, _, _, folder, _ = live
+    tab.page.fill("#fc-path", str(folder / "page.csv"))
+    tab.note_after("#fc-record", "recording to")
+    tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 30}")
+    tab.note_after("#fc-record", "recorded")
+    anim = io.load(folder / "page.csv")
+    assert anim.n_frames >= 30 and io.load(folder / "page.clean.csv").n_frames == anim.n_frames
+
+
+def test_a_request_without_the_token_is_refused(live, browser):
+    tab, *_, url = live
+    bare = url.split("?")[0]
+    page = browser.new_page()
+    assert page.goto(bare).status == 403
+    assert "no valid token" in page.inner_text("body")
+    assert page.goto(bare + "ui.js").status == 403
+    page.close()

@@ -10,6 +10,9 @@ and ``--calibrate-seconds N``: hold a neutral face for the first N seconds of th
 A new stream (the sender restarted) calibrates again on its own first N seconds.
 ``--record take.csv`` (or .npz) saves what came in to take.csv and what went out to
 take.clean.csv when the relay stops: ``faceclean replay take.csv`` streams it again.
+``--ui`` serves the tuning page on the running relay (faceclean.ui.live): its controls
+change the cleaner between two frames; with it, ``--calibrate-seconds N`` is the page's
+Calibrate pressed at start (once, not again on a new stream).
 """
 
 from __future__ import annotations
@@ -38,6 +41,10 @@ levels before the cleaner:
 recording:
   --record session.csv           input to session.csv, cleaned output to session.clean.csv
                                  (or .npz); 'faceclean replay session.csv' streams it again
+the tuning page:
+  --ui                           serve it (127.0.0.1, a free port, a per-start token; the
+                                 URL is printed and opened): sliders, Calibrate, live
+                                 faces and curves, settings saved as --preset/--calibration
 """
 )
 
@@ -60,6 +67,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="save the session: input to FILE, cleaned output to FILE.clean (.csv or .npz)",
     )
+    from faceclean.cli import ui
+
+    p.add_argument("--ui", action="store_true", help="serve the tuning page on the relay")
+    ui.add_page_arguments(p, "ui-")
 
 
 def build_cleaner(choice: Choice) -> tuple[Any, str]:
@@ -108,22 +119,34 @@ def run(args: argparse.Namespace) -> int:
             f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} seconds (got {args.stats})"
         )
     recorder = Recorder(args.record) if args.record else None
+    if args.ui:
+        return _with_page(args, listen, send, recorder)
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice)
     cleaner, levels = with_levels(args, choice, cleaner)
     what += f"; levels: {levels}" if levels else ""
     with Relay(listen, send, cleaner, recorder=recorder) as relay:
+        stats = _serve(args, relay, send, what)
+    return _done(stats, send, recorder)
 
-        def stop(signum: int, frame: object) -> None:
-            relay.stop()
 
-        old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            print(f"relay {relay.address} -> {send} ({what}); Ctrl-C stops", flush=True)
-            stats = relay.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
-        finally:
-            for s, handler in old.items():
-                signal.signal(s, handler)
+def _serve(args: argparse.Namespace, relay: Any, send: Any, what: str) -> Any:
+    """Run the relay until Ctrl-C or SIGTERM; its stats."""
+
+    def stop(signum: int, frame: object) -> None:
+        relay.stop()
+
+    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        print(f"relay {relay.address} -> {send} ({what}); Ctrl-C stops", flush=True)
+        stats = relay.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+    return stats
+
+
+def _done(stats: Any, send: Any, recorder: Any) -> int:
     print(f"stopped: {stats.line()}", flush=True)
     if recorder is not None and len(recorder):
         take, cleaned = recorder.save()
@@ -131,3 +154,28 @@ def run(args: argparse.Namespace) -> int:
     if stats.send_errors:
         print(f"faceclean: {stats.send_errors} sends refused by {send}", file=sys.stderr)
     return 0
+
+
+def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) -> int:
+    """The relay with the tuning page on it (faceclean.ui.live)."""
+    from faceclean.channels import ARKIT52
+    from faceclean.cli import ui
+    from faceclean.relay import Relay
+    from faceclean.ui.live import Live, Tap
+
+    tuning = ui.tuning(args).with_choice()
+    tap = Tap(recorder)
+    with Relay(listen, send, tuning.build(ARKIT52), recorder=tap) as relay:
+        what = f"{relay.address} -> {send}"
+        session = Live(tuning, relay, tap, what)
+        session.hello()  # the face's payload built before the page asks
+        session.start()
+        server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser)
+        try:
+            if args.calibrate_seconds is not None:
+                session.handle(None, {"type": "calibrate", "seconds": args.calibrate_seconds})
+            stats = _serve(args, relay, send, f"{tuning.choice.source}; tuning page on")
+        finally:
+            server.close()
+            session.stop()
+    return _done(stats, send, recorder)

@@ -22,7 +22,9 @@ No dropped start: the cleaner is warmed up (``warm_up``: a few frames through ev
 of its step, then ``reset()``) before the socket is bound, so the first packets meet a
 ready cleaner instead of queueing behind a just-in-time compile (the shipped model's
 numba kernel compiles on its first advancing step). A ``Recorder`` given to the relay
-keeps every cleaned frame (relay/recorder.py).
+keeps every cleaned frame (relay/recorder.py). ``swap(cleaner)`` hands the loop another
+cleaner from any thread (the tuning page, faceclean.ui.live): it is taken between two
+frames, so no frame is lost or cleaned twice; warming it up and probing it is the caller's.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from __future__ import annotations
 import contextlib
 import select
 import socket
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -166,6 +169,8 @@ class Relay:
             bounds.MAX_SENDERS
         )
         self._stopping = False
+        self._pending: Stepper | None = None  # handed over by swap(), taken between frames
+        self._swap_lock = threading.Lock()
         family, addr = listen.sockaddr()
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
@@ -198,6 +203,17 @@ class Relay:
         """The listening endpoint with its actual port (after binding port 0)."""
         host, port = self._sock.getsockname()[:2]
         return Endpoint(self.listen.scheme, host, port, self.listen.options)
+
+    @property
+    def sender(self) -> object:
+        """The address of the sender whose face is followed (None before the first)."""
+        return self._source
+
+    def swap(self, cleaner: Stepper) -> None:
+        """Clean with ``cleaner`` from the next frame on (thread-safe; see the module
+        docstring). Warm it up (``warm_up``) and ``probe`` it before: the loop does not."""
+        with self._swap_lock:
+            self._pending = cleaner
 
     def stop(self) -> None:
         """Ask ``run`` to return; safe from another thread or a signal handler."""
@@ -316,6 +332,9 @@ class Relay:
         x[dst] = frame.values[src]
         if not np.isfinite(x).any():
             self.stats.missing += 1
+        if self._pending is not None:  # swap(): the new cleaner from this frame on
+            with self._swap_lock:
+                self.cleaner, self._pending = self._pending, None
         y = self.cleaner.step(x, t)  # (52,)
         self._last_t = t
         if np.isnan(y).all():  # nothing seen yet: nothing to send

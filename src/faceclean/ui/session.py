@@ -34,12 +34,13 @@ class Base:
         self.tuning = tuning.with_choice()
         self.lock = threading.RLock()  # the tuning and the clients
         self.clients: list[Client] = []
+        self._mesh: dict[str, Any] | None = None  # the face's payload (report/payload.py)
 
     # -- clients ------------------------------------------------------------------------
     def attach(self, client: Client) -> None:
+        client.send(self.hello())  # first: pushes to the page only follow it
         with self.lock:
             self.clients.append(client)
-        client.send(self.hello())
 
     def detach(self, client: Client) -> None:
         with self.lock:
@@ -61,15 +62,17 @@ class Base:
         from faceclean.filters import presets
         from faceclean.report import payload
 
+        if self._mesh is None:  # built once: the stylised face takes a while
+            self._mesh = payload.mesh(stylised())
         return {
             "type": "hello",
             "mode": self.mode,
             "channels": list(ARKIT52),
             "groups": {g: sorted(m, key=ARKIT52.index) for g, m in GROUPS.items()},
-            "methods": [m for m in filters.METHODS],
+            "methods": list(filters.METHODS),
             "presets": presets.shipped(),
             "state": self.tuning.describe(),
-            "mesh": payload.mesh(stylised()),
+            "mesh": self._mesh,
         }
 
     # -- messages -----------------------------------------------------------------------

@@ -21,9 +21,9 @@ const RANGES = {
 const LEVELS = { gain: [0, 4, false, 1], offset: [-0.5, 0.5, false, 0], curve: [0.2, 5, true, 1] };
 
 const api = {
-  ready: false, mode: null, frames: 0, firstFrameMs: null, errors: [], notes: [],
+  ready: false, mode: null, frames: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
   state: null, sentSeq: 0, setSeq: 0, stats: null, cleanedSeq: null, fullSeq: null, cleanedParts: 0,
-  calibrating: null,
+  calibrating: null, countdown: [],
   get time() { return play.t; },
   get cleaned() { return take.cleaned; }, // (N * 52) float32, offline
   get input() { return take.input; },
@@ -42,7 +42,13 @@ const live = { t: [], x: new Map(), y: new Map(), fx: null, fy: null, tLast: 0 }
 // ---- the channel ---------------------------------------------------------------------
 const ws = new WebSocket(`ws://${location.host}/live${token ? `?token=${encodeURIComponent(token)}` : ""}`);
 ws.binaryType = "arraybuffer";
-ws.onmessage = (e) => (typeof e.data === "string" ? onMessage(JSON.parse(e.data)) : onBinary(e.data));
+ws.onmessage = (e) => {
+  if (typeof e.data !== "string") return onBinary(e.data);
+  const m = JSON.parse(e.data);
+  if (m.type === "frames" && m.t.length && api.firstFrameMs === null) api.firstFrameMs = e.timeStamp;
+  onMessage(m);
+};
+ws.addEventListener("open", (e) => { api.openMs = e.timeStamp; });
 ws.onclose = () => { $("fc-status").textContent = "disconnected: the server stopped (or refused the page)"; };
 
 function send(m) {
@@ -136,6 +142,7 @@ function start(m) {
   onState({ ...m.state, seq: 0 });
   bind();
   showStatus();
+  api.readyMs = performance.now(); // ms from the page's start: drawn, the live channel open
 }
 
 function onState(s) {
@@ -435,7 +442,6 @@ function pause() { play.playing = false; $("fc-play").textContent = "▶ play"; 
 
 // ---- live --------------------------------------------------------------------------------
 function onFrames(m) {
-  if (api.firstFrameMs === null && m.t.length) api.firstFrameMs = performance.now();
   api.frames += m.t.length;
   if (m.restart) { live.t = []; live.x.clear(); live.y.clear(); }
   m.channels.forEach((j, k) => {
@@ -473,6 +479,7 @@ function onCalibrating(m) {
   const el = $("fc-countdown");
   el.hidden = m.remaining <= 0;
   el.textContent = m.remaining > 0 ? `hold a neutral face… ${m.remaining.toFixed(1)} s` : "";
+  if (m.remaining > 0) api.countdown.push(el.textContent);
 }
 
 function showStatus() {
