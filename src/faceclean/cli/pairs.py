@@ -56,12 +56,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
     from tqdm import tqdm
 
+    from faceclean import workers as pool_of
     from faceclean.synthetic import engine
+
+    pool_of.count(args.jobs, None)  # --jobs 0: refused before any take is read
 
     jobs = engine.shard(_plan(args), *_shard(args.shard))
     out = Path(args.output)
@@ -75,7 +77,9 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(f"output is not a folder: {out}")
     worker = engine.Worker(head, model)  # a bad mesh or model file: one line, before any job
     out.mkdir(parents=True, exist_ok=True)
-    workers = _workers(args.jobs, len(todo))
+    workers, note = pool_of.count(args.jobs, len(todo), "pairs to make")
+    if note and todo:
+        print(note, file=sys.stderr)
     print(f"{len(jobs) - len(todo)} of {len(jobs)} pairs already done; {len(todo)} to make")
     failed: list[tuple[str, str]] = []
     bar = tqdm(total=len(todo), unit="pair", file=sys.stderr, desc="pairs", leave=False)
@@ -84,11 +88,8 @@ def run(args: argparse.Namespace) -> int:
             for job in todo:
                 _done(bar, job, _safe(worker.run, job, out), failed)
         elif todo:
-            del worker
-            spawn = multiprocessing.get_context("spawn")  # never fork a process running MediaPipe
-            with ProcessPoolExecutor(
-                workers, spawn, initializer=_init, initargs=(str(head), str(model))
-            ) as pool:
+            del worker  # spawned workers (never a fork of MediaPipe) that die with this process
+            with pool_of.Pool(workers, initializer=_init, initargs=(str(head), str(model))) as pool:
                 futures = {pool.submit(_job, job, str(out)): job for job in todo}
                 for f in as_completed(futures):
                     _done(bar, futures[f], f.result(), failed)
@@ -168,17 +169,6 @@ def _files(args: argparse.Namespace) -> tuple[Path, Path]:
     if model is None:
         raise FacecleanError("no tracker model: give --tracker-model face_landmarker.task")
     return head, model
-
-
-def _workers(requested: int, n_jobs: int) -> int:
-    import os
-
-    if requested < 1:
-        raise FacecleanError(f"--jobs must be at least 1 (got {requested})")
-    cap = max(min(n_jobs, 2 * (os.cpu_count() or 1)), 1)
-    if requested > cap:
-        print(f"--jobs {requested} capped at {cap} (jobs to run, twice the cores)", file=sys.stderr)
-    return min(requested, cap)
 
 
 def _done(bar, job, result: tuple[bool, str], failed: list) -> None:

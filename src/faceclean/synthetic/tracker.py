@@ -18,7 +18,7 @@ import numpy as np
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, MEDIAPIPE
 from faceclean.errors import FacecleanError
-from faceclean.io.source import regular
+from faceclean.io.source import read_bytes
 
 NAMES = tuple(n for n in ARKIT52 if n != "tongueOut")  # what the tracker gives, canonical
 MAX_MODEL = 64 << 20  # bytes: the float16 bundle is 3.8 MB
@@ -27,9 +27,7 @@ MAX_MODEL = 64 << 20  # bytes: the float16 bundle is 3.8 MB
 class Tracker:
     def __init__(self, model_path: str | os.PathLike, threads: int = 1) -> None:
         path = Path(model_path)
-        size = regular(path, "tracker model file").st_size
-        if size > MAX_MODEL:
-            raise FacecleanError(f"{path}: {size} bytes, not a face_landmarker.task bundle")
+        bundle = read_bytes(path, MAX_MODEL, "tracker model file")  # regular, bounded, once
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
         try:
             from mediapipe.tasks.python import BaseOptions
@@ -44,7 +42,7 @@ class Tracker:
             ) from None
         del threads  # MediaPipe's CPU graph picks its own; the job pool spreads the work
         options = FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_buffer=path.read_bytes()),
+            base_options=BaseOptions(model_asset_buffer=bundle),
             running_mode=RunningMode.VIDEO,
             num_faces=1,
             output_face_blendshapes=True,
