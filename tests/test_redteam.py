@@ -654,6 +654,16 @@ def test_named_file_that_is_a_folder_or_missing_says_which(tmp_path, take, optio
     assert "no such" in r.stderr, r.stderr
 
 
+@pytest.mark.parametrize("kind", ["folder", "fifo"])
+def test_folder_or_fifo_named_like_a_method_is_not_taken_for_its_preset(tmp_path, take, kind):
+    # clean takes/ -o ema/ --method ema leaves a folder "ema" behind: the next run's
+    # --method ema (and --preset ema) still means the shipped tuned preset
+    special = tmp_path / "ema"
+    special.mkdir() if kind == "folder" else os.mkfifo(special)
+    for flag in ("--method", "--preset"):
+        ok(fc("clean", take, "-o", tmp_path / "o.csv", flag, "ema", cwd=tmp_path))
+
+
 CALIBRATION_REFUSED = [
     pytest.param(_levels(DEEP), id="channels-nested-100000"),
     pytest.param("[" * 100_000 + "]" * 100_000, id="array-nested-100000"),

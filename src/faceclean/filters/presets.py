@@ -46,9 +46,9 @@ def shipped() -> list[str]:
 def locate(preset: str | os.PathLike) -> Path:
     """A preset file: an existing path, else the shipped preset of that name."""
     p = Path(preset)
-    if named(p):  # the user's file, whatever it is: the reader says what is wrong with it
-        return p
     if isinstance(preset, str) and os.sep not in preset and not preset.endswith(".json"):
+        if p.is_file():  # a bare name ("ema"): a file of that name, else the shipped one
+            return p  # (a folder or FIFO named like a method is not meant: out/ema/)
         q = PRESETS / f"{preset}.json"
         if q.is_file():
             return q
@@ -56,6 +56,8 @@ def locate(preset: str | os.PathLike) -> Path:
             f"no preset file or shipped preset named {preset!r} "
             f"(shipped: {', '.join(shipped()) or 'none'})"
         )
+    if named(p):  # the user's file, whatever it is: the reader says what is wrong with it
+        return p
     raise FacecleanError(f"no such preset file: {p}")
 
 
