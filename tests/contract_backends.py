@@ -46,7 +46,7 @@ OFFLINE = "offline (non-causal): clean(animation) only, step refuses"
 # 120 fps (EMA measured 0.017); One Euro's published smoothing factor
 # 1 / (1 + 1 / (2 pi fc dt)) is not rate-exact (measured 0.031); Kalman's exact
 # discretisation (3e-3) and the time-domain offline kernels (2e-4) nearly are.
-RATE_TOL = {"one-euro": 0.05, "kalman": 0.01, "gaussian": 0.005, "savgol": 0.005}
+RATE_TOL = {"one-euro": 0.05, "rotation": 0.05, "kalman": 0.01, "gaussian": 0.005, "savgol": 0.005}
 RATE_TOL_DEFAULT = 0.03
 LEARNED = {"lstm", "fc", "gbt", "adaptive"}
 # (S, M) frames equal S cleaners to float64 rounding, but for the numpy LSTM kernel: its float32

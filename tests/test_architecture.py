@@ -16,7 +16,7 @@ ROOT = SRC / "faceclean"
 
 CORE = {
     "animation", "channels", "channel_map", "errors", "settings", "timing", "strict_json",
-    "workers",
+    "workers", "pose",
 }  # fmt: skip
 # package (a subpackage or a top-level module) -> what it may import besides the core and
 # itself, at module level or inside a function. The same table is in docs/ARCHITECTURE.md.

@@ -52,7 +52,18 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "cheeks_nose": tuple(n for n in ARKIT52 if n.startswith(("cheek", "nose"))),
 }
 
+# Live Link Face's 9 head and eye angles, radians, after the blendshapes (CSV and UDP):
+# not blendshapes, cleaned by the rotation filter (filters/rotation.py), never by the
+# blendshape cleaner. Their groups for per-group settings: ``head``, ``eyes``.
+POSE: tuple[str, ...] = (
+    "HeadYaw", "HeadPitch", "HeadRoll",
+    "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
+    "RightEyeYaw", "RightEyePitch", "RightEyeRoll",
+)  # fmt: skip
+POSE_GROUPS: dict[str, tuple[str, ...]] = {"head": POSE[:3], "eyes": POSE[3:]}
+
 _LOWER = {n.lower(): n for n in ARKIT52}
+_POSE_LOWER = {n.lower(): n for n in POSE}
 
 
 def canonical(name: str) -> str | None:
@@ -71,9 +82,17 @@ def channel_key(name: str) -> str:
     return canonical(name) or name.strip()
 
 
+def pose_name(name: str) -> str | None:
+    """The Live Link spelling (``HeadYaw``) of a head/eye angle name in any case, or None."""
+    return _POSE_LOWER.get(name.strip().lower())
+
+
 def group_of(name: str) -> str | None:
-    """The channel group ("eyes", "mouth", ...) of a channel name, or None."""
+    """The group of a channel name: a blendshape group ("eyes", "mouth", ...) or, for a
+    head/eye angle, its pose group ("head", "eyes"); None for other names."""
     c = canonical(name)
+    if c is None and (p := pose_name(name)) is not None:
+        return next(g for g, members in POSE_GROUPS.items() if p in members)
     return next((g for g, members in GROUPS.items() if c in members), None)
 
 

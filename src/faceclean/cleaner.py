@@ -27,6 +27,7 @@ from faceclean.adjust import apply_levels
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, canonical
 from faceclean.errors import FacecleanError
+from faceclean.filters.rotation import clean_pose
 from faceclean.resolve import BACKENDS, Choice, resolve
 
 __all__ = ["BACKENDS", "Cleaner"]
@@ -95,8 +96,9 @@ class Cleaner:
         return self.cleaner.step(x, t)
 
     def clean(self, anim: Animation) -> Animation:
-        """A cleaned copy of a whole clip: its blendshape channels cleaned, every other
-        column as it was. Resets the streams."""
+        """A cleaned copy of a whole clip: its blendshape channels cleaned, its head/eye
+        angles (``meta["pose"]``) by the rotation filter, every other column as it was.
+        Resets the streams."""
         cols = [j for j, n in enumerate(anim.names) if canonical(n) is not None]
         if not cols:
             raise FacecleanError("the animation has no blendshape channels to clean")
@@ -108,7 +110,7 @@ class Cleaner:
         out = anim.values.copy()
         out[:, cols] = cleaned.values
         self.reset()
-        return anim.with_values(out)
+        return clean_pose(anim.with_values(out), self.choice.build_pose)
 
     def __repr__(self) -> str:
         return f"Cleaner({self.source!r}, streams={self.streams})"

@@ -41,7 +41,7 @@ import numpy as np
 
 from faceclean import filters
 from faceclean.adjust import MAP_KEYS, matches
-from faceclean.channels import ARKIT52, GROUPS
+from faceclean.channels import ARKIT52, GROUPS, POSE
 from faceclean.errors import FacecleanError
 
 DEFAULT = "default"  # the shipped learned model (models/default.npz)
@@ -137,9 +137,16 @@ class Choice:
     offline: bool  # non-causal: clean() only
     factory: Factory = field(repr=False)
     levels: tuple[tuple[str, str, Any], ...] = ()  # (pattern, key, value) for faceclean.adjust
+    pose: Factory | None = field(default=None, repr=False)  # head/eye angles' cleaner
+    pose_source: str = ""  # how to name it ("rotation (tuned preset) head.beta=2")
 
     def build(self, names: Sequence[str] = ARKIT52) -> filters.Cleaner:
         return self.factory(tuple(names))
+
+    def build_pose(self, names: Sequence[str] = POSE) -> filters.Cleaner:
+        """A fresh rotation cleaner for head/eye angle channels ``names``."""
+        factory = self.pose or pose_factory([])[0]
+        return factory(tuple(names))
 
     def adjust(self, names: Sequence[str] = ARKIT52):
         """The level mapping the settings ask for (faceclean.adjust.Adjust)."""
@@ -167,6 +174,7 @@ def resolve(
     items = parse_items(settings)
     levels = tuple((p or "*", k, v) for p, k, v in items if k in MAP_KEYS)
     items = [it for it in items if it[1] not in MAP_KEYS]
+    items, shared, pose_items = _split_pose(items)
     text = "" if words is None else str(words)
     model = [v for p, k, v in items if k == "model"]
     if model:  # "--method lstm --set model=FILE" is "--model FILE"
@@ -177,16 +185,74 @@ def resolve(
         from faceclean.settings import MODELS
 
         own = MODELS / SHIPPED_MODELS.get(text, "default.npz")
-        choice = _model(own if own.is_file() else MODELS / "default.npz", items, backend)
+        choice = _model(own if own.is_file() else MODELS / "default.npz", items, backend, shared)
         if text not in ("", "default") and choice.method != text:
             raise FacecleanError(f"no shipped {text} model (the default is {choice.method})")
     elif text.lower().endswith(MODEL_SUFFIXES):
-        choice = _model(Path(text), items, backend)
+        choice = _model(Path(text), items, backend, shared)
     else:
         if backend == "onnx":
             raise FacecleanError("the onnx backend runs learned models only")
-        choice = _classical(text, items)
-    return dataclasses.replace(choice, levels=levels) if levels else choice
+        choice = _classical(text, items, shared)
+    per = getattr(filters.cleaner_class(choice.method), "PER_CHANNEL", ())
+    for pattern, key, _ in shared:  # an eyes.KEY that neither side has
+        if key not in per and key not in _POSE_KEYS:
+            raise FacecleanError(
+                f"{pattern}.{key}: {key} is neither a per-channel setting of "
+                f"{choice.method} nor one of the rotation filter's ({', '.join(_POSE_KEYS)})"
+            )
+    pose, pose_source = pose_factory(pose_items + [it for it in shared if it[1] in _POSE_KEYS])
+    return dataclasses.replace(choice, levels=levels, pose=pose, pose_source=pose_source)
+
+
+_POSE_KEYS = ("min_cutoff", "beta", "d_cutoff")  # filters.rotation.Rotation.PER_CHANNEL
+
+
+def _split_pose(items: list[Item]) -> tuple[list[Item], list[Item], list[Item]]:
+    """(blendshape items, items naming both the eye blendshapes and angles, angle items)."""
+    from faceclean.filters.rotation import pose_matches
+
+    blend, shared, pose = [], [], []
+    for it in items:
+        pattern = it[0]
+        angles = pattern is not None and any(pose_matches(pattern, n) for n in POSE)
+        if not angles:
+            blend.append(it)
+        elif any(matches(pattern, n) for n in ARKIT52):
+            shared.append(it)
+        else:
+            pose.append(it)
+    return blend, shared, pose
+
+
+def pose_factory(items: list[Item]) -> tuple[Factory, str]:
+    """The head/eye angles' cleaner: the shipped tuned ``rotation`` preset with ``items``
+    (pattern, key, value) on top; (factory(names), how to name it)."""
+    from faceclean.filters import presets
+    from faceclean.filters.rotation import Rotation, pose_matches
+
+    doc = presets.read("rotation") if "rotation" in presets.shipped() else None
+    for pattern, key, value in items:
+        if key not in Rotation.PER_CHANNEL:
+            raise FacecleanError(
+                f"{pattern}.{key}: the rotation filter (head and eye angles) has no setting "
+                f"{key!r}; valid: {', '.join(Rotation.PER_CHANNEL)}"
+            )
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise FacecleanError(f"{pattern}.{key}: expected a number (got {value!r})")
+
+    def factory(names: Sequence[str]) -> filters.Cleaner:
+        params: dict[str, Any] = presets.expand(doc, names) if doc else {}
+        for pattern, key, value in items:
+            base = params.get(key, getattr(Rotation(names=names), key))
+            out = np.array(np.broadcast_to(base, (len(names),)), dtype=np.float64)
+            out[[j for j, n in enumerate(names) if pose_matches(pattern, n)]] = value
+            params[key] = out
+        return filters.make("rotation", params, names=names)
+
+    factory(POSE)  # bad values fail now, with the parameter's reason
+    what = "rotation (tuned preset)" if doc else "rotation (defaults)"
+    return factory, _shown(what, items)
 
 
 def tracker_words(tracker: str | None) -> str | None:
@@ -222,8 +288,9 @@ def model_file(words: str | os.PathLike) -> Path:
     return path
 
 
-def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
-    """A learned model file: the class from its format, settings as keywords."""
+def _model(path: Path, items: list[Item], backend: str | None, shared: list[Item] = ()) -> Choice:
+    """A learned model file: the class from its format, settings as keywords; ``shared``
+    items (``eyes.KEY``) are taken where KEY is one of its per-channel settings."""
     from faceclean.learned import formats
 
     formats.model_file(path)  # missing, a FIFO, a device or a folder: one line saying so
@@ -246,6 +313,7 @@ def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
     method = formats.method_of(path)
     cls = filters.cleaner_class(method)
     per = tuple(getattr(cls, "PER_CHANNEL", ()))  # the adaptive model: One Euro's keys
+    items = [*items, *(it for it in shared if it[1] in per)]
     params = _checked(cls, method, items, per_channel=per)
     _known_patterns(items)
     probe = filters.make(method, {"model": path, **params})  # bad settings fail now
@@ -268,8 +336,9 @@ def _model(path: Path, items: list[Item], backend: str | None) -> Choice:
     return Choice(method, _shown(what, items), False, factory)
 
 
-def _classical(text: str, items: list[Item]) -> Choice:
-    """A preset (file or shipped name) or a method name."""
+def _classical(text: str, items: list[Item], shared: list[Item] = ()) -> Choice:
+    """A preset (file or shipped name) or a method name; ``shared`` items (``eyes.KEY``)
+    are taken where KEY is one of the method's per-channel settings."""
     from faceclean.filters import presets
 
     doc: dict[str, Any] | None = None
@@ -289,6 +358,7 @@ def _classical(text: str, items: list[Item]) -> Choice:
         )
     cls = filters.cleaner_class(method)
     per = tuple(getattr(cls, "PER_CHANNEL", ()))
+    items = [*items, *(it for it in shared if it[1] in per)]
     _checked(cls, method, items, per)
     _known_patterns(items)
 

@@ -2,7 +2,8 @@
 
 Import FILE with Blender's own glTF importer and write what it made, as JSON: per mesh
 object its shape key names and the action on its shape keys (name, frame rate, and per
-F-curve the data path and its keyframes as [frame, value] pairs).
+F-curve the data path and its keyframes as [frame, value] pairs); per object with an
+action of its own (a turning head node), that action's F-curves the same way.
 """
 
 import json
@@ -38,6 +39,17 @@ for obj in bpy.data.objects:
             "fcurves": curves,
         }
     )
-result = {"fps": scene.render.fps / scene.render.fps_base, "meshes": found}
+objects = []
+for obj in bpy.data.objects:
+    action = obj.animation_data.action if obj.animation_data else None
+    if action is None:
+        continue
+    curves = [
+        {"path": fc.data_path, "index": fc.array_index,
+         "keys": [[p.co[0], p.co[1]] for p in fc.keyframe_points]}
+        for fc in action.fcurves
+    ]  # fmt: skip
+    objects.append({"object": obj.name, "action": action.name, "fcurves": curves})
+result = {"fps": scene.render.fps / scene.render.fps_base, "meshes": found, "objects": objects}
 with open(out, "w") as f:
     json.dump(result, f)

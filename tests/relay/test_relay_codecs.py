@@ -52,7 +52,8 @@ def test_livelink_decodes_a_byte_literal():
     assert f.t == pytest.approx(120.5 / 60.0)
     assert f.values[0] == 1.0 and f.values[17] == 0.5
     assert np.count_nonzero(f.values) == 2
-    assert f.pose is not None and f.pose[0] == 0.5 and np.count_nonzero(f.pose) == 1
+    assert f.pose is not None and f.pose[:3].tolist() == [0.5, 0.0, 0.0]
+    assert np.isnan(f.pose[3:]).all()  # eyes all exactly 0: not tracked, absent
 
 
 def test_livelink_encoder_writes_the_same_bytes():
@@ -229,11 +230,17 @@ IFM = (
 )
 
 
-def test_ifacialmocap_decodes_percent_values_and_ignores_head_fields():
+def test_ifacialmocap_decodes_percent_values_and_its_head_and_eyes():
     f = ifacialmocap.decode(IFM)
     assert f.names == ("mouthSmile_R", "eyeBlink_L", "jawOpen")
     np.testing.assert_allclose(f.values, [0.25, 1.0, 0.0])
-    assert f.t is None and f.pose is None
+    assert f.t is None
+    # rx, ry, rz degrees -> yaw (ry), pitch (rx), roll (rz) radians; head, left, right eye
+    want = [-6.0, -21.4, -6.6, -1.6, 6.0, -0.17, 2.4, 6.0, 0.25]
+    np.testing.assert_allclose(f.pose, np.radians(want))
+    assert ifacialmocap.decode(b"jawOpen-5|").pose is None  # no rotation fields: no pose
+    with pytest.raises(Malformed, match="rotation"):
+        ifacialmocap.decode(b"jawOpen-5|=head#1,2|")
 
 
 def test_ifacialmocap_ampersand_variant():

@@ -15,7 +15,9 @@ The output format follows OUT's extension (``--format`` forces one); a ``.csv`` 
 Live Link Face CSV stays Live Link, with only the blendshape values changed. Every
 output replaces its file atomically once complete. A causal cleaner on a Live Link or
 plain CSV written to the same format streams the file in blocks (constant memory,
-faceclean.io.stream); anything else is read whole.
+faceclean.io.stream); anything else is read whole. Head and eye angles (a Live Link
+file's 9 angle columns, ``meta["pose"]``) are cleaned by the rotation filter
+(filters/rotation.py, its tuned preset; ``--set head.min_cutoff=0.5``, ``eyes.beta=...``).
 
 A raw take is never replaced by accident: an OUT that is IN (``./IN``, a symlink to it,
 a hard link of it: the same file, ``os.path.samefile``) is refused unless ``--in-place``
@@ -111,6 +113,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     from faceclean import io
     from faceclean.adjust import Adjusted, check_range
     from faceclean.errors import FacecleanError
+    from faceclean.filters import rotation
     from faceclean.io import stream
 
     choice = options.choice(args)
@@ -132,8 +135,11 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
             if not adjust.is_identity:
                 cleaner = Adjusted(cleaner, adjust, names)
             guard = None if args.scale is not None else (names, input)
-            frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard)
-            return _line(output, frames, missing, names, what, adjust)
+            pose = None
+            if fmt_in == "livelink" and (angles := stream.angle_names(src)):
+                pose = choice.build_pose(angles)
+            frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard, pose)
+            return _line(output, frames, missing, names, what, adjust, choice, pose)
     anim = io.load(src)
     if args.scale is None:  # the same judgement as the stream's, block by block
         for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
@@ -142,8 +148,11 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     adjust = build_levels(args, choice, anim.names)
     mapped = anim.with_values(adjust.apply(anim.values, anim.names))
     cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
+    cleaned = rotation.clean_pose(cleaned, choice.build_pose)
     io.save(cleaned, output, fmt=args.fmt)
-    return _line(output, anim.n_frames, int((~anim.valid).sum()), anim.names, what, adjust)
+    angles = rotation.pose_columns(anim)[1]
+    missing = int((~anim.valid).sum())
+    return _line(output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)
 
 
 def same_file(a: str | Path, b: str | Path) -> bool:
@@ -171,13 +180,24 @@ def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Cleaner, str]
     return choice.build(names), choice.source
 
 
-def _line(out: str, frames: int, missing: int, names: tuple[str, ...], what: str, adjust) -> str:
+def _line(
+    out: str,
+    frames: int,
+    missing: int,
+    names: tuple[str, ...],
+    what: str,
+    adjust,
+    choice: Choice,
+    angles=None,
+) -> str:
     n = 0 if adjust.is_identity else len(adjust.levels(names).active)
+    n_angles = len(getattr(angles, "names", angles) or ())
     return (
         f"wrote {out}: {frames} frames"
         + (f" ({missing} missing)" if missing else "")
         + f", {len(names)} channels, cleaned with {what}"
         + (f" after levels on {n} channels" if n else "")
+        + (f"; {n_angles} head/eye angles with {choice.pose_source}" if n_angles else "")
     )
 
 
@@ -188,9 +208,13 @@ def _stream(
     fmt: str,
     progress: bool = True,
     guard: tuple[tuple[str, ...], str] | None = None,
+    pose=None,
 ) -> tuple[int, int]:
     """``stream.clean_file`` with a progress bar (bytes) on stderr for big files;
-    ``guard`` (names, label): refuse a block of values far outside [0, 1]."""
+    ``guard`` (names, label): refuse a block of values far outside [0, 1]; ``pose``: the
+    head/eye angles' cleaner, or None (its output gets the finite check only)."""
+    import functools
+
     from tqdm import tqdm
 
     from faceclean.adjust import check_range
@@ -205,10 +229,17 @@ def _stream(
         check_finite(inp, outp, cleaner.name)
 
     size = src.stat().st_size
+    angles = {}
+    if pose is not None:
+        pose.reset()
+        angles = {
+            "pose_step": pose.step,
+            "pose_check": functools.partial(check_finite, name=pose.name),
+        }
     if size < PROGRESS_BYTES or not progress:
-        return stream.clean_file(src, out, cleaner.step, fmt, check=check)
+        return stream.clean_file(src, out, cleaner.step, fmt, check=check, **angles)
     with tqdm(total=size, unit="B", unit_scale=True, file=sys.stderr, leave=False) as bar:
-        return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check)
+        return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check, **angles)
 
 
 def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:

@@ -70,6 +70,11 @@ def describe(anim) -> dict[str, Any]:
         "max": float(np.nanmax(hi)) if np.isfinite(hi).any() else None,
         "outside_0_1": outside,
         "pose_channels": list(anim.meta.get("pose_names", ())),
+        "timecode_start": anim.meta.get("timecode_start"),
+        # a relay recording of a stream without timecode keeps its arrival times
+        "timecode_source": "arrival"
+        if "ArrivalTime" in anim.meta.get("pose_names", ())
+        else ("file" if anim.meta.get("timecode_start") is not None else None),
     }
 
 
@@ -103,7 +108,15 @@ def run(args: argparse.Namespace) -> int:
         ("range", _range(facts)),
     ]
     if facts["pose_channels"]:
-        lines.append(("passthrough", ", ".join(facts["pose_channels"])))
+        lines += _pose_lines(facts["pose_channels"])
+    if facts["timecode_start"] is not None:
+        from faceclean.io.livelink_csv import timecode_text
+
+        how = {
+            "arrival": "the arrival time: the source sent no timecode (ArrivalTime column)",
+            "file": "as the file carries it",
+        }[facts["timecode_source"]]
+        lines.append(("timecode", f"starts {timecode_text(facts['timecode_start'])}, {how}"))
     if adjust is not None:
         rules = list(facts["levels"]["rules"])
         about = rules.pop() if adjust.facts else None  # describe()'s facts line comes last
@@ -121,6 +134,22 @@ def run(args: argparse.Namespace) -> int:
     for key, text in lines:
         print(f"{key:<12}{text}")
     return 0
+
+
+def _pose_lines(names: list[str]) -> list[tuple[str, str]]:
+    """The pose columns: head/eye angles (cleaned by the rotation filter) and any other
+    column (passed through)."""
+    from faceclean.channels import pose_name
+
+    angles = [n for n in names if pose_name(n) is not None]
+    other = [n for n in names if pose_name(n) is None]
+    lines = []
+    if angles:
+        text = f"{len(angles)} head/eye angles (rad): {', '.join(angles)}"
+        lines.append(("pose", text + "; cleaned by the rotation filter (head, eyes)"))
+    if other:
+        lines.append(("passthrough", ", ".join(other)))
+    return lines
 
 
 def _levels_file(args: argparse.Namespace) -> int:

@@ -13,6 +13,9 @@ take.clean.csv when the relay stops: ``faceclean replay take.csv`` streams it ag
 ``--ui`` serves the tuning page on the running relay (faceclean.ui.live): its controls
 change the cleaner between two frames; with it, ``--calibrate-seconds N`` is the page's
 Calibrate pressed at start (once, not again on a new stream).
+Head and eye rotation (Live Link's 9 angles, VMC's Head/LeftEye/RightEye bones,
+iFacialMocap's head and eyes) are cleaned by the rotation filter (``--set
+head.min_cutoff=...``); a Live Link stream keeps the tracker's timecode.
 """
 
 from __future__ import annotations
@@ -125,7 +128,11 @@ def run(args: argparse.Namespace) -> int:
     cleaner, what = build_cleaner(choice)
     cleaner, levels = with_levels(args, choice, cleaner)
     what += f"; levels: {levels}" if levels else ""
-    with Relay(listen, send, cleaner, recorder=recorder) as relay:
+    from faceclean.channels import POSE
+
+    pose = choice.build_pose(POSE)  # head/eye angles: the rotation filter
+    what += f"; head/eye angles: {choice.pose_source}"
+    with Relay(listen, send, cleaner, recorder=recorder, pose=pose) as relay:
         stats = _serve(args, relay, send, what)
     return _done(stats, send, recorder)
 
@@ -158,14 +165,15 @@ def _done(stats: Any, send: Any, recorder: Any) -> int:
 
 def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) -> int:
     """The relay with the tuning page on it (faceclean.ui.live)."""
-    from faceclean.channels import ARKIT52
+    from faceclean.channels import ARKIT52, POSE
     from faceclean.cli import ui
     from faceclean.relay import Relay
     from faceclean.ui.live import Live, Tap
 
     tuning = ui.tuning(args).with_choice()
     tap = Tap(recorder)
-    with Relay(listen, send, tuning.build(ARKIT52), recorder=tap) as relay:
+    pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
+    with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:
         what = f"{relay.address} -> {send}"
         session = Live(tuning, relay, tap, what)
         session.hello()  # the face's payload built before the page asks

@@ -6,6 +6,7 @@ MSE × raw per held-out source."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -261,4 +262,39 @@ def markdown(results: dict[str, Any]) -> str:
                 _fmt(by_cond.get(c, {}).get(s, {}).get("rel_mse")) for s in folds for c in keys
             ]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines += rotation_lines()
     return "\n".join(lines) + "\n"
+
+
+ROTATION = Path(__file__).resolve().parents[3] / "docs" / "rotation.json"
+
+
+def rotation_lines(path: Path = ROTATION) -> list[str]:
+    """The head/eye rotation section, from benchmarks/tune_rotation.py's docs/rotation.json
+    (nothing where it is absent, e.g. an installed wheel)."""
+    if not path.is_file():
+        return []
+    doc = json.loads(path.read_text())
+    about = doc["about"]
+    lines = [
+        "",
+        "## Head and eye rotation: the rotation filter against raw and a tuned One Euro",
+        "",
+        f"`{about['script']}`: the 9 Live Link angles of the takes, corrupted as measured on "
+        f"the raw Live Link stream ({about['corruption']}); tuned on {about['tuned_on']}, "
+        "judged on held-out takes for the eyes (jmtechart, sentien) and on other noise "
+        "draws of the one take whose head moves (sentien). Both filters tuned the same way "
+        "(MSE, per group). *yaw turned by pi*: every yaw (input and truth) turned half a "
+        "circle, so the face sits on the +-pi cut. MSE in rad² on the wrapped error; RMS in "
+        "degrees; jitter and lag as above.",
+        "",
+        "| group | condition | method | MSE × raw | RMS deg | jitter | lag ms |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    label = {"raw": "Raw input", "rotation": "Rotation (ours)", "one-euro": "One Euro (tuned)"}
+    for r in doc["rows"]:
+        lines.append(
+            f"| {r['group']} | {r['condition']} | {label.get(r['method'], r['method'])} | "
+            f"{r['x_raw']:.3g} | {r['rms_deg']:.3g} | {r['jitter']:.3g} | {r['lag_ms']:.3g} |"
+        )
+    return lines

@@ -21,6 +21,7 @@ METHODS: dict[str, str] = {
     "kalman": "faceclean.filters.kalman:Kalman",
     "gaussian": "faceclean.filters.gaussian:Gaussian",
     "savgol": "faceclean.filters.savgol:SavGol",
+    "rotation": "faceclean.filters.rotation:Rotation",
     "adaptive": "faceclean.learned.adaptive:Adaptive",
     "lstm": "faceclean.learned.cleaner:Learned",
     "fc": "faceclean.learned.derivative_net:FullyConnected",

@@ -9,7 +9,8 @@ Layout (``faceclean-preset/1``)::
      "about": {...}}
 
 ``params`` apply to every channel; ``groups`` (names from faceclean.channels.GROUPS:
-eyes, brows, jaw, mouth, cheeks_nose) override them for that group's channels. Values
+eyes, brows, jaw, mouth, cheeks_nose; for the head/eye angles of the ``rotation``
+method, POSE_GROUPS: head, eyes) override them for that group's channels. Values
 are plain numbers in the cleaner's physical units. ``about`` is free-form provenance
 (how and on what the preset was tuned). Parsing is strict and never unpickles anything.
 Shipped presets live in ``faceclean/presets/<name>.json`` and are found by name.
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from faceclean import strict_json
-from faceclean.channels import ARKIT52, GROUPS, group_of
+from faceclean.channels import ARKIT52, GROUPS, POSE_GROUPS, group_of
 from faceclean.errors import FacecleanError
 from faceclean.filters import METHODS, Cleaner, make
 from faceclean.io.atomic import atomic_write
@@ -97,9 +98,10 @@ def validate(doc: Any, source: str = "preset") -> dict[str, Any]:
     groups = doc.get("groups", {})
     if not isinstance(groups, dict):
         raise FacecleanError(f"{source}: groups must be an object")
+    known = {**GROUPS, **POSE_GROUPS}
     for g in groups:
-        if g not in GROUPS:
-            raise FacecleanError(f"{source}: unknown group {g!r} (known: {', '.join(GROUPS)})")
+        if g not in known:
+            raise FacecleanError(f"{source}: unknown group {g!r} (known: {', '.join(known)})")
     groups = {g: _numbers(v, f"{source}: groups.{g}") for g, v in groups.items()}
     if "about" in doc and not isinstance(doc["about"], dict):
         raise FacecleanError(f"{source}: about must be an object")

@@ -14,7 +14,8 @@ pairs, cut into segments of ``segment`` seconds, are stepped together as streams
 all groups and candidates are tuned at once. Offline cleaners are run per candidate.
 
 Kalman's steady state depends on q / r^2 only, so r is fixed and q is searched;
-One Euro's d_cutoff stays at Casiez et al.'s 1 Hz; Savitzky-Golay keeps polyorder 2.
+One Euro's (and the rotation filter's) d_cutoff stays at Casiez et al.'s 1 Hz;
+Savitzky-Golay keeps polyorder 2.
 """
 
 from __future__ import annotations
@@ -41,9 +42,11 @@ SPACES: dict[str, dict[str, tuple[float, float]]] = {
     "kalman": {"q": (0.01, 1e7)},  # unit^2/s^3
     "gaussian": {"sigma": (0.002, 0.2)},  # s
     "savgol": {"window": (0.02, 0.8)},  # s
+    "rotation": {"min_cutoff": (0.05, 60.0), "beta": (0.001, 100.0)},  # Hz, Hz/(rad/s)
 }
 FIXED: dict[str, dict[str, float]] = {
     "one-euro": {"d_cutoff": 1.0},  # Hz
+    "rotation": {"d_cutoff": 1.0},  # Hz
     "kalman": {"r": 0.02},  # unit
     "savgol": {"polyorder": 2},
 }

@@ -17,8 +17,15 @@ Keyframes, the rule chosen for what glTF cannot hold:
   backwards timestamp) is dropped, as glTF needs strictly increasing times;
 - a single missing value in a tracked frame holds that channel's previous value (its
   next one before the first); a channel the take lacks, or never gives, stays at 0.
-Weights are written as they are (no clamping); channels that are not ARKIT blendshapes
-(head and eye rotations of a Live Link take) are not animated.
+Weights are written as they are (no clamping); other channels are not animated.
+
+Head: a take with head angles (``meta["pose"]``: HeadYaw, HeadPitch, HeadRoll) gets a node
+``head`` above ``face``, at the neck pivot ``PIVOT`` (``face`` carries the opposite
+offset, so the face rests where it was), whose ``rotation`` is animated by a second
+``LINEAR`` sampler on the same keyframe times: the angles as glTF quaternions
+(faceclean.pose: Unity's frame with X mirrored), a missing angle held as the weights
+are, consecutive quaternions kept in one hemisphere so that importers interpolate the
+short way. The eyes stay what the eyeLook* morph targets show (the face is one mesh).
 """
 
 from __future__ import annotations
@@ -31,13 +38,15 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import ARKIT52
+from faceclean.channels import ARKIT52, pose_name
 from faceclean.errors import FacecleanError
 from faceclean.face.mesh import FaceMesh
 from faceclean.io.gltf_container import data_uri, glb
 
 _FLOAT, _UINT = 5126, 5125  # glTF componentType
 _ARRAY, _ELEMENTS = 34962, 34963  # bufferView targets
+PIVOT = (0.0, -0.08, -0.03)  # m, the head node's place: the top of the neck, behind the jaw
+HEAD = ("HeadYaw", "HeadPitch", "HeadRoll")
 
 
 def keyframes(anim: Animation) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
@@ -52,20 +61,43 @@ def keyframes(anim: Animation) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
             "none of the take's channels is an ARKit blendshape (nothing to animate): "
             f"{', '.join(anim.names[:5])}{', ...' if anim.n_channels > 5 else ''}"
         )
-    valid = anim.valid
+    rows = kept(anim)
     times = (anim.times - anim.times[0]).astype(np.float32)
-    tv = times[valid]
-    if len(tv) == 0:
-        raise FacecleanError("every frame of the take is a tracking loss: no keyframe to write")
-    before = np.maximum.accumulate(np.concatenate([[-np.inf], tv[:-1]]))
-    advance = tv > before  # strictly later than every earlier tracked frame
-    weights = _hold(values[valid][advance])
+    valid = anim.valid
+    advance = np.isin(np.flatnonzero(valid), rows)
+    weights = _hold(values[rows])
     counts = {
         "lost": int((~valid).sum()),
         "unordered": int((~advance).sum()),
         "channels": int(present.sum()),
     }
-    return tv[advance], weights.astype(np.float32), counts
+    return times[rows], weights.astype(np.float32), counts
+
+
+def kept(anim: Animation) -> np.ndarray:
+    """(K,) indices of the frames that become keyframes (the module's rule)."""
+    valid = np.flatnonzero(anim.valid)
+    if len(valid) == 0:
+        raise FacecleanError("every frame of the take is a tracking loss: no keyframe to write")
+    tv = (anim.times - anim.times[0]).astype(np.float32)[valid]
+    before = np.maximum.accumulate(np.concatenate([[-np.inf], tv[:-1]]))
+    return valid[tv > before]  # strictly later than every earlier tracked frame
+
+
+def head_rotations(anim: Animation) -> np.ndarray | None:
+    """(K,) x 4 glTF quaternions (x, y, z, w) of the head at the keyframes, or None when
+    the take has no head angles."""
+    from faceclean.pose import gltf_quaternion
+
+    pose = anim.meta.get("pose")
+    names = [pose_name(str(n)) for n in anim.meta.get("pose_names", ())]
+    if pose is None or not set(HEAD) <= set(names) or np.shape(pose)[0] != anim.n_frames:
+        return None
+    ypr = np.asarray(pose, np.float64)[kept(anim)][:, [names.index(n) for n in HEAD]]
+    q = gltf_quaternion(_hold(ypr))  # (K, 4)
+    flip = np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=1) < 0, -1.0, 1.0))
+    q[1:] *= flip[:, None]  # each key in the hemisphere of the one before
+    return q.astype(np.float32)
 
 
 def _hold(w: np.ndarray) -> np.ndarray:
@@ -161,11 +193,21 @@ def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
         times, weights, counts = keyframes(anim)
         t_acc = blob.add(times.astype("<f4"), "SCALAR", _FLOAT, None, True)
         w_acc = blob.add(weights.reshape(-1).astype("<f4"), "SCALAR", _FLOAT, None, False)
+        samplers = [{"input": t_acc, "output": w_acc, "interpolation": "LINEAR"}]
+        channels = [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]
+        q = head_rotations(anim)
+        if q is not None:  # a head node above the face, turning at the neck
+            q_acc = blob.add(np.ascontiguousarray(q, "<f4"), "VEC4", _FLOAT, None, False)
+            samplers.append({"input": t_acc, "output": q_acc, "interpolation": "LINEAR"})
+            channels.append({"sampler": 1, "target": {"node": 1, "path": "rotation"}})
+            doc["nodes"][0]["translation"] = [-v for v in PIVOT]
+            doc["nodes"].append({"name": "head", "children": [0], "translation": list(PIVOT)})
+            doc["scenes"] = [{"nodes": [1]}]
         doc["animations"] = [
             {
                 "name": name,
-                "samplers": [{"input": t_acc, "output": w_acc, "interpolation": "LINEAR"}],
-                "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+                "samplers": samplers,
+                "channels": channels,
                 "extras": {"droppedTrackingLoss": counts["lost"]},
             }
         ]

@@ -3,7 +3,9 @@
 Header: ``Timecode,BlendshapeCount,`` (or ``BlendShapeCount``), then blendshape names in
 PascalCase in the app's own order, then 9 head/eye angles. Columns are mapped by name;
 only columns whose name is an ARKit blendshape are channels, every other column is
-passthrough (``meta["pose"]`` (N, P) radians as written, ``meta["pose_names"]``).
+``meta["pose"]`` (N, P) (the head/eye angles in radians, as written) with
+``meta["pose_names"]``; the angles are cleaned by the rotation filter
+(filters/rotation.py), the rest passes through.
 
 Timecode ``HH:MM:SS:FF.fff``: FF frames at 60 fps plus a fractional sub-frame ``.fff``::
 
@@ -17,11 +19,13 @@ A row with ``BlendshapeCount`` 0 and no values (``16:48:52:29.134,0``) is a miss
 an all-NaN row, written back as it was.
 
 Writing an animation read from such a file changes only the text of blendshape values
-that changed: the header, timecodes, counts, angles, column order, line endings, blank
-lines and the final newline (or its absence) stay byte for byte. A changed value is
+and angles (``meta["pose"]``) that changed: the header, timecodes, counts, other
+columns, column order, line endings, blank lines and the final newline (or its absence)
+stay byte for byte. A changed value is
 written with the source's number of decimals (10 in the app's files); a NaN keeps the
 original text. Any other animation is written as a fresh file: 52 blendshapes in the app's
-order, angles from ``meta["pose"]`` or 0, timecodes synthesised from ``times``
+order, angles from ``meta["pose"]`` or 0, then any other pose column (e.g. a relay
+recording's ``ArrivalTime``), timecodes synthesised from ``times``
 (+ ``meta["timecode_start"]``).
 """
 
@@ -73,6 +77,8 @@ class Source:
     values: np.ndarray  # (N, M) the values as read
     times: np.ndarray  # (N,) s
     decimals: int
+    pose_columns: np.ndarray | None = None  # (P,) field index of each pose column
+    pose: np.ndarray | None = None  # (N, P) the pose cells as read
 
 
 def sniff(head: bytes) -> bool:
@@ -130,6 +136,8 @@ def read(path: str | os.PathLike) -> Animation:
         values=values.copy(),
         times=times.copy(),
         decimals=decimals_of(table[~np.array(missing, bool)][:DECIMALS_SAMPLE, head.columns - 2]),
+        pose_columns=head.pose_cols,
+        pose=pose.copy(),
     )
     meta = {
         "format": "livelink",
@@ -270,6 +278,10 @@ def _patched(src: Source, anim: Animation) -> bytes:
             new[:, i] = anim.values[:, j]
     lines = list(src.lines)
     patch_lines(lines, src.rows, src.missing, src.columns, src.values, new, src.decimals)
+    pose = anim.meta.get("pose")
+    if src.pose is not None and pose is not None and np.shape(pose) == src.pose.shape:
+        old = src.pose
+        patch_lines(lines, src.rows, src.missing, src.pose_columns, old, pose, src.decimals)
     return b"".join(lines)
 
 
@@ -303,13 +315,16 @@ def _fresh(anim: Animation) -> bytes:
     values = np.nan_to_num(arkit[:, order], nan=0.0)  # (N, 52) app order
     pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
     pose_names = tuple(anim.meta.get("pose_names", ()))
-    angles = np.zeros((anim.n_frames, len(ANGLES)))
-    if pose.shape[0] == anim.n_frames:
-        for a, name in enumerate(ANGLES):
+    fits = pose.ndim == 2 and pose.shape[0] == anim.n_frames
+    plain = [n for n in pose_names if not set(n) & set(',\r\n"')]  # fits in a CSV header
+    extra = tuple(n for n in plain if n not in ANGLES and fits)  # passthrough columns
+    angles = np.zeros((anim.n_frames, len(ANGLES) + len(extra)))
+    if fits:
+        for a, name in enumerate(ANGLES + extra):
             if name in pose_names:
                 angles[:, a] = np.nan_to_num(pose[:, pose_names.index(name)], nan=0.0)
     start = float(anim.meta.get("timecode_start", 0.0))
-    out = [",".join(("Timecode", "BlendshapeCount") + ORDER + ANGLES).encode() + b"\n"]
+    out = [",".join(("Timecode", "BlendshapeCount") + ORDER + ANGLES + extra).encode() + b"\n"]
     valid = anim.valid
     count = str(len(ORDER) + len(ANGLES)).encode()
     for i in range(anim.n_frames):

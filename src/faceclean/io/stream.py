@@ -10,11 +10,14 @@ order. A refused file (a bad row half-way) leaves no output: the temporary file 
 removed and an existing OUT is untouched.
 
 The cleaner is a plain ``step(x, t) -> x`` callable over one frame (M,) at t s, reset by
-the caller; ``check(input, output)`` (R, M), when given, sees every block before it is
-written and raises to refuse the file (the cleaner's finite check, filters/base.py).
-Only a cleaner whose ``clean`` is reset-then-step can stream (the caller asks
-``Cleaner.stepwise``; offline cleaners and cleaners with their own batch path load the
-whole file), and only into the same format (``can_stream``).
+the caller; a Live Link file's head/eye angles go through ``pose_step`` (the same kind of
+callable, over the angle columns in file order, ``angle_names``) on the frames that carry
+blendshapes, as ``filters.rotation.clean_pose`` does in memory. ``check(input, output)``
+(R, M), when given, sees every block before it is written and raises to refuse the file
+(the cleaner's finite check, filters/base.py). Only a cleaner whose ``clean`` is
+reset-then-step can stream (the caller asks ``Cleaner.stepwise``; offline cleaners and
+cleaners with their own batch path load the whole file), and only into the same format
+(``can_stream``).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from faceclean.channels import pose_name
 from faceclean.errors import FacecleanError
 from faceclean.io import livelink_csv, plain_csv, source
 from faceclean.io.atomic import atomic_open
@@ -62,6 +66,15 @@ def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
         raise FacecleanError(f"{p.name}: header is not UTF-8 ({e})") from None
 
 
+def angle_names(path: str | os.PathLike) -> tuple[str, ...]:
+    """The head/eye angle columns of a Live Link file (Live Link spelling, file order)."""
+    p = Path(path)
+    with source.open_binary(p) as f:
+        first = next(iter_lines(f), b"")
+    head = livelink_csv.parse_header(first, p.name)
+    return tuple(n for j in head.pose_cols if (n := pose_name(head.fields[j])) is not None)
+
+
 def clean_file(
     src: str | os.PathLike,
     dst: str | os.PathLike,
@@ -69,9 +82,12 @@ def clean_file(
     fmt: str,
     progress: Progress | None = None,
     check: Check | None = None,
+    pose_step: Step | None = None,
+    pose_check: Check | None = None,
 ) -> tuple[int, int]:
     """Clean ``src`` (format ``fmt``) into ``dst`` block by block with ``step`` (a reset
-    cleaner's); (frames, missing frames). ``check``: see the module docstring.
+    cleaner's) and, for a Live Link file's angles, ``pose_step``; (frames, missing
+    frames). ``check``: see the module docstring; ``pose_check`` sees the angles.
 
     OUT may be IN: the output replaces it only once the whole file is through.
     """
@@ -79,10 +95,12 @@ def clean_file(
         raise FacecleanError(f"cannot stream format {fmt!r} (only {', '.join(FORMATS)})")
     p = Path(src)
     rows = _Rows(step, check)
-    through = _livelink if fmt == "livelink" else _plain
+    pose = None if pose_step is None else _Rows(pose_step, pose_check)
     with source.open_binary(p) as f, atomic_open(dst, "wb") as out:
         try:
-            return through(p.name, _counted(f, progress), out, rows)
+            if fmt == "livelink":
+                return _livelink(p.name, _counted(f, progress), out, rows, pose)
+            return _plain(p.name, _counted(f, progress), out, rows)
         except UnicodeDecodeError as e:
             raise FacecleanError(f"{p.name}: not UTF-8 text ({e})") from None
 
@@ -136,13 +154,20 @@ class _Rows:
         return out
 
 
-def _livelink(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, clean_rows: _Rows):
+def _livelink(
+    name: str,
+    blocks: Iterator[list[bytes]],
+    out: BinaryIO,
+    clean_rows: _Rows,
+    clean_pose: _Rows | None = None,
+):
     first = next(blocks, None)
     if not first or not livelink_csv.sniff(first[0]):
         raise FacecleanError(f"{name}: not a Live Link Face CSV (no Timecode,BlendshapeCount)")
     head = livelink_csv.parse_header(first[0], name)
     n_fields = len(head.fields)
     cols = head.columns - 2
+    angles = np.array([j for j in head.pose_cols if pose_name(head.fields[j])], dtype=int)
     out.write(first[0])
     pending: list[tuple[list[bytes], tuple]] = []  # blocks parsed before the decimals are known
     decimals: int | None = None
@@ -160,12 +185,18 @@ def _livelink(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, clean_row
                 start = previous = float(absolute[0])
             times, wraps = livelink_csv.relative_times(absolute, start, previous, wraps)
             previous = float(absolute[-1])
-            values = livelink_csv.parse_numbers(table, name)[:, cols]
+            numbers = livelink_csv.parse_numbers(table, name)
+            values = numbers[:, cols]
             new = clean_rows(times, values)
             local = np.array(rows) - first_line
-            livelink_csv.patch_lines(
-                lines, local, np.array(missing, bool), head.columns, values, new, decimals
-            )
+            gone = np.array(missing, bool)
+            livelink_csv.patch_lines(lines, local, gone, head.columns, values, new, decimals)
+            if clean_pose is not None and len(angles):
+                old = numbers[:, angles - 2]  # (R, A) rad
+                seen = ~np.all(np.isnan(values), axis=1) if values.shape[1] else ~gone
+                steps = np.where(seen[:, None], old, np.nan)  # tracking loss: missing
+                cleaned = clean_pose(times, steps)
+                livelink_csv.patch_lines(lines, local, gone, angles, old, cleaned, decimals)
             frames += len(rows)
             missing_total += int(np.sum(missing))
         out.write(b"".join(lines))

@@ -12,14 +12,12 @@ from typing import Protocol
 
 import numpy as np
 
+from faceclean.channels import POSE
 from faceclean.errors import FacecleanError
 
 # Live Link Face's 9 head and eye angles (radians), after the 52 blendshapes.
-POSE_NAMES: tuple[str, ...] = (
-    "HeadYaw", "HeadPitch", "HeadRoll",
-    "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
-    "RightEyeYaw", "RightEyePitch", "RightEyeRoll",
-)  # fmt: skip
+POSE_NAMES: tuple[str, ...] = POSE
+Timecode = tuple[int, float, int, int]  # frame number, sub-frame, rate numerator, denominator
 
 
 class Malformed(FacecleanError):
@@ -34,9 +32,14 @@ class Frame:
                  datagram that only carries passthrough messages).
     values:      (M,) float64 weights in [0, 1] (non-finite values are possible).
     t:           s, the sender's timestamp, or None when the packet has none.
-    pose:        (9,) Live Link head/eye angles (``POSE_NAMES``), or None.
+    pose:        (9,) Live Link head/eye angles (``POSE_NAMES``), rad, or None; NaN
+                 where the source sent no such angle (a VMC Head bone without eyes).
     passthrough: raw OSC elements (messages or bundles) to forward unchanged.
     subject, device: Live Link subject name and device id, or None.
+    timecode:    the sender's own (frame number, sub-frame, rate numerator, rate
+                 denominator) (Live Link), kept as it came; None when it sent none.
+    positions:   VMC bone name -> its (x, y, z) local position as received, for the
+                 bones the pose came from (sent back with the cleaned rotation).
     """
 
     names: tuple[str, ...]
@@ -46,6 +49,8 @@ class Frame:
     passthrough: tuple[bytes, ...] = ()
     subject: str | None = None
     device: str | None = None
+    timecode: Timecode | None = None
+    positions: dict[str, tuple[float, float, float]] | None = None
 
     @property
     def is_face(self) -> bool:

@@ -4,9 +4,15 @@ One packet, big-endian (../shared/data/README.md):
 ``u8 version(=6)``, ``i32 len`` + device id, ``i32 len`` + subject name,
 ``i32 frame_number``, ``f32 sub_frame``, ``i32 rate_numerator``, ``i32 rate_denominator``,
 ``u8 count`` (61; 52 is accepted: no angles), ``count x f32``: 52 blendshapes in ARKit
-order, then the 9 head/eye angles (``POSE_NAMES``).
+order, then the 9 head/eye angles (``POSE_NAMES``). A head or eye whose three angles are
+all exactly 0 is not tracked (the app sends zeros with head rotation off): its angles
+decode as NaN (absent: no VMC bone is sent for it) and encode back as 0.
 
 Time of a packet: t = (frame_number + sub_frame) * denominator / numerator seconds.
+The frame number, sub-frame and rate are the tracker's timecode: a decoded frame keeps
+them (``Frame.timecode``) and the encoder writes them back unchanged, so a relayed,
+recorded or replayed stream carries the tracker's own timecode. A frame without one
+(VMC, iFacialMocap, a take file) gets frame numbers of its time at ``OUT_RATE``.
 """
 
 from __future__ import annotations
@@ -64,9 +70,21 @@ def decode(data: bytes) -> Frame:
         raise Malformed(f"livelink: {count} values in a {len(data)}-byte packet")
     floats = np.frombuffer(data, _BE_F32, count, at).astype(np.float64)  # (count,)
     t = (number + float(sub)) * den / num if num > 0 and den > 0 else None
-    pose = floats[N_SHAPES:] if count > N_SHAPES else None
-    # a non-finite or absurd time (NaN sub-frame, ...) makes the packet malformed
-    return bounds.checked(Frame(ARKIT52, floats[:N_SHAPES], t, pose, (), subject, device))
+    pose = floats[N_SHAPES:].copy() if count > N_SHAPES else None
+    if pose is not None:  # a rotation of exactly (0, 0, 0): not tracked (the app's setting)
+        off = (pose.reshape(3, 3) == 0.0).all(axis=1)
+        pose.reshape(3, 3)[off] = np.nan
+    timecode = (number, float(sub), num, den) if t is not None else None
+    frame = Frame(ARKIT52, floats[:N_SHAPES], t, pose, (), subject, device, timecode)
+    return bounds.checked(frame)  # a non-finite or absurd time makes the packet malformed
+
+
+def timecode_at(seconds: float, rate: tuple[int, int] = OUT_RATE) -> tuple[int, float, int, int]:
+    """A timecode (frame number, sub-frame, num, den) for a time in seconds at ``rate``."""
+    num, den = rate
+    x = seconds * num / den  # frames
+    number = int(np.floor(x))
+    return number, float(x - number), num, den
 
 
 class Decoder:
@@ -79,8 +97,9 @@ class Decoder:
 class Encoder:
     """Frames -> Live Link Face v6 packets (61 floats: 52 blendshapes, then 9 angles).
 
-    Channels the frame lacks are 0; its pose passes through (zeros when it has none).
-    Frame numbers count 60 fps frames of the frame's time (``OUT_RATE``).
+    Channels the frame lacks are 0; its pose passes through (zeros when it has none, or
+    for an angle it lacks). The frame's own timecode is written as it is; without one,
+    frame numbers count 60 fps frames of the frame's time (``OUT_RATE``).
     """
 
     def __init__(self, subject: str = "faceclean", device: str = "faceclean") -> None:
@@ -105,10 +124,13 @@ class Encoder:
         src, dst = self._index(frame.names)
         floats[dst] = frame.values[src]
         if frame.pose is not None:
-            floats[N_SHAPES : N_SHAPES + min(N_POSE, len(frame.pose))] = frame.pose[:N_POSE]
+            pose = np.nan_to_num(frame.pose[:N_POSE])
+            floats[N_SHAPES : N_SHAPES + len(pose)] = pose
         num, den = OUT_RATE
         x = frame.t * num / den if frame.t is not None else None  # frames, 60 fps
-        if x is not None and abs(x) < 2.0**52:  # else no exact frame number: count on
+        if frame.timecode is not None:  # the tracker's own, unchanged
+            number, sub, num, den = frame.timecode
+        elif x is not None and abs(x) < 2.0**52:  # else no exact frame number: count on
             number = int(np.floor(x))
             sub = x - number
         else:

@@ -25,6 +25,12 @@ numba kernel compiles on its first advancing step). A ``Recorder`` given to the 
 keeps every cleaned frame (relay/recorder.py). ``swap(cleaner)`` hands the loop another
 cleaner from any thread (the tuning page, faceclean.ui.live): it is taken between two
 frames, so no frame is lost or cleaned twice; warming it up and probing it is the caller's.
+
+Head pose: a frame's 9 head/eye angles (Live Link, a VMC Head/eye bone, iFacialMocap's
+head) go through ``pose`` (the rotation filter, filters/rotation.py) at the frame's time;
+a frame without a single finite blendshape is tracking loss for the angles too (they
+hold), and an angle the source did not send stays absent. The sender's timecode (Live
+Link frame number, sub-frame and rate) goes out with the frame unchanged.
 """
 
 from __future__ import annotations
@@ -150,9 +156,11 @@ class Relay:
         *,
         clock: Callable[[], float] = time.monotonic,
         recorder: Recorder | None = None,
+        pose: Stepper | None = None,
     ) -> None:
         self.listen, self.send, self.cleaner, self.clock = listen, send, cleaner, clock
         self.recorder = recorder
+        self.pose = pose  # the head/eye angles' cleaner ((9,) frames), or None: as received
         warm_up(cleaner)  # before the socket exists: nothing queues behind it
         probe(cleaner)  # a cleaner that erases the face does not start
         self._decoders: bounds.Bounded[object, Decoder] = bounds.Bounded(bounds.MAX_SENDERS)
@@ -323,6 +331,8 @@ class Relay:
 
     def _reset(self) -> None:
         self.cleaner.reset()
+        if self.pose is not None:
+            self.pose.reset()
         if self.recorder is not None:
             self.recorder.restart()
 
@@ -336,23 +346,34 @@ class Relay:
             with self._swap_lock:
                 self.cleaner, self._pending = self._pending, None
         y = self.cleaner.step(x, t)  # (52,)
+        pose = self._pose(frame.pose, x, t)
         self._last_t = t
         if np.isnan(y).all():  # nothing seen yet: nothing to send
             return
         if self.recorder is not None:
-            self.recorder.add(t, x, y, frame.pose)
+            arrival = time.time()  # s since the epoch: the time of day when none is sent
+            self.recorder.add(t, x, y, frame.pose, pose, frame.timecode, arrival)
         if self._vmc_out:
             values = frame.values.copy()  # non-ARKit channels pass unchanged
             values[src] = y[dst]
-            out = Frame(frame.names, values, t, frame.pose, frame.passthrough)
+            out = Frame(frame.names, values, t, pose, frame.passthrough, positions=frame.positions)
         else:
-            out = Frame(ARKIT52, np.nan_to_num(y), t, frame.pose, (), frame.subject, frame.device)
+            y = np.nan_to_num(y)
+            out = Frame(ARKIT52, y, t, pose, (), frame.subject, frame.device, frame.timecode)
         data = self.encoder.encode(out)
         self.stats.frames_out += 1  # counted before the peer can see it
         if self._send(data):
             self.stats.record(time.perf_counter_ns() - received)
         else:
             self.stats.frames_out -= 1
+
+    def _pose(self, pose: np.ndarray | None, x: np.ndarray, t: float) -> np.ndarray | None:
+        """The cleaned (9,) angles of a frame's pose (see the module docstring)."""
+        if pose is None or self.pose is None or len(pose) != 9:
+            return pose
+        seen = np.isfinite(x).any()  # tracking loss: the angles hold too
+        out = np.asarray(self.pose.step(pose if seen else np.full(9, np.nan), t))
+        return np.where(np.isnan(pose) | np.isnan(out), pose, out)  # absent stays absent
 
     def _send(self, data: bytes) -> bool:
         try:

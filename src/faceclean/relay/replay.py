@@ -4,6 +4,12 @@ A take is any file ``faceclean.io.load`` reads, or a ``.gesichter`` recording of
 packets. Sent times start at 0 on the first frame; with ``loop`` each pass goes on from
 where the last ended (times keep increasing, as from a live tracker). Missing frames
 (tracking loss) send nothing, as a tracker that lost the face.
+
+Timecode (Live Link output): a ``.gesichter`` recording's packets keep their own frame
+number, sub-frame and rate; a take with a timecode (a Live Link CSV's, or any file's
+``timecode_start``) sends that timecode at 60 fps frames (the CSV's own rate); each
+further ``loop`` pass goes on from the end of the last at the same rate. Only a take
+without one starts at frame 0.
 """
 
 from __future__ import annotations
@@ -36,9 +42,14 @@ def frames_from_animation(anim: Animation) -> list[Frame]:
         raise FacecleanError("replay: the take has no ARKit blendshape channels")
     pose = _pose(anim)
     t0 = float(anim.times[anim.valid][0]) if anim.valid.any() else 0.0
+    start = anim.meta.get("timecode_start")
     return [
         Frame(
-            names, values[i, present], float(anim.times[i] - t0), None if pose is None else pose[i]
+            names,
+            values[i, present],
+            float(anim.times[i] - t0),
+            None if pose is None else pose[i],
+            timecode=None if start is None else livelink.timecode_at(start + anim.times[i]),
         )
         for i in np.flatnonzero(anim.valid)
     ]
@@ -91,6 +102,14 @@ def _period(frames: list[Frame]) -> float:
     return float(np.median(dt)) if len(dt) else 1.0 / 60.0
 
 
+def _later(timecode, seconds: float):
+    """``timecode`` (frame number, sub-frame, num, den) ``seconds`` later at its rate."""
+    if timecode is None or seconds == 0:
+        return timecode
+    number, sub, num, den = timecode
+    return livelink.timecode_at((number + sub) * den / num + seconds, (num, den))
+
+
 def replay(
     frames: list[Frame],
     send: Endpoint,
@@ -133,8 +152,9 @@ def replay(
                 wait(start + (t - times[0]) / speed)
                 if stop.is_set():
                     break
+                timecode = _later(frame.timecode, k * cycle)
                 try:
-                    sock.send(encoder.encode(replace(frame, t=t)))
+                    sock.send(encoder.encode(replace(frame, t=t, timecode=timecode)))
                     sent += 1
                 except OSError:  # no listener yet: a live tracker does not care either
                     pass

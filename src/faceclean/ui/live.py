@@ -66,7 +66,9 @@ class Tap:
         for r in self.recorders:
             r.restart()
 
-    def add(self, t: float, x: np.ndarray, y: np.ndarray, pose: np.ndarray | None) -> None:
+    def add(self, t: float, x: np.ndarray, y: np.ndarray, pose: np.ndarray | None, *more) -> None:
+        """A cleaned frame (Recorder.add's arguments: ``more`` the cleaned pose, the
+        timecode and the arrival time, passed on to the recorders)."""
         i = self.n % RING
         self.t[i], self.x[i], self.y[i] = t, x, y
         self.n += 1  # published after the row is written
@@ -75,7 +77,7 @@ class Tap:
             hold.append((t, np.array(x)))
             self.held = t - hold[0][0] >= self.hold_s
         for r in self.recorders:
-            r.add(t, x, y, pose)
+            r.add(t, x, y, pose, *more)
 
     def since(self, first: int) -> tuple[int, slice | np.ndarray]:
         """(frames now, the ring rows of frames first..now-1, at most RING)."""
