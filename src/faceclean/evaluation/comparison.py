@@ -18,6 +18,7 @@ from faceclean.animation import Animation
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import channel_key
 from faceclean.errors import FacecleanError
+from faceclean.filters.rotation import clean_pose
 from faceclean.resolve import DEFAULT, Choice, resolve
 
 SPIKE = 0.15  # weight units: a frame this far from its neighbours' median is a spike
@@ -50,13 +51,14 @@ class Comparison:
 def clean_with(spec: str | Choice, anim: Animation, adjust: Adjust | None = None) -> Animation:
     """The output on ``anim`` of the cleaner ``spec`` names (faceclean.resolve: words, and
     settings inline as ``WORDS:KEY=VALUE,KEY=VALUE``), after the level mapping ``adjust``
-    with the spec's own level settings on top."""
+    with the spec's own level settings on top; its head/eye angles (``meta["pose"]``) by the
+    rotation filter."""
     choice = resolve(spec) if isinstance(spec, str) else spec
     if choice.levels:
         adjust = (adjust or Adjust()).merged(choice.adjust(anim.names))
     if adjust is not None and not adjust.is_identity:
         anim = anim.with_values(adjust.apply(anim.values, anim.names))
-    return choice.build(anim.names).clean(anim)
+    return clean_pose(choice.build(anim.names).clean(anim), choice.build_pose)
 
 
 def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Animation:

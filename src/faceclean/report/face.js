@@ -12,8 +12,11 @@ export function decode(b64, Type) {
   return new Type(bytes.buffer);
 }
 
-// The view on `canvas`: fit() after a resize, show([w_left, w_right]) poses and draws
-// both faces ((52,) weights each), renders counts the frames drawn.
+// The view on `canvas`: fit() after a resize, show([w_left, w_right], heads) poses and
+// draws both faces ((52,) weights each; heads, optional: [yaw, pitch, roll] rad or null
+// per face, turning it about a neck pivot in glTF's frame: faceclean/pose.py, Euler
+// "YXZ" of pitch, -yaw, -roll), renders counts the frames drawn, heads gives each face's
+// head rotation as a quaternion [x, y, z, w].
 export function faceView(canvas, m, background = 0xe9edf2) {
   const base = decode(m.positions, Float32Array); // (V*3) mesh units
   const index = decode(m.indices, Uint32Array);
@@ -45,6 +48,8 @@ export function faceView(canvas, m, background = 0xe9edf2) {
     vertexColors: !!colors, color: colors ? 0xffffff : 0xe8bfa8,
     roughness: 0.62, metalness: 0.0, side: THREE.DoubleSide,
   });
+  // the neck pivot the head turns about: behind the jaw, low in the face's bounding box
+  const pivot = [centre[0], min[1] + 0.2 * size[1], centre[2] - 0.15 * size[2]];
   const faces = [];
   for (const side of [-1, 1]) {
     const geometry = new THREE.BufferGeometry();
@@ -54,8 +59,18 @@ export function faceView(canvas, m, background = 0xe9edf2) {
     geometry.setIndex(new THREE.BufferAttribute(index, 1));
     geometry.computeVertexNormals();
     const mesh = new THREE.Mesh(geometry, material);
-    scene.add(mesh);
-    faces.push({ geometry, pos, weights: null, mesh, side });
+    const holder = new THREE.Group(); // at the pivot: turned to the camera, then by the head
+    mesh.position.set(-pivot[0], -pivot[1], -pivot[2]);
+    holder.add(mesh);
+    scene.add(holder);
+    const facing = new THREE.Quaternion(), head = new THREE.Quaternion();
+    faces.push({ geometry, pos, weights: null, mesh, holder, facing, head, side });
+  }
+  const euler = new THREE.Euler(0, 0, 0, "YXZ");
+  function turn(face, ypr) {
+    if (ypr) face.head.setFromEuler(euler.set(ypr[1], -ypr[0], -ypr[2], "YXZ"));
+    else face.head.identity();
+    face.holder.quaternion.copy(face.facing).multiply(face.head);
   }
   const camera = new THREE.PerspectiveCamera(24, 2, size[1] * 0.05, size[1] * 60);
   let renders = 0;
@@ -96,18 +111,24 @@ export function faceView(canvas, m, background = 0xe9edf2) {
       const width = 2 * dist * tan * camera.aspect; // visible width at the faces' plane
       for (const f of faces) {
         const x = (f.side * width) / 4;
-        f.mesh.position.set(x - centre[0], -centre[1], -centre[2]);
-        f.mesh.rotation.y = -Math.atan2(x, dist + size[2] / 2); // face the camera squarely
+        f.holder.position.set(x + pivot[0] - centre[0], pivot[1] - centre[1], pivot[2] - centre[2]);
+        const yaw = -Math.atan2(x, dist + size[2] / 2); // face the camera squarely
+        f.facing.setFromAxisAngle(new THREE.Vector3(0, 1, 0), yaw);
+        f.holder.quaternion.copy(f.facing).multiply(f.head);
       }
       camera.position.set(0, size[1] * 0.03, dist + size[2] / 2);
       camera.lookAt(0, 0, 0);
       camera.updateProjectionMatrix();
       draw();
     },
-    show(weights) {
-      faces.forEach((face, k) => pose(face, weights[k]));
+    show(weights, heads = null) {
+      faces.forEach((face, k) => {
+        pose(face, weights[k]);
+        turn(face, heads ? heads[k] : null);
+      });
       draw();
     },
     get renders() { return renders; },
+    get heads() { return faces.map((f) => f.head.toArray()); },
   };
 }

@@ -4,7 +4,10 @@ Weights are integers ``round(value * SCALE)`` (3 decimals; null where missing), 
 seconds from the first frame rounded to 0.1 ms, and long clips keep every k-th frame so
 that the page stays small (at most ``MAX_VALUES`` numbers over all series). The mesh is
 base64 binary: float32 positions, uint32 triangles, uint8 colours, and per ARKit channel
-the vertices its target moves with int16 deltas times a per-target scale ``q``.
+the vertices its target moves with int16 deltas times a per-target scale ``q``. A version
+with head angles (``meta["pose"]``: HeadYaw, HeadPitch, HeadRoll) carries ``head``: three
+lists (yaw, pitch, roll) in radians, 4 decimals, at the kept frames; the viewer turns its
+face by them (the glTF convention of faceclean.pose).
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import GROUPS, INDEX, channel_key
+from faceclean.animation import Animation
+from faceclean.channels import GROUPS, INDEX, channel_key, pose_name
 from faceclean.evaluation.comparison import Comparison, change
 from faceclean.face.mesh import FaceMesh
 
@@ -49,12 +53,26 @@ def _ints(values: np.ndarray) -> list[list[int | None]]:
     ]
 
 
+HEAD = ("HeadYaw", "HeadPitch", "HeadRoll")
+
+
+def head(anim: Animation | None, keep: np.ndarray) -> list[list[float | None]] | None:
+    """(yaw, pitch, roll) lists in rad at frames ``keep`` (None where missing), or None
+    when ``anim`` has no head angles."""
+    pose = None if anim is None else anim.meta.get("pose")
+    names = [pose_name(str(n)) for n in (anim.meta.get("pose_names", ()) if anim else ())]
+    if pose is None or not set(HEAD) <= set(names) or len(pose) != anim.n_frames:
+        return None
+    ypr = np.asarray(pose, np.float64)[keep][:, [names.index(n) for n in HEAD]]
+    return [[round(float(v), 4) if np.isfinite(v) else None for v in col] for col in ypr.T]
+
+
 def animation(comp: Comparison) -> dict[str, Any]:
     """Curves and face weights of every version in ``comp`` (see the module docstring)."""
-    versions = [("input", "input", comp.input.values)]
+    versions = [("input", "input", comp.input.values, comp.input)]
     if comp.truth is not None:
-        versions.append(("truth", "truth", comp.truth.values))
-    versions += [(label, "output", out.values) for label, out in comp.outputs.items()]
+        versions.append(("truth", "truth", comp.truth.values, comp.truth))
+    versions += [(label, "output", out.values, out) for label, out in comp.outputs.items()]
     m = comp.input.n_channels
     k = stride(comp.input.n_frames, m * len(versions))
     keep = np.arange(0, comp.input.n_frames, k)
@@ -85,8 +103,8 @@ def animation(comp: Comparison) -> dict[str, Any]:
         "arkit": [INDEX.get(n, -1) for n in names],
         "change": [round(float(x), 4) for x in moved],
         "series": [
-            {"label": label, "kind": kind, "values": _ints(values[keep])}
-            for label, kind, values in versions
+            {"label": label, "kind": kind, "values": _ints(values[keep]), "head": head(a, keep)}
+            for label, kind, values, a in versions
         ],
         "face": [0, 2 if comp.truth is not None else 1],
         "groups": groups,

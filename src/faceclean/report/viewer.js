@@ -16,6 +16,8 @@ const api = {
   ready: false, seek, play, pause, duration,
   get time() { return state.t; },
   get renders() { return view.face ? view.face.renders : 0; },
+  // each face's head rotation now, as a quaternion [x, y, z, w] (identity without angles)
+  get heads() { return view.face ? view.face.heads : []; },
 };
 window.faceclean = api;
 
@@ -46,6 +48,22 @@ function valueAt(s, col, t) {
   return i >= 0 ? v[i] / data.scale : 0;
 }
 
+// A series' head [yaw, pitch, roll] rad at time t (series.head: three lists, null where
+// missing; linear, holding through a gap), or null when it has no head angles.
+function headAt(s, t) {
+  if (!s.head) return null;
+  return s.head.map((a) => {
+    let i = frameAt(t);
+    const x = a[i], y = i + 1 < N ? a[i + 1] : null;
+    if (x !== null && y !== null) {
+      const u = (t - times[i]) / Math.max(times[i + 1] - times[i], 1e-9);
+      return x + (y - x) * Math.min(Math.max(u, 0), 1);
+    }
+    while (i >= 0 && a[i] === null) i--;
+    return i >= 0 ? a[i] : 0;
+  });
+}
+
 // ---- the 3D view (report/face.js, shared with the tuning page) ----------------------
 const view = { face: null };
 
@@ -64,7 +82,8 @@ function faceWeights(s, t) {
 
 function render() {
   if (!view.face) return;
-  view.face.show(data.face.map((k) => faceWeights(data.series[k], state.t)));
+  const heads = data.face.map((k) => headAt(data.series[k], state.t));
+  view.face.show(data.face.map((k) => faceWeights(data.series[k], state.t)), heads);
 }
 
 // ---- curves -------------------------------------------------------------------------
