@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import os
+import select
+import signal
 import socket
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -72,3 +75,73 @@ def test_two_process_training_keeps_ranks_identical(tmp_path):
     assert "2 process(es)" in proc.stderr
     written = np.load(out)  # rank 0 wrote the model, and it is the trained one
     assert np.array_equal(written["head.w"], r0["head.w"])
+
+
+def _ranks(agent: int) -> list[int]:
+    """The python processes torchrun's agent started (its children, from /proc)."""
+    out = []
+    for d in Path("/proc").iterdir():
+        try:
+            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            if int(fields[1]) == agent and b"python" in (d / "cmdline").read_bytes():
+                out.append(int(d.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in ("Z", "X")  # a zombie is gone (the container's init may not reap)
+
+
+def _until(condition, deadline: float) -> bool:
+    end = time.monotonic() + deadline
+    while not condition() and time.monotonic() < end:
+        time.sleep(0.1)
+    return condition()
+
+
+@pytest.mark.skipif(takes_dir() is None, reason="shared data arkit_takes/ absent")
+@pytest.mark.skipif(not TORCHRUN.exists(), reason="torchrun not installed beside python")
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_ranks_die_when_torchrun_is_killed(tmp_path):
+    """SIGKILL to torchrun's agent mid-training: both ranks stop (faceclean.workers
+    die_with_parent in distributed.setup), polled up to a deadline, not left training."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(takes_dir().parent)}
+    cmd = [
+        str(TORCHRUN), "--nproc_per_node", "2", "--master_addr", "127.0.0.1",
+        "--master_port", str(free_port(socket.SOCK_STREAM)), "-m", "faceclean.neural.train",
+        "--arch", "lstm", "--val-sources", "jmtechart", "--epochs", "1000", "--batch", "2",
+        "--hidden", "8", "--layers", "1", "--quiet", "--out", str(tmp_path / "m.npz"),
+    ]  # fmt: skip
+    agent = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    ranks: list[int] = []
+    try:
+        seen = b""
+        end = time.monotonic() + 240
+        while b"process(es)" not in seen and time.monotonic() < end:  # rank 0 has started
+            ready, _, _ = select.select([agent.stderr], [], [], 1.0)
+            if ready:
+                chunk = os.read(agent.stderr.fileno(), 4096)
+                if not chunk:
+                    break
+                seen += chunk
+        assert b"process(es)" in seen, seen.decode(errors="replace")[-1500:]
+        ranks = _ranks(agent.pid)
+        assert len(ranks) == 2, ranks
+        agent.kill()  # SIGKILL: the agent forwards nothing
+        agent.wait(timeout=60)
+        assert _until(lambda: not any(map(_running, ranks)), 60.0), [
+            p for p in ranks if _running(p)
+        ]
+    finally:
+        for p in ranks:
+            if _running(p):
+                os.kill(p, signal.SIGKILL)
+        if agent.poll() is None:
+            agent.kill()
+            agent.wait()
