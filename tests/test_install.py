@@ -91,6 +91,18 @@ def test_the_installed_package_is_the_wheel_with_its_own_three(installed, tmp_pa
     assert not list(REPO.glob("src/faceclean/report/vendor"))  # never copied into src/
 
 
+def test_the_wheel_carries_every_file_the_tuning_page_serves(installed, tmp_path):
+    venv, env = installed
+    code = (
+        "import faceclean.ui.server as s; [print(u, p, p.is_file()) for u, p in s.files().items()]"
+    )
+    rows = [r.split() for r in _run([str(venv / "bin" / "python"), "-c", code], tmp_path, env)
+            .splitlines()]  # fmt: skip
+    site = venv / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+    assert len(rows) == 7 and all(ok == "True" for _, _, ok in rows)
+    assert all(Path(p).is_relative_to(site / "faceclean") for _, p, _ in rows)  # no repo file
+
+
 def test_the_report_from_the_wheel_embeds_the_pinned_three(report):
     html = report.read_text(encoding="utf-8")
     imports = json.loads(re.search(r'<script type="importmap">(.*?)</script>', html, re.S)[1])

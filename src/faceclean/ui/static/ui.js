@@ -21,7 +21,7 @@ const RANGES = {
 const LEVELS = { gain: [0, 4, false, 1], offset: [-0.5, 0.5, false, 0], curve: [0.2, 5, true, 1] };
 
 const api = {
-  ready: false, mode: null, frames: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
+  ready: false, mode: null, frames: 0, pushes: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
   state: null, sentSeq: 0, setSeq: 0, stats: null, cleanedSeq: null, fullSeq: null, cleanedParts: 0,
   calibrating: null, countdown: [],
   get time() { return play.t; },
@@ -73,7 +73,7 @@ function onMessage(m) {
     if (m.for === "set") { inFlight = null; items = state ? [...state.items] : []; render(); flush(); }
     return;
   }
-  if (m.type === "frames") return onFrames(m);
+  if (m.type === "frames") { api.pushes++; return onFrames(m); }
   if (m.type === "stats") { api.stats = m; return showStatus(); }
   if (m.type === "calibrating") return onCalibrating(m);
   if (m.type === "saved") {
