@@ -41,7 +41,11 @@ def tuning(args: argparse.Namespace):
     from faceclean.ui.tuning import Tuning
 
     calibration = options.calibration(args)
-    return Tuning(options.words(args), tuple(args.params), calibration, args.calibration)
+    words = options.words(args)  # checked as the CLI checks them
+    tracker = getattr(args, "tracker", None)
+    if not any(getattr(args, o, None) for o in ("method", "model", "preset")):
+        words = None  # the tracker's shipped cleaner, named as --tracker on the page
+    return Tuning(words, tuple(args.params), calibration, args.calibration, tracker)
 
 
 def serve(session, host: str, port: int, no_browser: bool):

@@ -57,7 +57,7 @@ class Base:
 
     def hello(self) -> dict[str, Any]:
         """The first message: what the page needs to draw itself."""
-        from faceclean import filters
+        from faceclean import filters, resolve
         from faceclean.face.mesh import stylised
         from faceclean.filters import presets
         from faceclean.report import payload
@@ -71,6 +71,7 @@ class Base:
             "groups": {g: sorted(m, key=ARKIT52.index) for g, m in GROUPS.items()},
             "methods": list(filters.METHODS),
             "presets": presets.shipped(),
+            "trackers": list(resolve.TRACKERS),  # --tracker's names
             "state": self.tuning.describe(),
             "mesh": self._mesh,
         }
@@ -97,7 +98,8 @@ class Base:
     def on_set(self, client: Client, m: dict[str, Any]) -> None:
         words = text(m, "words", optional=True)
         items = texts(m, "items")
-        self.use(self.tuning.changed(words, items), seq(m))
+        tracker = text(m, "tracker", optional=True)
+        self.use(self.tuning.changed(words, items, tracker), seq(m))
 
     def on_save(self, client: Client, m: dict[str, Any]) -> None:
         what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
@@ -118,7 +120,7 @@ class Base:
     def on_load(self, client: Client, m: dict[str, Any]) -> None:
         what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
         if what == "preset":
-            self.use(self.tuning.changed(path, []), seq(m))
+            self.use(self.tuning.changed(path, [], self.tuning.tracker), seq(m))
         else:
             adjust = Adjust.load(path)
             self.use(self.tuning.calibrated(adjust, path).with_choice(), seq(m))

@@ -34,7 +34,7 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, GROUPS
 from faceclean.errors import FacecleanError
 from faceclean.filters import presets
-from faceclean.resolve import Choice, parse_item, resolve
+from faceclean.resolve import Choice, parse_item, resolve, tracker_words
 
 MAX_ITEMS = 256  # --set items one page state may hold
 MAX_TEXT = 400  # characters of one word or item
@@ -48,6 +48,7 @@ class Tuning:
     items: tuple[str, ...] = ()  # --set items, in order (later ones win)
     calibration: Adjust | None = None  # --calibration's mapping (or a Calibrate press)
     calibration_file: str | None = None  # where it was loaded from or saved to
+    tracker: str | None = None  # --tracker: its shipped cleaner when no words are given
     choice: Choice = field(default=None, repr=False, compare=False)  # type: ignore[assignment]
 
     def with_choice(self) -> Tuning:
@@ -58,13 +59,18 @@ class Tuning:
                 raise FacecleanError(f"a setting of {len(text)} characters (at most {MAX_TEXT})")
         if len(self.items) > MAX_ITEMS:
             raise FacecleanError(f"{len(self.items)} settings (at most {MAX_ITEMS})")
-        choice = resolve(words, list(self.items))
+        tracker = self.tracker if self.tracker not in ("", None) else None
+        chosen = words if words is not None else tracker_words(tracker)  # options.words' rule
+        choice = resolve(chosen, list(self.items))
         choice.adjust(ARKIT52)  # bad level values fail now, with the CLI's reason
-        return replace(self, words=words, choice=choice)
+        return replace(self, words=words, tracker=tracker, choice=choice)
 
-    def changed(self, words: str | None, items: Sequence[str]) -> Tuning:
-        """A checked tuning with other words and items (the calibration kept)."""
-        return replace(self, words=words, items=tuple(str(i) for i in items)).with_choice()
+    def changed(
+        self, words: str | None, items: Sequence[str], tracker: str | None = None
+    ) -> Tuning:
+        """A checked tuning with other words, items and tracker (the calibration kept)."""
+        items = tuple(str(i) for i in items)
+        return replace(self, words=words, items=items, tracker=tracker).with_choice()
 
     def calibrated(self, adjust: Adjust | None, path: str | None = None) -> Tuning:
         return replace(self, calibration=adjust, calibration_file=path)
@@ -110,6 +116,7 @@ class Tuning:
         cal = self.calibration
         return {
             "words": self.words,
+            "tracker": self.tracker,
             "items": list(self.items),
             "method": method,
             "source": self.choice.source,
@@ -123,6 +130,7 @@ class Tuning:
     def command(self, verb: str = "clean IN -o OUT") -> str:
         """The shell line for this state (the calibration as the file it was saved to)."""
         words = [] if self.words is None else ["--method", self.words]
+        words += ["--tracker", self.tracker] if self.tracker and self.words is None else []
         for item in self.items:
             words += ["--set", item]
         if self.calibration is not None:

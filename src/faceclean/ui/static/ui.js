@@ -113,6 +113,8 @@ function start(m) {
   document.title = $("fc-title").textContent;
   const words = $("fc-words-list");
   for (const w of ["default", ...m.methods, ...m.presets.map((p) => p)]) words.append(new Option(w, w));
+  const tracker = $("fc-tracker");
+  for (const t of m.trackers || []) tracker.append(new Option(t, t));
   const scope = $("fc-scope");
   scope.append(new Option("all channels", "*"));
   for (const g of Object.keys(m.groups)) scope.append(new Option(`group: ${g}`, g));
@@ -151,6 +153,7 @@ function onState(s) {
   if (inFlight !== null && (s.seq === undefined || s.seq === null || s.seq >= inFlight)) inFlight = null;
   items = [...s.items];
   if (document.activeElement !== $("fc-words")) $("fc-words").value = s.words || "";
+  if (s.tracker) $("fc-tracker").value = s.tracker;
   $("fc-source").textContent = `cleaning with ${s.source}`;
   $("fc-command").textContent = s.command;
   const cal = s.calibration;
@@ -182,7 +185,8 @@ function flush() {
   if (!dirty || inFlight !== null || ws.readyState !== WebSocket.OPEN) return;
   dirty = false;
   const words = $("fc-words").value.trim();
-  inFlight = send({ type: "set", words: words && words !== "default" ? words : null, items });
+  const tracker = $("fc-tracker").value || null;
+  inFlight = send({ type: "set", words: words && words !== "default" ? words : null, items, tracker });
   api.setSeq = inFlight;
 }
 
@@ -270,6 +274,7 @@ function render() {
 
 function bind() {
   $("fc-words").addEventListener("change", () => { items = []; requestSet(); });
+  $("fc-tracker").addEventListener("change", () => { $("fc-words").value = ""; items = []; requestSet(); });
   $("fc-scope").addEventListener("change", render);
   $("fc-apply").addEventListener("click", () => {
     items = $("fc-items").value.split("\n").map((s) => s.trim()).filter(Boolean);
