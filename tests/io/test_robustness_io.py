@@ -125,7 +125,8 @@ def test_bad_file_is_one_line_exit_2_nothing_written(tmp_path, capsys, case):
     assert "\n" not in str(e.value)
     for out in ("o.csv", "o.json"):
         argv = ["clean", str(src), "-o", str(tmp_path / out), "--method", "ema"]
-        _refused(capsys, argv, tmp_path, message)
+        # -o naming the input itself: refused first as a raw take (issue 19), never written
+        _refused(capsys, argv, tmp_path, "is the input" if out == name else message)
     _refused(capsys, ["convert", str(src), "-o", str(tmp_path / "o.npz")], tmp_path, message)
     _refused(capsys, ["info", str(src)], tmp_path, message)
 
