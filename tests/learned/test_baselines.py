@@ -168,4 +168,5 @@ def test_the_bench_reference_for_a_baseline_computes_the_same_function(method):
     ours.step(x[0], t[0])
     for n in range(1, 150):
         want = ours.step(x[n], t[n])
-        np.testing.assert_allclose(ref.step(x[n], t[n] - t[n - 1]), want, atol=1e-9)
+        tol = 1e-9 if method == "gbt" else 2e-5  # FC: float32 layers on both sides
+        np.testing.assert_allclose(ref.step(x[n], t[n] - t[n - 1]), want, atol=tol)

@@ -234,8 +234,10 @@ class FullyConnected(_DerivativeNet):
 
     def _load(self, a: dict) -> None:
         n = len([k for k in a if k.startswith("fc.") and k.endswith(".w")])
-        self._w = [a[f"fc.{i}.w"].astype(np.float64) for i in range(n)]
-        self._b = [a[f"fc.{i}.b"].astype(np.float64) for i in range(n)]
+        # float32 layers, as trained and stored: half the bytes a step reads (the
+        # products are memory-bound for one stream); features and output stay float64
+        self._w = [np.ascontiguousarray(a[f"fc.{i}.w"].astype(np.float32).T) for i in range(n)]
+        self._b = [a[f"fc.{i}.b"].astype(np.float32) for i in range(n)]
         self._fm, self._fs = a["feat_mean"].astype(np.float64), a["feat_std"].astype(np.float64)
         self._om, self._os = a["out_mean"].astype(np.float64), a["out_std"].astype(np.float64)
 
@@ -243,12 +245,13 @@ class FullyConnected(_DerivativeNet):
         n, m, f = feats.shape
         h = (feats.transpose(0, 2, 1).reshape(n, f * m) - self._fm) / self._fs  # feature-major
         clip = float(self.config.get("feat_clip", np.inf))  # scaled features kept in +-clip
-        h = _clip(h, -clip, clip)
-        for i, (w, b) in enumerate(zip(self._w, self._b, strict=True)):
-            h = h @ w.T + b
+        h = _clip(h, -clip, clip).astype(np.float32)
+        for i, (w, b) in enumerate(zip(self._w, self._b, strict=True)):  # w (in, out)
+            h = h @ w
+            h += b
             if i < len(self._w) - 1:
-                h = np.maximum(h, 0.0)
-        out = h * self._os + self._om  # (n, K·M) order-major
+                np.maximum(h, 0.0, out=h)
+        out = h.astype(np.float64) * self._os + self._om  # (n, K·M) order-major
         return out.reshape(n, self.K, m).transpose(0, 2, 1)
 
 

@@ -162,8 +162,9 @@ class DerivativeReference:
     """The paper's FC or GBT baseline (learned/derivative_net.py) stepped naively in eager
     PyTorch: backward-difference features, the model (the MLP as ``nn.Linear`` layers; the
     trees as one gather-and-compare per level over every tree), the complementary blend,
-    once per frame. Same ``start``/``step(x, dt)`` interface as above. Float64, as the
-    runtime (a tree's threshold compare must see the same numbers)."""
+    once per frame. Same ``start``/``step(x, dt)`` interface as above. Float64 as the
+    runtime (a tree's threshold compare must see the same numbers), the MLP's layers
+    float32 as the runtime's."""
 
     def __init__(self, cleaner) -> None:
         from faceclean.learned.derivative_net import BoostedTrees, group_index
@@ -184,12 +185,12 @@ class DerivativeReference:
             self.base, self.ostd = t64(c._base), t64(c._ostd)
             self.groups = t64(group_index(c.channels))
         else:
-            layers = []
+            layers = []  # float32 layers (torch's default, the runtime's too)
             for i, (w, b) in enumerate(zip(cleaner._w, cleaner._b, strict=True)):
-                lin = nn.Linear(w.shape[1], w.shape[0]).double()
+                lin = nn.Linear(w.shape[0], w.shape[1])  # the runtime keeps w as (in, out)
                 with torch.no_grad():
-                    lin.weight.copy_(t64(w))
-                    lin.bias.copy_(t64(b))
+                    lin.weight.copy_(torch.from_numpy(np.ascontiguousarray(w.T)))
+                    lin.bias.copy_(torch.from_numpy(b))
                 layers += [lin] + ([nn.ReLU()] if i < len(cleaner._w) - 1 else [])
             self.mlp = nn.Sequential(*layers)
             self.fm, self.fs = t64(cleaner._fm), t64(cleaner._fs)
@@ -214,7 +215,7 @@ class DerivativeReference:
             h = ((feats.transpose(1, 2).reshape(S, F * M) - self.fm) / self.fs).clamp(
                 -self.clip, self.clip
             )
-            out = self.mlp(h) * self.os + self.om  # (S, K M) order-major
+            out = self.mlp(h.float()).double() * self.os + self.om  # (S, K M) order-major
             return out.reshape(S, self.K, M).transpose(1, 2)
         x = torch.cat([feats, self.groups.expand(S, M)[..., None]], -1).reshape(S * M, -1)
         pos = torch.zeros(S * M, len(self.in_off), dtype=torch.int64)  # (n, T)
