@@ -27,6 +27,7 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True) -> MapWeights:
         "w2": rng.normal(0, 0.2, (k, hidden)),
         "b2": np.zeros(k),
         "a": np.eye(k) * 1.3,
+        "b": np.eye(k) * 0.2 if rest else np.zeros((k, k)),
         "c": np.full(k, -0.05),
     }
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
@@ -68,7 +69,7 @@ def test_a_still_face_stays_still():
 
 def test_levels_change_where_a_filter_cannot():
     a = take()
-    y = TrackerMap(weights=weights(hidden=0, prefilter=False)).clean(a).values
+    y = TrackerMap(weights=weights(hidden=0, prefilter=False, rest=False)).clean(a).values
     np.testing.assert_allclose(y, np.clip(1.3 * a.values - 0.05, 0, 1), atol=1e-12)
 
 

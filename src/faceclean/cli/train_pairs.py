@@ -46,8 +46,9 @@ def run(args: argparse.Namespace) -> int:
     )
 
     def report(e: dict) -> None:
-        if e.get("event") == "prefilter":
-            print(f"pre-filter {e['pre']}: validation MSE {e['val_mse']:.5f}", file=sys.stderr)
+        if e.get("event") == "candidate":
+            print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}: validation MSE "
+                  f"{e['val_mse']:.5f}, jitter {e['jitter']:.2f}x", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "epoch" and arch == "lstm":
             print(f"epoch {e['epoch']}: validation MSE {e['val_mse']:.5f}", file=sys.stderr)
 
@@ -62,9 +63,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.out}: lstm, validation MSE {best.get('val_mse', float('nan')):.5f}")
         return 0
     if arch == "ridge":
-        w = tracker_map.fit_ridge(train + val)
+        w = tracker_map.fit_ridge(train, val)
     else:
-        w = tracker_map.fit(train, val, hidden=args.hidden or 64, seed=args.seed, report=report)
+        w = tracker_map.fit(train, val, hidden=args.hidden or 0, seed=args.seed, report=report)
     w.config.update(trained_on=sorted({p.group for p in train}), validated_on=sorted(val_groups))
     w.save(args.out)
     print(f"wrote {args.out}: {arch}, {len(w.inputs)} channels, hidden {w.config['hidden']}")

@@ -5,7 +5,8 @@ A folder of pairs holds, per pair, two takes in any format faceclean reads:
     NAME.tracked.EXT + NAME.truth.EXT    (what ``faceclean pairs`` writes), or
     NAME.raw.EXT     + NAME.clean.EXT    (a studio's raw solve and the animator's final take)
 
-and optionally ``NAME.json`` (``faceclean pairs`` metadata: the performance ``group`` and the
+in the folder or in its subfolders (one per performer or session: the pair's group), and
+optionally ``NAME.json`` (``faceclean pairs`` metadata: the performance ``group`` and the
 render ``setting`` that splits use). The truth is taken at the tracked take's instants
 (linear interpolation when a studio's takes were sampled apart); frames the tracker lost
 stay missing. Nothing here imports torch.
@@ -49,10 +50,22 @@ class Pair:
 
 
 def find(folder: str | os.PathLike) -> list[tuple[str, Path, Path, Path | None]]:
-    """[(name, tracked file, truth file, metadata file or None)] in a folder, sorted."""
+    """[(name, tracked file, truth file, metadata file or None)] in a folder and its
+    immediate subfolders (one per performer or session), sorted."""
     root = Path(folder)
     if not root.is_dir():
         raise FacecleanError(f"no such folder of pairs: {root}")
+    found = []
+    for d in [root, *sorted(p for p in root.iterdir() if p.is_dir() and p.name[0] != ".")]:
+        found += _in_folder(d)
+    if not found:
+        raise FacecleanError(
+            f"{root}: no pairs (NAME.tracked.csv + NAME.truth.csv, or NAME.raw.* + NAME.clean.*)"
+        )
+    return found
+
+
+def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
     files = {p.name: p for p in root.iterdir() if p.is_file() and not p.name.startswith(".")}
     found = []
     for fname, p in sorted(files.items()):
@@ -63,14 +76,8 @@ def find(folder: str | os.PathLike) -> list[tuple[str, Path, Path, Path | None]]
             name = m.group(1)
             want = rf"{re.escape(name)}\.{clean}\.\w+"
             partner = [files[n] for n in sorted(files) if re.fullmatch(want, n)]
-            if not partner:
-                continue
-            meta = files.get(f"{name}.json")
-            found.append((name, p, partner[0], meta))
-    if not found:
-        raise FacecleanError(
-            f"{root}: no pairs (NAME.tracked.csv + NAME.truth.csv, or NAME.raw.* + NAME.clean.*)"
-        )
+            if partner:
+                found.append((name, p, partner[0], files.get(f"{name}.json")))
     return found
 
 
@@ -97,7 +104,7 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
                 name=name,
                 tracked=tracked,
                 truth=aligned(truth, tracked, name),
-                group=str(job.get("group", Path(folder).resolve().name)),
+                group=str(job.get("group", tracked_path.resolve().parent.name)),
                 setting=str(job.get("setting", "studio-take")),
                 meta=meta,
             )

@@ -38,13 +38,38 @@ Build = Callable[[Sequence[str]], Cleaner | None]  # names -> a cleaner (None: r
 Report = Callable[[str], None]
 
 
+def outputs(build: Build, pairs: Sequence[Pair]) -> list[Animation]:
+    """Every pair's tracked take cleaned; causal cleaners step all pairs at once as streams."""
+    from faceclean.evaluation.harness import run_streams
+
+    names = pairs[0].tracked.names
+    cleaner = build(names)
+    if cleaner is None:
+        return [p.tracked for p in pairs]
+    if any(p.tracked.names != names for p in pairs):
+        return [build(p.tracked.names).clean(p.tracked) for p in pairs]
+    ys = run_streams(cleaner, [p.tracked for p in pairs])
+    return [p.tracked.with_values(y) for p, y in zip(pairs, ys, strict=True)]
+
+
+def mse(build: Build, pairs: Sequence[Pair]) -> float:
+    """MSE over every frame of ``pairs`` (channels matched by name), the tuning score."""
+    from faceclean.evaluation.metrics import paired as matched
+
+    sq, n = 0.0, 0
+    for out, p in zip(outputs(build, pairs), pairs, strict=True):
+        a, b, _ = matched(out, p.truth)
+        err = (a - b) ** 2
+        err = err[np.isfinite(err)]
+        sq, n = sq + float(err.sum()), n + err.size
+    return sq / max(n, 1)
+
+
 def scores(build: Build, pairs: Sequence[Pair]) -> dict[str, float]:
     """Mean measures of one cleaner over ``pairs``; MSE also per group."""
     rows = []
     sq = {g: [] for g in GROUPS}
-    for p in pairs:
-        cleaner = build(p.tracked.names)
-        out = p.tracked if cleaner is None else cleaner.clean(p.tracked)
+    for out, p in zip(outputs(build, pairs), pairs, strict=True):
         s = summary(out, p.truth)
         s["frames"] = int(out.valid.sum())
         rows.append(s)
@@ -80,9 +105,9 @@ def tune_one_euro(train: Sequence[Pair]) -> tuple[float, float]:
 
     best = None
     for mc, beta in ONE_EURO_GRID:
-        s = scores(lambda n, mc=mc, beta=beta: OneEuro(names=n, min_cutoff=mc, beta=beta), train)
-        if best is None or s["mse"] < best[0]:
-            best = (s["mse"], (mc, beta))
+        score = mse(lambda n, mc=mc, beta=beta: OneEuro(names=n, min_cutoff=mc, beta=beta), train)
+        if best is None or score < best[0]:
+            best = (score, (mc, beta))
     assert best is not None
     return best[1]
 
@@ -116,7 +141,7 @@ def evaluate(
         inner_train = [p for p in train if p not in inner_val]
         report(f"fold {group}: {len(train)} training pairs, {len(test)} + {len(held)} test")
         mc, beta = tune_one_euro(train)
-        ridge = fit.fit_ridge(train)
+        ridge = fit.fit_ridge(inner_train, inner_val)
         mapped = fit.fit(inner_train, inner_val)
         rows: dict[str, Build] = {
             "raw": lambda n: None,

@@ -9,12 +9,13 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
                                         the map sees the tracker's signal, not its noise
     r  = min(r, u)                      the stream's resting level so far (since reset)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
-    y  = clip(W2 tanh(W1 z + b1) + b2 + A u + c, 0, 1)                            (M,)
+    y  = clip(A u + B (u - r) + c + W2 tanh(W1 z + b1) + b2, 0, 1)                (M,)
 
-``A u + c`` is a linear map over all inputs (with ``hidden`` 0, no pre-filter and no rest
-feature, exactly the per-channel ridge baseline); the hidden layer adds what is not
-linear (a blink read at 0.6 is a closed eye). The rest feature ``u - r`` lets it take each
-face's own resting reading off (identities differ more than any gain). Why this cannot
+``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
+the rest feature takes each face's own resting reading off, which is where identities
+differ most (with B = 0, no hidden layer and no pre-filter it is exactly the per-channel
+ridge baseline). The optional hidden layer (``hidden`` > 0) adds what is not linear; on
+the pairs we have it overfits (docs/MODEL.md), so the shipped map is linear. Why this cannot
 invent motion: y is a function of (u, r) only; on a still face u converges and r is
 constant, so y converges and stays; a missing frame holds u and so y.
 
@@ -27,7 +28,7 @@ column for (tongueOut for MediaPipe) are not written.
 Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "inputs": [K],
 "outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, ...facts}; arrays
 ``min_cutoff``, ``beta``, ``d_cutoff`` (K,) Hz; ``mu``, ``sd`` (2K,); ``w1`` (H, 2K),
-``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``c`` (M,).
+``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,).
 """
 
 from __future__ import annotations
@@ -96,6 +97,7 @@ class MapWeights:
             "w2": (m, h),
             "b2": (m,),
             "a": (m, k),
+            "b": (m, k),
             "c": (m,),
         }
         out = {}
@@ -198,8 +200,11 @@ class TrackerMap(Cleaner):
             self._r = np.full_like(u, np.nan)
         self._r = np.fmin(self._r, u)  # NaN-aware: the first value starts it
         lin = u @ a["a"].T + a["c"]
+        rest = (u - self._r) if self.rest else None
+        if rest is not None:
+            lin = lin + rest @ a["b"].T
         if self._hidden:
-            rest = (u - self._r) if self.rest else np.zeros_like(u)
+            rest = np.zeros_like(u) if rest is None else rest
             z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
             lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
         return np.clip(lin, 0.0, 1.0)

@@ -2,11 +2,11 @@
 
 The map is memoryless given its causal features (the pre-filtered input u and the resting
 level r), and those do not depend on the map's weights: they are computed once per pair
-by the numpy runtime itself (so training sees exactly what the cleaner computes), and the
-map is fitted frame by frame. Ridge first (closed form: the linear part ``A u + c`` and
-the baseline), then the hidden layer on the residual with Adam, early-stopped on
-validation pairs (performances no training pair comes from). The pre-filter is chosen
-from a few One Euro settings by the validation score of the whole map.
+with the runtime's own One Euro (so training sees what the cleaner computes), and the map
+is fitted frame by frame. The linear part ``A u + B (u - r) + c`` by ridge (closed form);
+an optional hidden layer on top with Adam, early-stopped. The pre-filter and the ridge
+shrinkage are chosen on validation pairs (performances no training pair comes from) by
+MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's.
 """
 
 from __future__ import annotations
@@ -23,8 +23,12 @@ from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.tracker_map import MapWeights
 
-# (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates: none, light, medium, strong
-PREFILTERS = ((3.0, 1.0, 1.0), (1.5, 0.5, 1.0), (0.8, 0.3, 1.0))
+# (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter)
+PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
+    None, (4.0, 1.0, 1.0), (2.0, 0.5, 1.0), (1.0, 0.3, 1.0))  # fmt: skip
+LAMBDAS = (1e-3, 1e-2, 1e-1)  # ridge shrinkage, relative to the inputs' mean square
+LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
+JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -52,6 +56,7 @@ def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], re
         "w2": np.zeros((k, h)),
         "b2": np.zeros(k),
         "a": np.eye(k),
+        "b": np.zeros((k, k)),
         "c": np.zeros(k),
     }
     config = {"format": TRACKER_MAP, "inputs": list(names), "outputs": list(names),
@@ -59,135 +64,178 @@ def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], re
     return MapWeights(config, arrays)
 
 
-def features(w: MapWeights, pairs: Sequence[Pair]) -> tuple[np.ndarray, ...]:
-    """(u, r, y) stacked over every valid frame of ``pairs``: (F, K) each, truth y (F, K).
-
-    u and r come from running the runtime's own pre-filter over each pair's frames."""
-    us, rs, ys = [], [], []
-    names = w.inputs
-    a = w.arrays
+def features(w: MapWeights, pairs: Sequence[Pair]) -> list[tuple[np.ndarray, ...]]:
+    """Per pair (t, u, r, y) over its valid frames: times (F,), the pre-filtered input u,
+    the resting level r and the truth y, (F, K) each. u comes from the runtime's own
+    One Euro, stepped as the cleaner steps it."""
+    names, a = w.inputs, w.arrays
+    out = []
     for p in pairs:
         pre = OneEuro(names=names, min_cutoff=a["min_cutoff"].tolist(),
                       beta=a["beta"].tolist(), d_cutoff=a["d_cutoff"].tolist())  # fmt: skip
         x = p.tracked.arkit(names)[0]
         y = p.truth.arkit(names)[0]
-        u = np.full_like(x, np.nan)
         valid = ~np.isnan(x).all(axis=1)
-        prefilter = w.config["prefilter"]
-        for i in np.flatnonzero(valid):
-            xi = np.nan_to_num(x[i])
-            u[i] = pre.step(xi, p.tracked.times[i]) if prefilter else xi
-        r = np.fmin.accumulate(np.where(valid[:, None], u, np.inf), axis=0)
-        ok = valid & ~np.isnan(y).any(axis=1)
-        us.append(u[ok])
-        rs.append(r[ok])
-        ys.append(y[ok])
-    return np.concatenate(us), np.concatenate(rs), np.concatenate(ys)
+        t, x, y = p.tracked.times[valid], np.nan_to_num(x[valid]), y[valid]
+        if w.config["prefilter"]:
+            pre.reset()
+            u = np.stack([pre.step(x[i], t[i]) for i in range(len(t))]) if len(t) else x
+        else:
+            u = x
+        r = np.minimum.accumulate(u, axis=0)
+        ok = ~np.isnan(y).any(axis=1)
+        out.append((t[ok], u[ok], r[ok], y[ok]))
+    return out
 
 
-def ridge(u: np.ndarray, y: np.ndarray, lam: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
-    """(A (M, K), c (M,)) minimising |A u + c - y|^2 + lam s |A|^2, s the mean of diag(u'u)
+def _stack(feats: list[tuple[np.ndarray, ...]], rest: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(inputs (F, K or 2K): u, and u - r when ``rest``; truth (F, K))."""
+    z = [np.concatenate([u, u - r], axis=1) if rest else u for _, u, r, _ in feats]
+    return np.concatenate(z), np.concatenate([y for *_, y in feats])
+
+
+def ridge(u: np.ndarray, y: np.ndarray, lam: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
+    """(A (M, D), c (M,)) minimising |A u + c - y|^2 + lam s |A|^2, s the mean of diag(u'u)
     (the shrinkage in proportion to the data, whatever its length and levels)."""
     f, k = u.shape
     x = np.concatenate([u, np.ones((f, 1))], axis=1)
     gram = x.T @ x
     reg = lam * float(np.mean(np.diag(gram)[:k])) * np.eye(k + 1)
     reg[-1, -1] = 0.0  # the offset is not shrunk
-    sol = np.linalg.solve(gram + reg, x.T @ y)  # (K+1, M)
+    sol = np.linalg.solve(gram + reg, x.T @ y)  # (D+1, M)
     return sol[:-1].T, sol[-1]
 
 
-def fit_ridge(train: Sequence[Pair], lam: float = 1e-4) -> MapWeights:
-    """The per-channel ridge baseline: a linear map over all raw inputs, no filter."""
+def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray) -> None:
+    k = len(w.inputs)
+    w.arrays["a"], w.arrays["c"] = coef[:, :k], c
+    w.arrays["b"] = coef[:, k:] if coef.shape[1] > k else np.zeros((len(c), k))
+
+
+def _score(w: MapWeights, feats) -> tuple[float, float]:
+    """(MSE, jitter ratio vs the truth) of the map over per-pair features."""
+    from faceclean.evaluation.metrics import jitter_ratio
+
+    sq, n, jit = 0.0, 0, []
+    for t, u, r, y in feats:
+        pred = _predict(w, u, r)
+        sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
+        if len(t) > 3:
+            jit.append(jitter_ratio(t, pred, y))
+    return sq / max(n, 1), float(np.nanmean(jit)) if jit else float("nan")
+
+
+def fit_ridge(
+    train: Sequence[Pair], val: Sequence[Pair] = (), lams: Sequence[float] = LAMBDAS
+) -> MapWeights:
+    """The per-channel ridge baseline: a linear map over all raw inputs, no filter, no rest
+    level; its shrinkage chosen on ``val`` (on ``train`` without it)."""
     names = channels(train)
-    w = blank(names, 0, PREFILTERS[0], rest=False, prefilter=False)
-    u, _, y = features(w, train)
-    a, c = ridge(u, y, lam)
-    w.arrays["a"], w.arrays["c"] = a, c
-    w.config.update(fitted="ridge", lam=lam, frames=len(u))
+    w = blank(names, 0, LIGHT, rest=False, prefilter=False)
+    feats = features(w, train)
+    vfeats = features(w, val) if val else feats
+    z, y = _stack(feats, False)
+    best = None
+    for lam in lams:
+        _set_linear(w, *ridge(z, y, lam))
+        score = _score(w, vfeats)[0]
+        if best is None or score < best[0]:
+            best = (score, lam)
+    _set_linear(w, *ridge(z, y, best[1]))
+    w.config.update(fitted="ridge", lam=best[1], frames=len(z))
     return w
 
 
 def fit(
     train: Sequence[Pair],
     val: Sequence[Pair],
-    hidden: int = 64,
+    hidden: int = 0,
     rest: bool = True,
     epochs: int = 60,
     seed: int = 0,
-    prefilters: Sequence[tuple[float, float, float]] = PREFILTERS,
+    prefilters: Sequence[tuple[float, float, float] | None] = PREFILTERS,
+    lams: Sequence[float] = LAMBDAS,
     report: Report | None = None,
 ) -> MapWeights:
-    """The tracker map with the best validation MSE over ``prefilters``."""
+    """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
+    ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
+    ``val`` by MSE x (1 + jitter over JITTER_BUDGET x the truth's, when over): the best."""
     report = report or (lambda _e: None)
+    torch.set_num_threads(1)  # a tiny net: more threads only contend
     names = channels(train)
     best: tuple[float, MapWeights] | None = None
     for pre in prefilters:
-        w = blank(names, hidden, pre, rest)
-        u, r, y = features(w, train)
-        vu, vr, vy = features(w, val) if val else (u, r, y)
-        _fit_one(w, u, r, y, vu, vr, vy, epochs, seed, report)
-        score = float(np.mean((_predict(w, vu, vr) - vy) ** 2))
-        report({"event": "prefilter", "pre": pre, "val_mse": score})
-        if best is None or score < best[0]:
-            best = (score, w)
+        w = blank(names, hidden, pre or LIGHT, rest, prefilter=pre is not None)
+        feats = features(w, train)
+        vfeats = features(w, val) if val else feats
+        z, y = _stack(feats, rest)
+        for lam in lams:
+            _set_linear(w, *ridge(z, y, lam))
+            if hidden:
+                _fit_hidden(w, feats, vfeats, epochs, seed, report)
+            mse, jit = _score(w, vfeats)
+            score = mse * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
+            report({"event": "candidate", "pre": pre, "lam": lam, "val_mse": mse, "jitter": jit})
+            if best is None or score < best[0]:
+                best = (score, MapWeights(dict(w.config, lam=lam, val_mse=mse, val_jitter=jit),
+                                          {k: v.copy() for k, v in w.arrays.items()}))  # fmt: skip
     assert best is not None
-    best[1].config.update(val_mse=best[0], frames=int(len(u)))
+    best[1].config.update(frames=int(sum(len(f[0]) for f in features(best[1], train))))
     return best[1]
 
 
 def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
     a = w.arrays
     lin = u @ a["a"].T + a["c"]
+    rest = (u - r) if w.config["rest"] else np.zeros_like(u)
+    lin = lin + rest @ a["b"].T
     if w.config["hidden"]:
-        rest = (u - r) if w.config["rest"] else np.zeros_like(u)
         z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
     return np.clip(lin, 0.0, 1.0)
 
 
-def _fit_one(w, u, r, y, vu, vr, vy, epochs, seed, report) -> None:
+def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Report) -> None:
+    """The hidden layer on top of the fitted linear part (Adam, early stopped on ``vfeats``)."""
     a = w.arrays
-    a["a"], a["c"] = ridge(u, y)
-    if not w.config["hidden"]:
-        return
-    rest_u = (u - r) if w.config["rest"] else np.zeros_like(u)
-    z = np.concatenate([u, rest_u], axis=1)
+    k, h = len(w.inputs), int(w.config["hidden"])
+
+    def tensors(fs):
+        u = np.concatenate([f[1] for f in fs])
+        r = np.concatenate([f[2] for f in fs])
+        z = np.concatenate([u, u - r if w.config["rest"] else np.zeros_like(u)], axis=1)
+        return z, torch.tensor(np.concatenate([f[3] for f in fs]), dtype=torch.float32)
+
+    z, yt = tensors(feats)
+    vz, vyt = tensors(vfeats)
     a["mu"], a["sd"] = z.mean(0), np.maximum(z.std(0), 1e-3)
+    lin_w = np.concatenate([a["a"], a["b"]], axis=1)  # (K, 2K) over [u, u - r]
+    zt = torch.tensor((z - a["mu"]) / a["sd"], dtype=torch.float32)
+    vzt = torch.tensor((vz - a["mu"]) / a["sd"], dtype=torch.float32)
+    raw, vraw = torch.tensor(z, dtype=torch.float32), torch.tensor(vz, dtype=torch.float32)
     torch.manual_seed(seed)
-    k, h = u.shape[1], int(w.config["hidden"])
     net = torch.nn.Sequential(torch.nn.Linear(2 * k, h), torch.nn.Tanh(), torch.nn.Linear(h, k))
-    lin = torch.nn.Linear(k, k)
+    lin = torch.nn.Linear(2 * k, k)
     with torch.no_grad():
         torch.nn.init.zeros_(net[2].weight)
         torch.nn.init.zeros_(net[2].bias)
-        lin.weight.copy_(torch.tensor(a["a"]))
+        lin.weight.copy_(torch.tensor(lin_w))
         lin.bias.copy_(torch.tensor(a["c"]))
     params = [*net.parameters(), *lin.parameters()]
     opt = torch.optim.Adam(params, lr=3e-3, weight_decay=1e-5)
-
-    def tensors(uu, rr):
-        rr_u = (uu - rr) if w.config["rest"] else np.zeros_like(uu)
-        zz = (np.concatenate([uu, rr_u], axis=1) - a["mu"]) / a["sd"]
-        return torch.tensor(zz, dtype=torch.float32), torch.tensor(uu, dtype=torch.float32)
-
-    zt, ut = tensors(u, r)
-    yt = torch.tensor(y, dtype=torch.float32)
-    vz, vu_t = tensors(vu, vr)
-    vyt = torch.tensor(vy, dtype=torch.float32)
     gen = torch.Generator().manual_seed(seed)
-    best, best_state, bad = float("inf"), None, 0
+    best, best_state, bad = float("inf"), [p.detach().clone() for p in params], 0
     for epoch in range(epochs):
         order = torch.randperm(len(zt), generator=gen)
         for i in range(0, len(order), 512):
             idx = order[i : i + 512]
-            pred = torch.clamp(net(zt[idx]) + lin(ut[idx]), 0.0, 1.0)
+            pred = torch.clamp(net(zt[idx]) + lin(raw[idx]), 0.0, 1.0)
             loss = torch.mean((pred - yt[idx]) ** 2)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
         with torch.no_grad():
-            val = float(torch.mean((torch.clamp(net(vz) + lin(vu_t), 0, 1) - vyt) ** 2))
+            val = float(torch.mean((torch.clamp(net(vzt) + lin(vraw), 0, 1) - vyt) ** 2))
         report({"event": "epoch", "epoch": epoch, "val_mse": val})
         if val < best - 1e-7:
             best, bad = val, 0
@@ -197,11 +245,11 @@ def _fit_one(w, u, r, y, vu, vr, vy, epochs, seed, report) -> None:
             if bad >= 8:
                 break
     with torch.no_grad():
-        for p, s in zip(params, best_state or [p.detach() for p in params], strict=True):
+        for p, s in zip(params, best_state, strict=True):
             p.copy_(s)
     a["w1"] = net[0].weight.detach().double().numpy()
     a["b1"] = net[0].bias.detach().double().numpy()
     a["w2"] = net[2].weight.detach().double().numpy()
     a["b2"] = net[2].bias.detach().double().numpy()
-    a["a"] = lin.weight.detach().double().numpy()
-    a["c"] = lin.bias.detach().double().numpy()
+    coef = lin.weight.detach().double().numpy()
+    a["a"], a["b"], a["c"] = coef[:, :k], coef[:, k:], lin.bias.detach().double().numpy()
