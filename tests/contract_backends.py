@@ -153,6 +153,17 @@ BACKENDS: list[Backend] = [
         streams_tol=BLAS_STREAMS_TOL,
     ),
     Backend("lstm[numba]", "lstm", "kernel", _method("lstm", kernel="numba"), needs=("numba",)),
+    Backend(
+        "tracker-map[mediapipe.npz]",
+        "tracker-map",
+        "method",
+        _method("tracker-map", model=MODELS / "mediapipe.npz"),
+        unsupported={
+            c: "a tracker map changes levels by design: its first and held outputs are the "
+            "mapped input, not the input (its own rules: tests/learned/test_tracker_map.py)"
+            for c in ("constant", "t_zero", "step_kind", "time_rules")
+        },
+    ),
     Backend("lstm[onnx]", "lstm", "onnx", _onnx, needs=ONNX),
     Backend(
         "Cleaner.load(preset)",

@@ -48,9 +48,9 @@ DEFAULT = "default"  # the shipped learned model (models/default.npz)
 MODEL_SUFFIXES = (".npz", ".onnx")
 # method word -> its shipped file; else models/default.npz when that is of this method
 SHIPPED_MODELS = {"lstm": "lstm.npz", "adaptive": "adaptive.npz", "fc": "fc.npz", "gbt": "gbt.npz"}
-# tracker -> the shipped cleaner made for its output (None: the default, made for ARKit);
-# ``--tracker`` names the tracker, so the cleaner follows from what the input is
-TRACKERS = {"arkit": None, "mediapipe": "mediapipe.npz"}
+# tracker (channels.TRACKERS, the one list of trackers) -> the shipped cleaner made for its
+# output; a tracker not named here gets the default (made for ARKit)
+TRACKER_MODELS = {"mediapipe": "mediapipe.npz"}
 BACKENDS = ("numpy", "onnx")
 Item = tuple[str | None, str, Any]  # (channel pattern or None for every channel, key, value)
 Factory = Callable[[Sequence[str]], filters.Cleaner]
@@ -257,16 +257,18 @@ def pose_factory(items: list[Item]) -> tuple[Factory, str]:
 
 def tracker_words(tracker: str | None) -> str | None:
     """The words for the cleaner shipped for ``tracker`` (None: the default)."""
+    from faceclean.channels import TRACKERS
+
     if tracker is None:
         return None
     key = str(tracker).strip().lower()
     if key not in TRACKERS:
         raise FacecleanError(f"unknown tracker {tracker!r} (known: {', '.join(TRACKERS)})")
-    if TRACKERS[key] is None:
+    if key not in TRACKER_MODELS:
         return None
     from faceclean.settings import MODELS
 
-    path = MODELS / TRACKERS[key]
+    path = MODELS / TRACKER_MODELS[key]
     if not path.is_file():
         raise FacecleanError(f"no shipped cleaner for {key} in this install ({path.name})")
     return str(path)

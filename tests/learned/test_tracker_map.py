@@ -105,3 +105,17 @@ def test_a_checkpoint_round_trips_and_bad_ones_are_refused(tmp_path):
     nan = dict(w.arrays, c=np.array([np.nan, 0, 0]))
     with pytest.raises(FacecleanError, match="not finite"):
         MapWeights.build(w.config, nan)
+
+
+def test_old_times_and_lost_channels_follow_the_time_rules():
+    a = take(40)
+    names = (*NAMES, "tongueOut")  # a column the model does not know
+    x = np.concatenate([a.values, np.linspace(0, 1, 40)[:, None]], axis=1)
+    tm = TrackerMap(weights=weights(), names=names)
+    y = [tm.step(x[i], a.times[i]) for i in range(20)]
+    np.testing.assert_array_equal(tm.step(x[20], a.times[10]), y[-1])  # an older time: held
+    np.testing.assert_array_equal(tm.step(x[20], np.nan), y[-1])  # no time: held
+    part = x[21].copy()
+    part[[0, 3]] = np.nan, np.inf
+    out = tm.step(part, a.times[21])
+    assert np.isfinite(out).all() and out[3] == y[-1][3]  # a lost cell takes its last output

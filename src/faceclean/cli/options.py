@@ -40,12 +40,7 @@ def add_arguments(
         "(default: the shipped model)",
     )
     p.add_argument("--model", metavar="FILE", help="learned model file (.npz or .onnx)")
-    p.add_argument(
-        "--tracker",
-        metavar="NAME",
-        help="what made the input: arkit (iPhone, the default) or mediapipe, whose shipped "
-        "cleaner also maps its levels onto ARKit's (without --method/--model/--preset)",
-    )
+    add_tracker_argument(p)
     p.add_argument("--preset", metavar="FILE", help="preset file or shipped preset's name")
     p.add_argument(
         "--set",
@@ -72,7 +67,9 @@ def add_tracker_argument(p: argparse.ArgumentParser) -> None:
         choices=tuple(TRACKERS),
         default=DEFAULT_TRACKER,
         help=f"the tracker that made the take (default {DEFAULT_TRACKER}); its profile "
-        "names the channels it under-reads (mediapipe: eyeWide, cheekSquint, noseSneer)",
+        "names the channels it under-reads (mediapipe: eyeWide, cheekSquint, noseSneer), and "
+        "without --method/--model/--preset it picks the cleaner shipped for it (mediapipe: "
+        "a learned map onto ARKit's levels)",
     )
 
 

@@ -19,11 +19,12 @@ the pairs we have it overfits (docs/MODEL.md), so the shipped map is linear. Why
 invent motion: y is a function of (u, r) only; on a still face u converges and r is
 constant, so y converges and stays; a missing frame holds u and so y.
 
-Time rules are the pre-filter's (filters/base.py, via OneEuro): a missing frame repeats
-the last output, a gap restarts the filter (the rest level is kept: the same face came
-back). Input columns the model does not know pass through unchanged; model inputs the
-frame lacks are fed 0 (a tracker that never reads them); model outputs the frame has no
-column for (tongueOut for MediaPipe) are not written.
+Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
+One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
+the filter (the rest level is kept: the same face came back). Input columns the model
+does not know pass through (under the same rules); model inputs the frame lacks are fed 0
+(a tracker that never reads them); model outputs the frame has no column for (tongueOut
+for MediaPipe) are not written.
 
 Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "inputs": [K],
 "outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, ...facts}; arrays
@@ -44,7 +45,7 @@ import numpy as np
 
 from faceclean.channel_map import ChannelMap
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner
+from faceclean.filters.base import MAX_ABS, Cleaner, frame_rules
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned import formats
 from faceclean.learned.formats import TRACKER_MAP as FORMAT
@@ -164,41 +165,49 @@ class TrackerMap(Cleaner):
         self._r: np.ndarray | None = None  # (S, K) resting level so far
         self._last: np.ndarray | None = None  # (S, K) last frame (no pre-filter)
         self._y: np.ndarray | None = None  # (S, M) last output
+        self._t: np.ndarray | None = None  # (S,) s, last accepted time
 
     def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
         x = np.array(frame, dtype=np.float64, ndmin=1)
         single = x.ndim == 1
         x = x.reshape(1, -1) if single else x
-        k = len(self.weights.inputs)
-        xi = np.zeros((len(x), k))
+        s = len(x)
+        tt = np.broadcast_to(np.asarray(t, dtype=np.float64), (s,))
+        if self._y is None or self._y.shape != x.shape:
+            self._y = np.full_like(x, np.nan)  # (S, M) last output
+            self._t = np.full(s, np.nan)  # (S,) s, time of the last accepted frame
+        bad = ~(np.abs(x) <= MAX_ABS)  # rule 2 for every column, passthrough ones too
+        missing = bad.all(axis=1) | ~np.isfinite(tt)  # rule 1
+        x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
+        start, advance = frame_rules(missing, tt - self._t, self._filter.max_gap)
+        moved = start | advance  # the rest hold: the last output (rules 1, 4)
+        xi = np.zeros((s, len(self.weights.inputs)))
         xi[:, self._in.have] = x[:, self._in.cols]  # (S, K); absent inputs read 0
-        missing_in = np.isnan(x).all(axis=1)
-        xi[missing_in] = np.nan  # a missing frame stays missing for the pre-filter
-        u = self._filter.step(xi, t) if self.prefilter else self._raw(xi)
-        y = self._map(u)
+        xi[missing] = np.nan  # a missing frame stays missing for the pre-filter
+        u = self._filter.step(xi, tt) if self.prefilter else self._raw(xi, moved)
+        y = self._map(u, moved)
         out = x.copy()
         out[:, self._out.cols] = y[:, self._out.have]
-        if self._y is not None and self._y.shape == out.shape:  # rule 1: the last output
-            out[missing_in] = self._y[missing_in]
+        out = np.where(moved[:, None], out, self._y)
+        self._t = np.where(moved, tt, self._t)
         self._y = out.copy()
         return out[0] if single else out
 
-    def _raw(self, xi: np.ndarray) -> np.ndarray:
-        """No pre-filter (the ridge baseline): the frame itself, a missing one held."""
+    def _raw(self, xi: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """No pre-filter (the ridge baseline): the frame itself where it is accepted."""
         last = self._last
-        ok = ~np.isnan(xi).all(axis=1)
         if last is None or last.shape != xi.shape:
             last = np.full_like(xi, np.nan)
-        last = np.where(ok[:, None], np.nan_to_num(xi), last)
+        last = np.where(moved[:, None], np.nan_to_num(xi), last)
         self._last = last
         return last.copy()
 
-    def _map(self, u: np.ndarray) -> np.ndarray:
+    def _map(self, u: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """(S, K) filtered inputs -> (S, M) outputs; rows not started yet stay NaN."""
         a = self.weights.arrays
         if self._r is None or self._r.shape != u.shape:
             self._r = np.full_like(u, np.nan)
-        self._r = np.fmin(self._r, u)  # NaN-aware: the first value starts it
+        self._r = np.where(moved[:, None], np.fmin(self._r, u), self._r)  # NaN-aware
         lin = u @ a["a"].T + a["c"]
         rest = (u - self._r) if self.rest else None
         if rest is not None:

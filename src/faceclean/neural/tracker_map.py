@@ -26,7 +26,7 @@ from faceclean.learned.tracker_map import MapWeights
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter)
 PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
     None, (4.0, 1.0, 1.0), (2.0, 0.5, 1.0), (1.0, 0.3, 1.0))  # fmt: skip
-LAMBDAS = (1e-3, 1e-2, 1e-1)  # ridge shrinkage, relative to the inputs' mean square
+LAMBDAS = (1e-2, 1e-1, 3e-1, 1.0)  # ridge shrinkage, relative to the inputs' mean square
 LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
 Report = Callable[[dict[str, Any]], None]
@@ -141,8 +141,9 @@ def fit_ridge(
         score = _score(w, vfeats)[0]
         if best is None or score < best[0]:
             best = (score, lam)
-    _set_linear(w, *ridge(z, y, best[1]))
-    w.config.update(fitted="ridge", lam=best[1], frames=len(z))
+    all_feats = features(w, [*train, *val])  # the chosen shrinkage, on every pair given
+    _set_linear(w, *ridge(*_stack(all_feats, False), best[1]))
+    w.config.update(fitted="ridge", lam=best[1], frames=int(sum(len(f[0]) for f in all_feats)))
     return w
 
 
@@ -156,10 +157,12 @@ def fit(
     prefilters: Sequence[tuple[float, float, float] | None] = PREFILTERS,
     lams: Sequence[float] = LAMBDAS,
     report: Report | None = None,
+    refit: bool = True,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
-    ``val`` by MSE x (1 + jitter over JITTER_BUDGET x the truth's, when over): the best."""
+    ``val`` by MSE x (1 + jitter over JITTER_BUDGET x the truth's, when over): the best,
+    refitted on ``train`` and ``val`` together when ``refit`` (a linear map only)."""
     report = report or (lambda _e: None)
     torch.set_num_threads(1)  # a tiny net: more threads only contend
     names = channels(train)
@@ -180,8 +183,11 @@ def fit(
                 best = (score, MapWeights(dict(w.config, lam=lam, val_mse=mse, val_jitter=jit),
                                           {k: v.copy() for k, v in w.arrays.items()}))  # fmt: skip
     assert best is not None
-    best[1].config.update(frames=int(sum(len(f[0]) for f in features(best[1], train))))
-    return best[1]
+    w = best[1]
+    if refit and val and not hidden:  # the chosen settings, fitted on every pair given
+        _set_linear(w, *ridge(*_stack(features(w, [*train, *val]), rest), w.config["lam"]))
+    w.config.update(frames=int(sum(len(f[0]) for f in features(w, [*train, *val]))))
+    return w
 
 
 def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:

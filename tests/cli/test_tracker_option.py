@@ -1,0 +1,58 @@
+"""``--tracker mediapipe`` selects the cleaner shipped for MediaPipe; the default stays."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+from faceclean import io
+from faceclean.animation import Animation
+from faceclean.learned.tracker_map import TrackerMap
+from faceclean.settings import MODELS
+from faceclean.synthetic.tracker import NAMES
+
+CLI = [sys.executable, "-m", "faceclean"]
+
+
+def _mediapipe_csv(path):
+    rng = np.random.default_rng(0)
+    t = np.arange(90) / 30
+    x = np.clip(
+        0.2 + 0.1 * np.sin(t[:, None] * 3 + np.arange(51)) + rng.normal(0, 0.02, (90, 51)), 0, 1
+    )
+    anim = Animation(t, x, NAMES)
+    io.save(anim, path, fmt="mediapipe")
+    return io.load(path)
+
+
+def test_tracker_mediapipe_cleans_with_the_shipped_map(tmp_path):
+    src = tmp_path / "face.csv"
+    anim = _mediapipe_csv(src)
+    out = tmp_path / "clean.csv"
+    r = subprocess.run([*CLI, "clean", str(src), "-o", str(out), "--tracker", "mediapipe"],
+                       capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "tracker-map" in r.stdout
+    got = io.load(out)
+    assert got.meta["format"] == "mediapipe"  # written back as it came
+    want = TrackerMap(model=MODELS / "mediapipe.npz", names=anim.names).clean(anim).values
+    np.testing.assert_allclose(got.values, want, atol=1e-12)
+    default = tmp_path / "default.csv"
+    r = subprocess.run(
+        [*CLI, "clean", str(src), "-o", str(default)], capture_output=True, text=True
+    )
+    assert r.returncode == 0 and "tracker-map" not in r.stdout  # iPhone input: unchanged
+    assert not np.allclose(io.load(default).values, got.values)
+
+
+def test_an_explicit_method_wins_and_an_unknown_tracker_is_refused(tmp_path):
+    src = tmp_path / "face.csv"
+    _mediapipe_csv(src)
+    args = ["-o", str(tmp_path / "o.csv"), "--tracker", "mediapipe", "--method", "one-euro"]
+    r = subprocess.run([*CLI, "clean", str(src), *args], capture_output=True, text=True)
+    assert r.returncode == 0 and "one-euro" in r.stdout
+    r = subprocess.run([*CLI, "clean", str(src), "-o", str(tmp_path / "o.csv"), "--tracker", "x"],
+                       capture_output=True, text=True)  # fmt: skip
+    assert r.returncode == 2 and "invalid choice: 'x'" in r.stderr
