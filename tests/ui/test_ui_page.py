@@ -33,12 +33,12 @@ def browser():
         b.close()
 
 
-def start(args: list[str]) -> tuple[subprocess.Popen, str]:
+def start(args: list[str], stderr=subprocess.PIPE) -> tuple[subprocess.Popen, str]:
     """A faceclean command that serves the page, and the URL it printed."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "faceclean", *args, "--no-browser"],
         stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        stderr=stderr,
         text=True,
         env=ENV,
     )
@@ -59,7 +59,7 @@ class Tab:
         self.page.on("console", lambda m: self.messages.append((m.type, m.text)))
         self.page.on("pageerror", lambda e: self.messages.append(("pageerror", str(e))))
         self.page.goto(url)
-        self.until("window.faceclean && window.faceclean.ready")
+        self.until("window.faceclean && window.faceclean.ready && window.faceclean.faceReady")
 
     def until(self, condition: str) -> None:
         self.page.evaluate(
@@ -194,7 +194,8 @@ def live(browser, tmp_path_factory):
     relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}",
                         "--send", f"livelink://127.0.0.1:{receiver.port}", "--method", "one-euro",
                         "--set", "min_cutoff=30", "--set", "beta=0", "--ui",
-                        "--record", str(folder / "session.csv")])  # fmt: skip
+                        "--record", str(folder / "session.csv")],
+                       stderr=subprocess.DEVNULL)  # fmt: skip
     replay = subprocess.Popen(
         [
             sys.executable,
@@ -202,6 +203,7 @@ def live(browser, tmp_path_factory):
             "faceclean",
             "replay",
             str(take),
+            "--loop",  # a pass lasts 50 s: the tests may take longer
             "--send",
             f"vmc://127.0.0.1:{port}",
         ],
@@ -269,7 +271,7 @@ def test_moving_a_smoothing_slider_changes_what_the_receiver_gets(live):
     tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 60}")
     light = _deviation(receiver.frames, take_frames, max(0, before - 60), before)
     heavy = _deviation(receiver.frames, take_frames, swapped + 5, len(receiver.frames))
-    assert heavy > 0.002 and heavy > 10 * light, (light, heavy)  # weight units
+    assert heavy > 5e-4 and heavy > 20 * light, (light, heavy)  # weight units
 
 
 def test_calibrate_sets_the_neutral_from_the_held_seconds(live):
@@ -282,7 +284,7 @@ def test_calibrate_sets_the_neutral_from_the_held_seconds(live):
     assert "calibrated" in tab.page.inner_text("#fc-calibration")
     assert tab.js("window.faceclean.countdown")[0].startswith("hold a neutral face… 1.0 s")
     t0, t1 = facts["hold"]  # sender times s of the first and last frame held
-    assert 1.0 <= t1 - t0 < 1.2
+    assert t1 - t0 >= 1.0 and facts["frames"] >= 5  # a second held, 5 frames at least
     # the neutral is the median of the input over the held second: the frames the relay
     # cleaned then (those the receiver got; a relay that lags skips stale ones)
     got = [t for t, _ in receiver.frames if t0 - 1e-4 <= t <= t1 + 1e-4]
@@ -298,7 +300,8 @@ def test_calibrate_sets_the_neutral_from_the_held_seconds(live):
 
     rules = Adjust.load(folder / "neutral.json").rules
     offsets = {p: v for p, k, v in rules if k == "offset"}
-    assert offsets["jawOpen"] == facts["channels"]["jawOpen"]["neutral"]
+    neutral = facts["channels"]["jawOpen"]["neutral"]  # (facts: 6 decimals)
+    assert offsets["jawOpen"] == pytest.approx(neutral, abs=1e-6)
 
 
 def test_the_page_records_the_session(live):

@@ -64,6 +64,10 @@ def test_the_page_needs_the_token_and_sets_it_as_a_strict_cookie(server):
     status, _, body = _get(server, "/ui.js", {"Cookie": f"{server.cookie}={server.token}"})
     assert status == 200 and b"faceclean tuning page" in body
     assert _get(server, "/ui.js", {"Cookie": f"{server.cookie}=x{server.token}"})[0] == 403
+    assert _get(server, "/mesh.json")[0] == 403
+    status, headers, body = _get(server, f"/mesh.json?token={server.token}")
+    assert status == 200 and headers["Content-Type"] == "application/json"
+    assert len(json.loads(body)["targets"]) == 52  # the face, beside the live channel
 
 
 def test_another_host_or_another_site_is_refused_even_with_the_token(server):

@@ -176,7 +176,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) 
     with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:
         what = f"{relay.address} -> {send}"
         session = Live(tuning, relay, tap, what)
-        session.hello()  # the face's payload built before the page asks
+        session.mesh()  # the face built before the page asks
         session.start()
         server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser)
         try:

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.ui.offline import Offline
 
     session = Offline(args.take, tuning(args))
-    session.hello()  # the face's payload built before the page asks
+    session.mesh()  # the face built before the page asks
     server = serve(session, args.host, args.port, args.no_browser)
     try:
         threading.Event().wait()

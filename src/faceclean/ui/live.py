@@ -29,6 +29,7 @@ import numpy as np
 
 from faceclean.adjust import Adjust
 from faceclean.animation import Animation
+from faceclean.calibration import MIN_FRAMES
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.ui.server import Client
@@ -75,7 +76,8 @@ class Tap:
         hold = self.hold
         if hold is not None and not self.held:
             hold.append((t, np.array(x)))
-            self.held = t - hold[0][0] >= self.hold_s
+            # complete after hold_s, with MIN_FRAMES frames at least (a stalled sender)
+            self.held = t - hold[0][0] >= self.hold_s and len(hold) >= MIN_FRAMES
         for r in self.recorders:
             r.add(t, x, y, pose, *more)
 

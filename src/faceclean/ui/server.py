@@ -36,6 +36,7 @@ MAX_MESSAGE = 64 * 1024  # bytes of one message from the page
 MAX_SENDS = 64  # messages queued to a slow page before the oldest views are dropped
 TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8"}
 TYPES[".css"] = "text/css; charset=utf-8"
+MESH = "/mesh.json"  # the face the page draws (Session.mesh), besides the files
 
 
 def files() -> dict[str, Path]:
@@ -83,6 +84,8 @@ class Session(Protocol):
     def detach(self, client: Client) -> None: ...
 
     def handle(self, client: Client, message: dict[str, Any]) -> None: ...
+
+    def mesh(self) -> bytes: ...
 
 
 class Server:
@@ -182,11 +185,14 @@ class Server:
         if path == "/live":
             return None  # the WebSocket handshake goes on (websockets checks the rest)
         target = self.files.get(path)
-        if target is None:
+        if path == MESH:
+            body, kind = self.session.mesh(), "application/json"
+        elif target is None:
             return _text(connection, http.HTTPStatus.NOT_FOUND, "not a file of the tuning page")
-        body = target.read_bytes()
+        else:
+            body, kind = target.read_bytes(), TYPES[target.suffix]
         headers = Headers()
-        headers["Content-Type"] = TYPES[target.suffix]
+        headers["Content-Type"] = kind
         headers["Content-Length"] = str(len(body))
         headers["Cache-Control"] = "no-store"
         headers["X-Content-Type-Options"] = "nosniff"

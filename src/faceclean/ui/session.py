@@ -34,7 +34,7 @@ class Base:
         self.tuning = tuning.with_choice()
         self.lock = threading.RLock()  # the tuning and the clients
         self.clients: list[Client] = []
-        self._mesh: dict[str, Any] | None = None  # the face's payload (report/payload.py)
+        self._mesh: bytes | None = None  # the face's payload as JSON (report/payload.py)
 
     # -- clients ------------------------------------------------------------------------
     def attach(self, client: Client) -> None:
@@ -55,15 +55,23 @@ class Base:
         for client in list(self.clients):
             client.send_bytes(data)
 
-    def hello(self) -> dict[str, Any]:
-        """The first message: what the page needs to draw itself."""
-        from faceclean import filters, resolve
+    def mesh(self) -> bytes:
+        """The face the page draws (``/mesh.json``: fetched beside the live channel, so
+        that its first message stays small), built once."""
+        import json
+
         from faceclean.face.mesh import stylised
-        from faceclean.filters import presets
         from faceclean.report import payload
 
-        if self._mesh is None:  # built once: the stylised face takes a while
-            self._mesh = payload.mesh(stylised())
+        if self._mesh is None:
+            self._mesh = json.dumps(payload.mesh(stylised()), separators=(",", ":")).encode()
+        return self._mesh
+
+    def hello(self) -> dict[str, Any]:
+        """The first message: what the page needs to draw its controls."""
+        from faceclean import filters, resolve
+        from faceclean.filters import presets
+
         return {
             "type": "hello",
             "mode": self.mode,
@@ -73,7 +81,6 @@ class Base:
             "presets": presets.shipped(),
             "trackers": list(resolve.TRACKERS),  # --tracker's names
             "state": self.tuning.describe(),
-            "mesh": self._mesh,
         }
 
     # -- messages -----------------------------------------------------------------------

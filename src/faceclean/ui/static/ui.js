@@ -39,6 +39,9 @@ const play = { t: 0, playing: false, last: null, span: 10, duration: 0 };
 const take = { times: null, input: null, cleaned: null, n: 0 };
 const live = { t: [], x: new Map(), y: new Map(), fx: null, fy: null, tLast: 0 };
 
+// The face comes beside the live channel (its first message stays small).
+const meshLoaded = fetch("/mesh.json").then((r) => r.json());
+
 // ---- the channel ---------------------------------------------------------------------
 const ws = new WebSocket(`ws://${location.host}/live${token ? `?token=${encodeURIComponent(token)}` : ""}`);
 ws.binaryType = "arraybuffer";
@@ -134,13 +137,13 @@ function start(m) {
   } else {
     api.ready = true;
   }
-  try {
-    face = faceView($("fc-canvas"), m.mesh);
+  meshLoaded.then((mesh) => {
+    face = faceView($("fc-canvas"), mesh);
     new ResizeObserver(() => { face.fit(); redraw(); }).observe($("fc-canvas"));
     face.fit();
-  } catch (err) {
-    note(`The 3D view could not start (${err.message}); the curves still work.`, true);
-  }
+    api.faceReady = true;
+    redraw();
+  }).catch((err) => note(`The 3D view could not start (${err.message}); the curves still work.`, true));
   onState({ ...m.state, seq: 0 });
   bind();
   showStatus();
