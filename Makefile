@@ -5,12 +5,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean-venv bench eval
+.PHONY: demo test lint venv clean-venv bench eval pairs
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[neural,onnx,fast,ui,dev]'
+	$(BIN)/python -m pip install -q -e '.[neural,onnx,fast,ui,pairs,dev]'
 	touch $(STAMP)
 
 # three.js for the HTML report: from the npm registry, pinned by package-lock.json, kept
@@ -36,8 +36,16 @@ test: $(STAMP) $(NODE_STAMP) lint
 bench: $(STAMP)
 	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md
 
+PAIRS ?= $(HOME)/.cache/faceclean/pairs
+
 eval: $(STAMP)
 	$(BIN)/faceclean eval --models benchmarks/models --json docs/results.json --markdown docs/RESULTS.md
+	@if [ -d "$(PAIRS)" ]; then $(BIN)/faceclean eval --pairs $(PAIRS) --lstm --json docs/results_tracker.json --markdown docs/RESULTS.md; \
+	else echo "no pairs in $(PAIRS): make pairs first for the MediaPipe table"; fi
+
+# Rendered faces tracked by MediaPipe (hours on 2 cores; resumable, rerun to continue).
+pairs: $(STAMP)
+	$(BIN)/faceclean pairs --shared --synthetic 24 --held-out window -o $(PAIRS) --jobs 2
 
 clean-venv:
 	rm -rf $(VENV)

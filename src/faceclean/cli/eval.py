@@ -25,6 +25,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seed", type=int, default=None, help="simulator seed (default 2020)")
     p.add_argument("--quick", action="store_true", help="first seconds of each take only")
+    p.add_argument(
+        "--pairs",
+        metavar="DIR",
+        help="instead: the MediaPipe tracker table on rendered pairs (faceclean pairs), "
+        "leave one source out, plus the still real face; its section of --markdown is "
+        "replaced, the rest of the page kept",
+    )
+    p.add_argument("--lstm", action="store_true", help="with --pairs: also the paper's LSTM")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,11 +44,14 @@ def run(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     check_writable(args.json, args.markdown)  # now, not after the evaluation
+    if args.pairs:
+        return _pairs(args, progress)
     seed = evaluate.SEED if args.seed is None else args.seed
     results = evaluate.evaluate(
         data=args.data, models=args.models, seed=seed, quick=args.quick, progress=progress
     )
     text = results_md.markdown(results)
+    text = _keep_tracker_section(args.markdown, text)
     if args.json:
         atomic_write(args.json, evaluate.dumps(results))
     if args.markdown:
@@ -52,4 +63,60 @@ def run(args: argparse.Namespace) -> int:
     for path in (args.json, args.markdown):
         if path:
             print(f"wrote {path}")
+    return 0
+
+
+def _keep_tracker_section(path: str | None, text: str) -> str:
+    """The page's tracker section (``eval --pairs``) survives a rewrite of the rest."""
+    from pathlib import Path
+
+    from faceclean.evaluation import tracker_results
+
+    if not path or not Path(path).is_file():
+        return text
+    old = Path(path).read_text(encoding="utf-8", errors="replace")
+    if tracker_results.BEGIN not in old or tracker_results.END not in old:
+        return text
+    start = old.index(tracker_results.BEGIN)
+    section = old[start : old.index(tracker_results.END) + len(tracker_results.END)]
+    return tracker_results.insert(text, section + "\n")
+
+
+def _pairs(args: argparse.Namespace, progress) -> int:
+    """``eval --pairs DIR``: the tracker table and the still real face."""
+    import json
+    from pathlib import Path
+
+    from faceclean import settings
+    from faceclean.evaluation import still, tracker_eval, tracker_results
+    from faceclean.filters.one_euro import OneEuro
+    from faceclean.io.atomic import atomic_write
+    from faceclean.learned.tracker_map import TrackerMap
+
+    result = tracker_eval.evaluate(args.pairs, lstm=args.lstm, report=progress)
+    model = settings.tracker_model()
+    still_rows = None
+    if model is not None and model.is_file():
+        take = still.still_take(model, seconds=8)
+        best = max(result["folds"], key=lambda g: len(result["folds"][g]))
+        oe = next(k for k in result["folds"][best] if k.startswith("one-euro"))
+        mc, beta = (float(v.split()[0]) for v in oe.split("tuned ")[1].rstrip(")").split(", beta"))
+        rows = {
+            "raw": take,
+            "one-euro": OneEuro(names=take.names, min_cutoff=mc, beta=beta).clean(take),
+            "tracker map (ours, shipped)": TrackerMap(
+                model=settings.MODELS / "mediapipe.npz", names=take.names
+            ).clean(take),
+        }
+        still_rows = {k: still.measures(v) for k, v in rows.items()}
+        for v in still_rows.values():
+            v["change_ratio"] = v["change"] / still_rows["raw"]["change"]
+    section = tracker_results.markdown(result, still_rows)
+    if args.json:
+        atomic_write(args.json, json.dumps({"pairs": result, "still": still_rows}, indent=1))
+    if args.markdown:
+        page = Path(args.markdown)
+        old = page.read_text(encoding="utf-8") if page.is_file() else ""
+        atomic_write(args.markdown, tracker_results.insert(old, section))
+    print(section)
     return 0
