@@ -230,6 +230,9 @@ class Server:
                 except FacecleanError as e:
                     reply = {"type": "error", "message": f"faceclean: {e}"}
                     client.send({**reply, "for": message["type"], "seq": _seq(message)})
+                except Exception as e:  # never a dead channel: one line, as cli.main says it
+                    why = f"faceclean: internal error: {type(e).__name__}: {e}"
+                    client.send({"type": "error", "message": why, "for": message["type"]})
         except ConnectionClosed:
             pass
         finally:

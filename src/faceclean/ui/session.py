@@ -16,7 +16,7 @@ import threading
 from typing import Any
 
 from faceclean.adjust import Adjust
-from faceclean.channels import ARKIT52, GROUPS
+from faceclean.channels import ARKIT52, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError
 from faceclean.ui.server import Client
 from faceclean.ui.tuning import MAX_ITEMS, MAX_TEXT, Tuning
@@ -69,7 +69,7 @@ class Base:
 
     def hello(self) -> dict[str, Any]:
         """The first message: what the page needs to draw its controls."""
-        from faceclean import filters, resolve
+        from faceclean import filters
         from faceclean.filters import presets
 
         return {
@@ -79,7 +79,7 @@ class Base:
             "groups": {g: sorted(m, key=ARKIT52.index) for g, m in GROUPS.items()},
             "methods": list(filters.METHODS),
             "presets": presets.shipped(),
-            "trackers": list(resolve.TRACKERS),  # --tracker's names
+            "trackers": list(TRACKERS),  # --tracker's names
             "state": self.tuning.describe(),
         }
 
