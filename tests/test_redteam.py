@@ -1658,15 +1658,6 @@ def test_late_output_in_a_missing_folder_is_refused_at_start(tmp_path, command):
     assert not r.stdout and not (tmp_path / "missing").exists()
 
 
-def test_train_out_inside_its_data_is_refused_at_start(tmp_path):
-    take = tmp_path / "takes" / "me" / "take.csv"
-    take.parent.mkdir(parents=True)
-    take.write_bytes(livelink_text())
-    r = fc("train", "--data", tmp_path / "takes", "--out", take.parent / "m.npz")
-    refused(r)
-    assert not r.stdout and not (take.parent / "m.npz").exists()
-
-
 def test_output_symlink_is_written_through_or_refused(tmp_path, take):
     target = tmp_path / "real" / "clean.csv"
     target.parent.mkdir()

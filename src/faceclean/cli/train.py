@@ -178,22 +178,16 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """--out (and the resumable MODEL.last.npz beside it) checked now with the -o policy,
-    not after the training; never inside --data (a model there would be read as a take).
+    not after the training (a take of --data is protected as every input is).
     A run may replace the files it writes even when it resumes from one of them
     (``--resume X.last.npz``, or fine-tuning X in place), atomically as always."""
-    import os
     from pathlib import Path
 
-    from faceclean.errors import FacecleanError
     from faceclean.io import atomic, paths
 
     out = Path(args.out)
     last = None if args.arch in ("fc", "gbt") else out.with_name(out.stem + ".last.npz")
     atomic.check_writable(out, last)
-    if args.data:
-        data = os.path.realpath(args.data)
-        if os.path.realpath(out).startswith(data.rstrip(os.sep) + os.sep):
-            raise FacecleanError(f"--out {out} is inside --data {args.data}: name another place")
     for p in (out, last):
         if p is not None:
             paths.rewritable(p)
