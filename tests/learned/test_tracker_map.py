@@ -119,3 +119,18 @@ def test_old_times_and_lost_channels_follow_the_time_rules():
     part[[0, 3]] = np.nan, np.inf
     out = tm.step(part, a.times[21])
     assert np.isfinite(out).all() and out[3] == y[-1][3]  # a lost cell takes its last output
+
+
+def test_the_inline_pre_filter_is_one_euro():
+    from faceclean.filters.one_euro import OneEuro
+
+    a = take(200)
+    t = a.times.copy()
+    t[50:] += 1.0  # a gap: both restart
+    t[80] = t[79]  # a duplicate: both hold
+    anim = Animation(t, a.values, NAMES)
+    w = weights(hidden=0, rest=False)
+    w.arrays["a"], w.arrays["c"] = np.eye(3), np.zeros(3)  # y = u
+    got = TrackerMap(weights=w).clean(anim).values
+    want = OneEuro(names=NAMES, min_cutoff=1.5, beta=0.5, d_cutoff=1.0).clean(anim).values
+    np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)

@@ -46,7 +46,7 @@ import numpy as np
 from faceclean.channel_map import ChannelMap
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import MAX_ABS, Cleaner, frame_rules
-from faceclean.filters.one_euro import OneEuro
+from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import formats
 from faceclean.learned.formats import TRACKER_MAP as FORMAT
 
@@ -156,57 +156,60 @@ class TrackerMap(Cleaner):
             if value is not None:
                 pre[key] = value
         pre = {k: np.asarray(v, np.float64).tolist() for k, v in pre.items()}
-        self._filter = OneEuro(names=w.inputs, **pre)
+        self.pre = OneEuro(names=w.inputs, **pre)  # its checked settings; stepped inline
         self._hidden = int(w.config["hidden"]) > 0
         self.reset()
 
     def reset(self) -> None:
-        self._filter.reset()
-        self._r: np.ndarray | None = None  # (S, K) resting level so far
-        self._last: np.ndarray | None = None  # (S, K) last frame (no pre-filter)
-        self._y: np.ndarray | None = None  # (S, M) last output
-        self._t: np.ndarray | None = None  # (S,) s, last accepted time
+        self._y: np.ndarray | None = None  # (S, M) last output; the rest is set with it
 
     def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
         x = np.array(frame, dtype=np.float64, ndmin=1)
         single = x.ndim == 1
         x = x.reshape(1, -1) if single else x
-        s = len(x)
+        s, k = len(x), len(self.weights.inputs)
         tt = np.broadcast_to(np.asarray(t, dtype=np.float64), (s,))
         if self._y is None or self._y.shape != x.shape:
             self._y = np.full_like(x, np.nan)  # (S, M) last output
             self._t = np.full(s, np.nan)  # (S,) s, time of the last accepted frame
+            self._u = np.full((s, k), np.nan)  # (S, K) pre-filtered input
+            self._edx = np.zeros((s, k))  # (S, K) One Euro's slope, weight/s
+            self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
         bad = ~(np.abs(x) <= MAX_ABS)  # rule 2 for every column, passthrough ones too
         missing = bad.all(axis=1) | ~np.isfinite(tt)  # rule 1
-        x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
-        start, advance = frame_rules(missing, tt - self._t, self._filter.max_gap)
+        if bad.any():
+            x = np.where(bad, np.nan_to_num(self._y, nan=0.0), x)
+        dt = tt - self._t
+        start, advance = frame_rules(missing, dt, self.pre.max_gap)
         moved = start | advance  # the rest hold: the last output (rules 1, 4)
-        xi = np.zeros((s, len(self.weights.inputs)))
-        xi[:, self._in.have] = x[:, self._in.cols]  # (S, K); absent inputs read 0
-        xi[missing] = np.nan  # a missing frame stays missing for the pre-filter
-        u = self._filter.step(xi, tt) if self.prefilter else self._raw(xi, moved)
+        xi = np.zeros((s, k))
+        xi[:, self._in.have] = x[:, self._in.cols]  # absent inputs read 0
+        u = self._u
+        if self.prefilter and advance.any():  # One Euro (filters/one_euro.py), inline
+            h = np.maximum(np.where(advance, dt, 1.0), DT_MIN)[:, None]  # (S, 1) s
+            edx = self._edx + alpha(self.pre.d_cutoff, h) * ((xi - u) / h - self._edx)
+            cut = self.pre.min_cutoff + self.pre.beta * np.abs(edx)
+            new = u + alpha(cut, h) * (xi - u)
+            u = np.where(advance[:, None], new, u)
+            self._edx = np.where(advance[:, None], edx, self._edx)
+        elif not self.prefilter:
+            u = np.where(advance[:, None], xi, u)
+        if start.any():  # rule 3: the filter restarts from the frame
+            u = np.where(start[:, None], xi, u)
+            self._edx = np.where(start[:, None], 0.0, self._edx)
+        self._u = u
         y = self._map(u, moved)
         out = x.copy()
         out[:, self._out.cols] = y[:, self._out.have]
-        out = np.where(moved[:, None], out, self._y)
+        if not moved.all():
+            out = np.where(moved[:, None], out, self._y)
         self._t = np.where(moved, tt, self._t)
-        self._y = out.copy()
-        return out[0] if single else out
-
-    def _raw(self, xi: np.ndarray, moved: np.ndarray) -> np.ndarray:
-        """No pre-filter (the ridge baseline): the frame itself where it is accepted."""
-        last = self._last
-        if last is None or last.shape != xi.shape:
-            last = np.full_like(xi, np.nan)
-        last = np.where(moved[:, None], np.nan_to_num(xi), last)
-        self._last = last
-        return last.copy()
+        self._y = out
+        return out[0].copy() if single else out.copy()
 
     def _map(self, u: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """(S, K) filtered inputs -> (S, M) outputs; rows not started yet stay NaN."""
         a = self.weights.arrays
-        if self._r is None or self._r.shape != u.shape:
-            self._r = np.full_like(u, np.nan)
         self._r = np.where(moved[:, None], np.fmin(self._r, u), self._r)  # NaN-aware
         lin = u @ a["a"].T + a["c"]
         rest = (u - self._r) if self.rest else None
