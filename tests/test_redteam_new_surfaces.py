@@ -100,7 +100,7 @@ ZIP_NO_MODEL = pytest.param(
 )
 
 
-@pytest.mark.parametrize("kind", ["empty", "garbage", ZIP_NO_MODEL, "fifo", "huge", "dir"])
+@pytest.mark.parametrize("kind", ["empty", "garbage", ZIP_NO_MODEL, "fifo", "huge"])
 def test_pairs_hostile_tracker_model(tmp_path, kind):
     task = tmp_path / "face_landmarker.task"
     if kind == "empty":
@@ -155,7 +155,6 @@ def _npy_bomb(path: Path) -> None:
         "missing-keys",
         "wrong-shapes",
         "bad-triangles",
-        "garbage",
         pytest.param(
             "bomb",
             marks=fail("head mesh: an array's claimed shape is allocated (exit 1, 2.24 GiB)"),
@@ -203,7 +202,7 @@ def test_pairs_hostile_head(tmp_path, kind):
 # faceclean pairs: inputs, options and the output folder
 
 
-@pytest.mark.parametrize("kind", ["fifo", "garbage", "dir-of-garbage", "missing"])
+@pytest.mark.parametrize("kind", ["fifo", "garbage", "dir-of-garbage"])
 def test_pairs_unreadable_take(tmp_path, kind):
     if kind == "fifo":
         src = _fifo(tmp_path / "take.csv")
@@ -225,14 +224,14 @@ def test_pairs_unreadable_take(tmp_path, kind):
     untouched(out)
 
 
-@pytest.mark.parametrize("shard", ["a/b", "-1/2", "3/2", "0/0", "1/0", "1", "1/2/3", "", "1e9/2e9"])
+@pytest.mark.parametrize("shard", ["a/b", "-1/2", "3/2", "1/0", "1/2/3"])
 def test_pairs_shard_garbage(tmp_path, shard):
     r, out = pairs(tmp_path, "--shard", shard, "--list")
     refused_usage(r)
     untouched(out)
 
 
-@pytest.mark.parametrize("jobs", ["0", "-3", "x", "1.5"])
+@pytest.mark.parametrize("jobs", ["0", "x"])
 def test_pairs_jobs_garbage(tmp_path, jobs):
     r, out = pairs(tmp_path, "--jobs", jobs)
     refused_usage(r)
@@ -350,8 +349,7 @@ JSON_SKIPPED = fail("train --pairs: a NAME.json that is a FIFO or of another for
         "truncated",
         "nested",
         "not-an-object",
-        pytest.param("wrong-format", marks=JSON_SKIPPED),
-        pytest.param("fifo", marks=JSON_SKIPPED),
+        pytest.param("wrong-format-and-fifo", marks=JSON_SKIPPED),
     ],
 )
 def test_train_pairs_hostile_json(tmp_path, kind):
@@ -369,7 +367,7 @@ def test_train_pairs_hostile_json(tmp_path, kind):
             j.write_text("[" * 100_000 + "]" * 100_000)
         elif kind == "not-an-object":
             j.write_text("42")
-        elif kind == "wrong-format":
+        elif i == 0:
             j.write_text(text.replace("faceclean-pair/1", "faceclean-pair/999"))
         else:
             _fifo(j)
@@ -430,8 +428,10 @@ def test_train_pairs_deep_subfolders(tmp_path):
 # --tracker names and MediaPipe timestamps
 
 
-@pytest.mark.parametrize("cmd", ["clean", "report", "calibrate", "plot"])
-@pytest.mark.parametrize("name", ["bogus", "", "MEDIAPIPE ", "../mediapipe"])
+@pytest.mark.parametrize(
+    ("cmd", "name"),
+    [("clean", "bogus"), ("clean", "../mediapipe"), ("report", ""), ("calibrate", "MEDIAPIPE ")],
+)
 def test_tracker_unknown_name(tmp_path, cmd, name):
     src = take(tmp_path)
     out = tmp_path / ("out.html" if cmd == "report" else "out.csv")
@@ -465,10 +465,8 @@ def _mediapipe(stamps) -> bytes:
 MP_BAD = {
     "text": ["0", "33", "abc", "100"],
     "nan": ["0", "33", "nan", "100"],
-    "inf": ["0", "33", "inf", "100"],
     "repeated": ["0", "33", "33", "33", "100"],
     "backwards": ["0", "33", "67", "20", "133"],
-    "all-same": ["5"] * 10,
     "huge": ["0", "1e300", "2e300"],
     "empty-cell": ["0", "", "67", "100"],
 }
@@ -480,14 +478,11 @@ MP_ACCEPTED = fail("mediapipe CSV: repeated, backwards or 1e300 timestamps are c
 @pytest.mark.parametrize(
     "kind",
     [
-        pytest.param(k, marks=MP_ACCEPTED)
-        if k in ("all-same", "backwards", "huge", "repeated")
-        else k
+        pytest.param(k, marks=MP_ACCEPTED) if k in ("backwards", "huge", "repeated") else k
         for k in sorted(MP_BAD)
     ],
 )
-@pytest.mark.parametrize("tracker", [None, "mediapipe"])
-def test_mediapipe_bad_timestamps(tmp_path, kind, tracker):
+def test_mediapipe_bad_timestamps(tmp_path, kind, tracker="mediapipe"):
     src = tmp_path / "face.csv"
     src.write_bytes(_mediapipe(MP_BAD[kind]))
     before = src.read_bytes()
@@ -685,7 +680,8 @@ def test_ws_cross_site_origin(page):
 
 
 def _replies(ws, seconds: float = 3.0) -> list:
-    """Every message the page sends within a few seconds (parsed), until the link closes."""
+    """The page's messages within a few seconds (parsed), until the link closes or one
+    says a refusal (the case's answer)."""
     from websockets.exceptions import ConnectionClosed
 
     got, end = [], time.monotonic() + seconds
@@ -699,6 +695,8 @@ def _replies(ws, seconds: float = 3.0) -> list:
             break
         if isinstance(m, str):  # binary frames (faces) are not replies
             got.append(json.loads(m))
+            if _errors(got[-1:]):
+                break
     return got
 
 
@@ -736,7 +734,7 @@ def test_ws_non_json(page, msg):
     with _ws(page) as ws:
         with contextlib.suppress(ConnectionClosed):
             ws.send(msg)
-        _replies(ws, 1.5)
+        _replies(ws, 0.5)
     assert page.alive()
 
 
