@@ -112,11 +112,9 @@ def test_pairs_hostile_tracker_model(tmp_path, kind):
             z.writestr("readme.txt", "not a model")
     elif kind == "fifo":
         _fifo(task)
-    elif kind == "huge":
+    else:
         with open(task, "wb") as f:  # sparse: 64 GiB claimed, nothing on disk
             f.truncate(64 << 30)
-    else:
-        task.mkdir()
     r, out = pairs(tmp_path, "--tracker-model", task)
     refused(r)
     untouched(out)
@@ -209,12 +207,10 @@ def test_pairs_unreadable_take(tmp_path, kind):
     elif kind == "garbage":
         src = tmp_path / "take.csv"
         src.write_bytes(b"\xff\xfe\x00garbage,,,\n" * 50)
-    elif kind == "dir-of-garbage":
+    else:
         src = tmp_path / "takes"
         src.mkdir()
         (src / "a.csv").write_bytes(b"time,jawOpen\nx,y\n")
-    else:
-        src = tmp_path / "nope.csv"
     out = tmp_path / "out"
     r = fc(
         "pairs", src, "--seconds", "1", "--settings", "studio", "--rates", "24", "-o", out,
