@@ -75,8 +75,11 @@ def run(args: argparse.Namespace) -> int:
     todo = [j for j in jobs if not engine.done(j, out)]
     if out.exists() and not out.is_dir():
         raise FacecleanError(f"output is not a folder: {out}")
+    try:  # the output folder before any work (issue 21: outputs are checked at start)
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise FacecleanError(f"cannot make the output folder {out}: {e.strerror or e}") from None
     worker = engine.Worker(head, model)  # a bad mesh or model file: one line, before any job
-    out.mkdir(parents=True, exist_ok=True)
     workers, note = pool_of.count(args.jobs, len(todo), "pairs to make")
     if note and todo:
         print(note, file=sys.stderr)
