@@ -3,6 +3,8 @@ cleaned file goes back out with the same columns and time unit."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -66,3 +68,26 @@ def test_a_csv_without_a_time_column_is_refused_in_one_line(tmp_path):
     p.write_text("frame,jawOpen\n0,0.1\n")
     with pytest.raises(FacecleanError, match="MediaPipe CSV"):
         io.load(p)
+
+
+@pytest.mark.parametrize(
+    ("stamps", "said"),
+    [
+        (["0", "33", "33", "100"], "row 3: time 0.033 s is not after the row before"),
+        (["0", "33", "67", "20"], "row 4: time 0.02 s is not after the row before"),
+        (["0", "1e300", "2e300"], "row 2: time 1e+297 s is beyond"),
+        (["0", "inf", "67"], "row 2 has no finite time"),
+    ],
+)
+def test_repeated_backwards_or_absurd_timestamps_are_refused_in_one_line(tmp_path, stamps, said):
+    p = tmp_path / "mp.csv"
+    p.write_text("timestamp_ms,jawOpen\n" + "".join(f"{s},0.5\n" for s in stamps))
+    with pytest.raises(FacecleanError, match=re.escape(said)) as e:
+        io.load(p)
+    assert str(e.value).startswith("mp.csv") and "\n" not in str(e.value)
+
+
+def test_epoch_milliseconds_are_read(tmp_path):
+    p = tmp_path / "mp.csv"
+    p.write_text("timestamp_ms,jawOpen\n1700000000000,0.5\n1700000000033,0.6\n")
+    np.testing.assert_allclose(io.load(p).times, [1.7e9, 1.7e9 + 0.033])

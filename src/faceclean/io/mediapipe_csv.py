@@ -6,7 +6,10 @@ milliseconds, else microseconds; a face tracker runs between 2 and 1000 fps), th
 column per category in MediaPipe's names (``_neutral``, ``eyeBlinkLeft``, ...). A
 ``frame`` column, where a script writes one, is kept but is not a channel. ``_neutral``
 is not a blendshape: it is kept for the writer and not cleaned. A row with every score
-empty is a missing frame (the face was lost).
+empty is a missing frame (the face was lost). The times increase row by row, as
+MediaPipe's VIDEO and LIVE_STREAM modes require, and fit its int64 microseconds: a
+repeated, backwards or absurd timestamp is refused in one line naming the row, never
+cleaned.
 
 Written back with the same columns in the same order and the time in its own unit
 (integers stay integers), so a cleaned file drops into the same tools.
@@ -25,6 +28,7 @@ from faceclean.errors import FacecleanError
 from faceclean.io import plain_csv, source
 
 TIME_COLUMNS = ("timestamp_ms", "timestamp")
+MAX_TIME = 2.0**63 * 1e-6  # s: MediaPipe's timestamps are int64 microseconds (~292 000 years)
 KEPT = ("_neutral", "frame")  # columns carried through, never cleaned
 
 
@@ -55,6 +59,8 @@ def read(path: str | os.PathLike) -> Animation:
     kept = [j for j, h in enumerate(rest) if h.lower() in KEPT]
     chans = [j for j in range(len(rest)) if j not in kept]
     scale = 1e-3 if t_name == "timestamp_ms" else _unit(raw_t)
+    times = raw_t * scale
+    source.check_times(times, f"{p.name} ({t_name})", increasing=True, limit=MAX_TIME)
     values = numbers[:, chans]
     missing = np.isnan(values).all(axis=1) if chans else np.zeros(len(raw_t), bool)
     meta = {
@@ -68,7 +74,7 @@ def read(path: str | os.PathLike) -> Animation:
         },
     }
     values[missing] = np.nan
-    return Animation(raw_t * scale, values, tuple(rest[j] for j in chans), meta)
+    return Animation(times, values, tuple(rest[j] for j in chans), meta)
 
 
 def _unit(t: np.ndarray) -> float:

@@ -71,8 +71,7 @@ def parse_rows(
     except ValueError as e:
         raise FacecleanError(f"{label}: a value is not a number ({e})") from None
     times = numbers[:, t_col]
-    if not np.isfinite(times).all():
-        raise FacecleanError(f"{label}: every row needs a finite time")
+    source.check_times(times, label, first=done)
     keep = [j for j in range(n_fields) if j != t_col]
     return times, numbers[:, keep], done + len(rows)
 

@@ -29,7 +29,9 @@ takes the same path; nothing opens a user's file any other way):
 - ``read_json(path, what, limit=MAX_DOC, max_depth=MAX_DEPTH)``: a document in strict
   JSON (``strict_json``: finite numbers, bounded nesting);
 - ``named(path)``: whether a path names something that exists (a dangling link too), so
-  a caller that falls back to a shipped name lets ``regular`` say what is wrong instead.
+  a caller that falls back to a shipped name lets ``regular`` say what is wrong instead;
+- ``check_times(times, label, increasing, limit)``: a time column's rows finite (and, for
+  a format whose times must, increasing and within a bound), else one line naming the row.
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ import os
 import stat
 from pathlib import Path
 from typing import Any, BinaryIO
+
+import numpy as np
 
 from faceclean import strict_json
 from faceclean.errors import FacecleanError
@@ -155,6 +159,37 @@ def check_cells(fields: list[bytes], label: str, limit: int = MAX_CELL) -> None:
         raise FacecleanError(f"{label}: {len(fields)} fields (at most {MAX_FIELDS})")
     if max(map(len, fields), default=0) > limit:
         raise FacecleanError(f"{label}: a cell longer than {limit} bytes")
+
+
+def check_times(
+    times: np.ndarray,
+    label: str,
+    *,
+    increasing: bool = False,
+    limit: float = np.inf,
+    first: int = 0,
+) -> None:
+    """Refuse a time column (R,) s with a row that is not finite, beyond +-``limit`` s, or
+    (``increasing``) not later than the row before. The message names the row, counted
+    from 1 after the ``first`` rows read before these."""
+    bad = np.flatnonzero(~(np.abs(times) <= limit))  # NaN compares False
+    if len(bad):
+        k = int(bad[0])
+        if not np.isfinite(times[k]):
+            raise FacecleanError(f"{label}: row {first + k + 1} has no finite time")
+        raise FacecleanError(
+            f"{label}: row {first + k + 1}: time {times[k]:.6g} s is beyond the +-{limit:.3g} s "
+            "a timestamp of this format can hold"
+        )
+    if increasing:
+        back = np.flatnonzero(np.diff(times) <= 0.0)
+        if len(back):
+            k = int(back[0]) + 1
+            raise FacecleanError(
+                f"{label}: row {first + k + 1}: time {times[k]:.6g} s is not after the row before "
+                f"({times[k - 1]:.6g} s); this format's times increase (sort the rows, drop "
+                "repeated ones)"
+            )
 
 
 def short_cells(fields: list[bytes], label: str) -> list[bytes]:
