@@ -136,6 +136,8 @@ def die_with_parent(parent: int | None = None) -> None:
 
 def _start(parent: int, initializer: Callable[..., Any] | None, initargs: Sequence) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent stops the pool
+    if hasattr(signal, "pthread_sigmask"):  # blocked since the spawn (Pool.submit): a
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # pending one is dropped
     signal.signal(signal.SIGTERM, _on_term)
     signal.signal(signal.SIGHUP, _on_term)
     die_with_parent(parent)
@@ -173,7 +175,17 @@ class Pool:
         )
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
-        return self._executor.submit(_call, fn, args, kwargs)
+        # a worker is spawned here, on demand: SIGINT blocked while it is, so a Ctrl-C
+        # during its start-up waits (the child inherits the mask until ``_start`` ignores
+        # it) instead of printing a KeyboardInterrupt traceback from its imports; the
+        # parent gets its own Ctrl-C as soon as the mask is restored
+        if not hasattr(signal, "pthread_sigmask"):
+            return self._executor.submit(_call, fn, args, kwargs)
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            return self._executor.submit(_call, fn, args, kwargs)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
     def terminate(self) -> None:
         """Cancel the work not started and stop every worker now (bounded: ``GRACE`` s)."""
@@ -191,6 +203,10 @@ class Pool:
         for p in left.values():
             with contextlib.suppress(OSError, ValueError):
                 p.kill()
+        # join the executor's manager thread now that its workers are gone: left running,
+        # it closes its wake-up pipe while the interpreter's exit hook writes to it
+        # (CPython 3.11: "OSError: Bad file descriptor" printed at exit)
+        self._executor.shutdown(wait=True)
 
     def __enter__(self) -> Pool:
         return self

@@ -87,8 +87,12 @@ def _command() -> Iterator[None]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = p.parse_args(argv)
+    try:  # Ctrl-C while the commands import (a second or so): no traceback either
+        p = parser()
+        args = p.parse_args(argv)
+    except KeyboardInterrupt:
+        print("faceclean: interrupted", file=sys.stderr)
+        return 130
     if getattr(args, "_run", None) is None:
         p.print_help()
         return 2
