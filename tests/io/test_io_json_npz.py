@@ -98,3 +98,18 @@ def test_json_refuses_infinity(tmp_path):
     with pytest.raises(FacecleanError, match="infinite"):
         save(anim, tmp_path / "a.json")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("held", [0, 1000])
+def test_npz_whose_header_claims_more_than_it_holds_is_refused_unallocated(tmp_path, held):
+    """An .npy header claiming 2.2 GiB in a small member: refused before numpy allocates."""
+    import struct
+    import zipfile
+
+    header = "{'descr': '<f8', 'fortran_order': False, 'shape': (300000000,), }".ljust(118)
+    npy = b"\x93NUMPY\x01\x00" + struct.pack("<H", 119) + (header + "\n").encode()
+    path = tmp_path / "a.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("times.npy", npy + bytes(held))
+    with pytest.raises(FacecleanError, match=r"times.npy claims \(300000000,\) float64"):
+        load(path)

@@ -94,3 +94,84 @@ def test_bad_mesh_and_model_files_are_one_line(tmp_path):
         Tracker(junk)
     with pytest.raises(FacecleanError, match="no such tracker model file"):
         Tracker(tmp_path / "absent.task")
+
+
+def _bundle(path, members: dict[str, bytes]) -> None:
+    import zipfile
+
+    with zipfile.ZipFile(path, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+
+
+TFL = b"\x1c\x00\x00\x00TFL3" + bytes(100)  # a TFLite flatbuffer's first bytes
+
+
+@pytest.mark.parametrize(
+    ("members", "said"),
+    [
+        ({"readme.txt": b"not a model"}, "no face_detector.tflite in the bundle"),
+        (
+            {"face_detector.tflite": TFL, "face_landmarks_detector.tflite": TFL},
+            "no face_blendshapes.tflite",
+        ),
+        (
+            {
+                "face_detector.tflite": TFL,
+                "face_landmarks_detector.tflite": b"x" * 50,
+                "face_blendshapes.tflite": TFL,
+            },
+            "face_landmarks_detector.tflite is not a TFLite model",
+        ),
+    ],
+)
+def test_a_task_zip_without_its_models_is_refused_before_mediapipe(tmp_path, members, said):
+    task = tmp_path / "face_landmarker.task"
+    _bundle(task, members)
+    with pytest.raises(FacecleanError, match=said) as e:
+        Tracker(task)
+    assert str(e.value).startswith(f"{task}: not a usable face landmarker model")
+
+
+def _ict(**changes) -> dict:
+    """The smallest arrays under every key Head.load asks for (not a renderable head)."""
+    d = {
+        "neutral_vertices": np.zeros((4, 3), np.float32),
+        "triangles": np.array([[0, 1, 2], [1, 2, 3]], np.int32),
+        "triangle_material": np.zeros(2, np.int8),
+        "material_names": np.array(["M_Face"]),
+        "arkit_names": np.array(["jawOpen"]),
+        "arkit_deltas": np.zeros((1, 4, 3), np.float16),
+        "identity_modes": np.zeros((2, 4, 3), np.float16),
+        "landmark_vertices": np.zeros(68, np.int32),
+    }
+    d.update(changes)
+    return d
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "said"),
+    [
+        ("neutral_vertices", np.nan, "'neutral_vertices' holds NaN or infinite values"),
+        ("arkit_deltas", np.inf, "'arkit_deltas' holds NaN or infinite values"),
+        ("identity_modes", 60000.0, "'identity_modes' reaches 6e\\+04 cm"),
+    ],
+)
+def test_a_head_mesh_with_non_finite_geometry_is_refused(tmp_path, key, value, said):
+    d = _ict()
+    d[key] = np.full_like(d[key], value)
+    np.savez(tmp_path / "head.npz", **d)
+    with pytest.raises(FacecleanError, match=said):
+        Head.load(tmp_path / "head.npz")
+
+
+def test_a_head_mesh_whose_array_claims_gigabytes_is_refused_unread(tmp_path):
+    import struct
+    import zipfile
+
+    header = "{'descr': '<f4', 'fortran_order': False, 'shape': (200000000, 3), }".ljust(118)
+    npy = b"\x93NUMPY\x01\x00" + struct.pack("<H", 119) + (header + "\n").encode()
+    with zipfile.ZipFile(tmp_path / "head.npz", "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("neutral_vertices.npy", npy + bytes(1 << 20))
+    with pytest.raises(FacecleanError, match=r"claims \(200000000, 3\) float32"):
+        Head.load(tmp_path / "head.npz")

@@ -34,6 +34,8 @@ KEYS = (
     "identity_modes",
     "landmark_vertices",
 )
+GEOMETRY = ("neutral_vertices", "arkit_deltas", "identity_modes")  # cm, summed per vertex
+MAX_CM = 1000.0  # |coordinate| of any of them: a head is ~20 cm, a bound keeps sums finite
 # region codes of Head.region (one per vertex): what paint a vertex gets
 SKIN, BACK, MOUTH, TEETH, SCLERA, IRIS, PUPIL, LIPS, BROW, LID = range(10)
 
@@ -55,6 +57,7 @@ class Head:
         if missing:
             raise FacecleanError(f"{os.fspath(path)}: not an ICT head mesh (no {missing[0]!r})")
         try:
+            _check_geometry(z, os.fspath(path))
             return _build(z)
         except (ValueError, IndexError, TypeError) as e:
             raise FacecleanError(f"{os.fspath(path)}: malformed head mesh ({e})") from None
@@ -76,6 +79,20 @@ class Head:
         a, b, c = (v[self.triangles[:, k]] for k in range(3))
         n = self.normal_sum @ np.cross(b - a, c - a)
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)
+
+
+def _check_geometry(z: dict[str, np.ndarray], label: str) -> None:
+    """Refuse vertices, deltas or modes that are not finite cm within +-MAX_CM (a NaN
+    vertex would be rendered as a broken face, not said)."""
+    for k in GEOMETRY:
+        a = z[k]
+        if a.dtype.kind not in "fiu":
+            raise FacecleanError(f"{label}: malformed head mesh ({k!r} is {a.dtype}, not numbers)")
+        if not np.isfinite(a).all():
+            raise FacecleanError(f"{label}: {k!r} holds NaN or infinite values (a broken export)")
+        top = float(np.abs(a).max()) if a.size else 0.0
+        if top > MAX_CM:
+            raise FacecleanError(f"{label}: {k!r} reaches {top:.3g} cm (a head is within 10 m)")
 
 
 def _build(z: dict[str, np.ndarray]) -> Head:

@@ -6,11 +6,18 @@ t)`` gives the 51 ARKit scores of one RGB frame at ``t`` seconds, in MediaPipe's
 mapped onto canonical ARKit (``_neutral`` dropped; MediaPipe has no ``tongueOut``), or None
 when no face is found: a lost face is a missing frame. VIDEO mode needs increasing integer
 millisecond timestamps; real frame times are rounded to ms and forced to increase.
+
+The bundle is a zip of TFLite models (``MEMBERS``); ``check_bundle`` refuses, in one line,
+one that is not a zip, lacks a model, claims more than ``MAX_MODEL`` unpacked or holds a
+model that is not TFLite, before MediaPipe sees it (its own errors are C++ status text).
 """
 
 from __future__ import annotations
 
+import io
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -21,13 +28,20 @@ from faceclean.errors import FacecleanError
 from faceclean.io.source import read_bytes
 
 NAMES = tuple(n for n in ARKIT52 if n != "tongueOut")  # what the tracker gives, canonical
-MAX_MODEL = 64 << 20  # bytes: the float16 bundle is 3.8 MB
+MAX_MODEL = 64 << 20  # bytes, of the bundle and of its models unpacked (the float16 one: 3.8 MB)
+# the models Face Landmarker loads from the bundle (blendshapes: output_face_blendshapes)
+MEMBERS = ("face_detector.tflite", "face_landmarks_detector.tflite", "face_blendshapes.tflite")
+TFLITE = b"TFL3"  # a TFLite flatbuffer's file identifier, at bytes 4-8
+# what zipfile raises on bytes that are no readable zip (RuntimeError: an encrypted member)
+_NOT_A_ZIP = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, RuntimeError,
+              NotImplementedError)  # fmt: skip
 
 
 class Tracker:
     def __init__(self, model_path: str | os.PathLike, threads: int = 1) -> None:
         path = Path(model_path)
         bundle = read_bytes(path, MAX_MODEL, "tracker model file")  # regular, bounded, once
+        check_bundle(bundle, path)
         os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
         try:
             from mediapipe.tasks.python import BaseOptions
@@ -83,6 +97,28 @@ class Tracker:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def check_bundle(bundle: bytes, path: str | os.PathLike) -> None:
+    """Refuse, in one line, bytes that are not a Face Landmarker bundle (see the module)."""
+    bad = f"{os.fspath(path)}: not a usable face landmarker model"
+    try:
+        with zipfile.ZipFile(io.BytesIO(bundle)) as z:
+            members = {m.filename: m for m in z.infolist()}
+            lacking = [n for n in MEMBERS if n not in members]
+            if lacking:
+                hint = "give MediaPipe's face_landmarker.task"
+                raise FacecleanError(f"{bad} (no {lacking[0]} in the bundle; {hint})")
+            unpacked = sum(m.file_size for m in members.values())  # B, as the zip claims
+            if unpacked > MAX_MODEL:
+                raise FacecleanError(f"{bad} (unpacks to over {MAX_MODEL >> 20} MiB)")
+            for n in MEMBERS:
+                with z.open(members[n]) as f:
+                    if f.read(8)[4:8] != TFLITE:
+                        raise FacecleanError(f"{bad} ({n} is not a TFLite model)")
+    except _NOT_A_ZIP as e:
+        text = " ".join(str(e).split())[:120] or type(e).__name__
+        raise FacecleanError(f"{bad} (not a .task bundle: {text})") from None
 
 
 assert set(NAMES) == set(MEDIAPIPE) - {"_neutral"}
