@@ -10,6 +10,12 @@ optionally ``NAME.json`` (``faceclean pairs`` metadata: the performance ``group`
 render ``setting`` that splits use). The truth is taken at the tracked take's instants
 (linear interpolation when a studio's takes were sampled apart); frames the tracker lost
 stay missing. Nothing here imports torch.
+
+Every file is read through ``io.source``: a FIFO or a folder under a pair's name is
+refused, not skipped, and ``NAME.json`` must be a ``faceclean-pair/1`` object. Time: a
+``tracked``/``truth`` pair shares its instants (within ``TIME_TOL``); a studio's ``clean``
+take must cover the ``raw`` take's instants on the same clock. Anything else is refused in
+one line naming the pair.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from faceclean.timing import resample
 ROLES = (("tracked", "truth"), ("raw", "clean"))
 EXTS = (".csv", ".json", ".npz", ".glb", ".gltf")
 MAX_META = 1 << 20  # bytes of a pair's metadata JSON
+TIME_TOL = 5e-4  # s: a tracked/truth pair's instants agree to half a millisecond
 
 
 @dataclass(eq=False)
@@ -66,7 +73,8 @@ def find(folder: str | os.PathLike) -> list[tuple[str, Path, Path, Path | None]]
 
 
 def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
-    files = {p.name: p for p in root.iterdir() if p.is_file() and not p.name.startswith(".")}
+    # every entry but folders: a FIFO or a dangling link is found, then refused by its reader
+    files = {p.name: p for p in root.iterdir() if not p.name.startswith(".") and not p.is_dir()}
     found = []
     for fname, p in sorted(files.items()):
         for raw, clean in ROLES:
@@ -84,26 +92,22 @@ def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
 def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
     """Every pair of a folder (see the module docstring)."""
     from faceclean import io
-    from faceclean.io.source import read_bytes, regular
-    from faceclean.strict_json import loads
 
     pairs = []
     for name, tracked_path, truth_path, meta_path in find(folder):
         meta: dict = {}
         if meta_path is not None:
-            regular(meta_path, "pair metadata file")
-            meta = loads(read_bytes(meta_path, MAX_META), str(meta_path))
-            if not isinstance(meta, dict):
-                raise FacecleanError(f"{meta_path}: not pair metadata (not an object)")
+            meta = _meta(meta_path)
         elif require_meta:
             continue  # a pair still being written: its JSON comes last
         tracked, truth = io.load(tracked_path), io.load(truth_path)
         job = meta.get("job") if isinstance(meta.get("job"), dict) else {}
+        same = tracked_path.name.startswith(f"{name}.{ROLES[0][0]}.")  # tracked + truth
         pairs.append(
             Pair(
                 name=name,
                 tracked=tracked,
-                truth=aligned(truth, tracked, name),
+                truth=aligned(truth, tracked, str(tracked_path.with_name(name)), same),
                 group=str(job.get("group", tracked_path.resolve().parent.name)),
                 setting=str(job.get("setting", "studio-take")),
                 meta=meta,
@@ -112,16 +116,67 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
     return pairs
 
 
-def aligned(truth: Animation, tracked: Animation, name: str) -> Animation:
-    """The truth (ARKit-52) at the tracked take's instants."""
+def _meta(path: Path) -> dict:
+    """A pair's ``NAME.json``: a ``faceclean-pair/1`` object, else one line."""
+    from faceclean.io.source import read_json
+    from faceclean.synthetic.engine import FORMAT  # the engine's own constant (numpy only)
+
+    meta = read_json(path, "pair metadata file", MAX_META)
+    if not isinstance(meta, dict):
+        raise FacecleanError(f"{path}: not pair metadata (not a JSON object)")
+    if meta.get("format") != FORMAT:
+        said = f"format {str(meta['format'])[:40]!r}" if "format" in meta else "no 'format'"
+        raise FacecleanError(
+            f"{path}: not pair metadata ({said}, expected {FORMAT!r}); move it aside or "
+            "write the pair again with faceclean pairs"
+        )
+    return meta
+
+
+def aligned(truth: Animation, tracked: Animation, name: str, same_times: bool = False) -> Animation:
+    """The truth (ARKit-52) at the tracked take's instants.
+
+    ``same_times`` (a ``tracked``/``truth`` pair): the takes must share their instants
+    within TIME_TOL. Otherwise (``raw``/``clean``) the truth is interpolated there and must
+    cover them: no raw instant more than one truth frame step outside the truth's span.
+    """
     y, present = truth.arkit(ARKIT52)
     if not present.any():
         raise FacecleanError(f"{name}: the truth take has no ARKit channel")
-    if truth.n_frames == tracked.n_frames and np.allclose(truth.times, tracked.times, atol=1e-6):
-        return Animation(tracked.times.copy(), y, ARKIT52)
+    t, tt = tracked.times, truth.times
+    if truth.n_frames == tracked.n_frames and np.allclose(tt, t, rtol=0.0, atol=TIME_TOL):
+        return Animation(t.copy(), y, ARKIT52)
+    if same_times:
+        raise FacecleanError(
+            f"{name}: the truth take's instants are not the tracked take's "
+            f"({_first_difference(tt, t)}); a pair shares its times: write it again with "
+            "faceclean pairs (a studio's takes sampled apart are NAME.raw.* + NAME.clean.*)"
+        )
     if truth.n_frames < 2:
         raise FacecleanError(f"{name}: the truth take has fewer than 2 frames")
-    return Animation(tracked.times.copy(), resample(truth.times, y, tracked.times), ARKIT52)
+    from faceclean.io.source import check_times
+
+    check_times(tt, f"{name}: the clean take", increasing=True)  # interpolation needs order
+    step = float(np.median(np.diff(tt)))  # s, one truth frame
+    outside = (t < tt[0] - step) | (t > tt[-1] + step)
+    if outside.any():
+        raise FacecleanError(
+            f"{name}: the clean take ({tt[0]:.6g} to {tt[-1]:.6g} s) does not cover "
+            f"{int(outside.sum())} of the raw take's {len(t)} instants ({t[0]:.6g} to "
+            f"{t[-1]:.6g} s); both need one clock from the same start: trim the raw take to "
+            "the clean one, or export the clean take over the whole shot"
+        )
+    return Animation(t.copy(), resample(tt, y, t), ARKIT52)
+
+
+def _first_difference(tt: np.ndarray, t: np.ndarray) -> str:
+    """Where truth times ``tt`` first leave tracked times ``t``, in words."""
+    n = min(len(tt), len(t))
+    off = np.flatnonzero(~np.isclose(tt[:n], t[:n], rtol=0.0, atol=TIME_TOL))
+    if len(off):
+        k = int(off[0])
+        return f"frame {k + 1} is at {tt[k]:.6g} s, tracked {t[k]:.6g} s"
+    return f"{len(tt)} frames, tracked {len(t)}"
 
 
 def split(
