@@ -52,6 +52,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--tracker-model", metavar="TASK", help="face_landmarker.task (default ../shared/models)"
     )
+    p.add_argument(
+        "--rom",
+        action="store_true",
+        help="also each pair's calibration clip (neutral, then a range of motion) with the same "
+        "face and camera: NAME.rom.tracked.csv, NAME.rom.truth.csv (for calibration rows)",
+    )
     p.add_argument("--list", action="store_true", help="print this shard's jobs and stop")
 
 
@@ -72,7 +78,10 @@ def run(args: argparse.Namespace) -> int:
             print(job.name, "(done)" if engine.done(job, out) else "")
         return 0
     head, model = _files(args)
-    todo = [j for j in jobs if not engine.done(j, out)]
+    todo = []  # in plan order, each pair followed by its calibration clip
+    for j in jobs:
+        todo += [(j, "pair")] if not engine.done(j, out) else []
+        todo += [(j, "rom")] if args.rom and not engine.rom_done(j, out) else []
     if out.exists() and not out.is_dir():
         raise FacecleanError(f"output is not a folder: {out}")
     try:  # the output folder before any work (issue 21: outputs are checked at start)
@@ -83,20 +92,25 @@ def run(args: argparse.Namespace) -> int:
     workers, note = pool_of.count(args.jobs, len(todo), "pairs to make")
     if note and todo:
         print(note, file=sys.stderr)
-    print(f"{len(jobs) - len(todo)} of {len(jobs)} pairs already done; {len(todo)} to make")
+    n_rom = sum(kind == "rom" for _, kind in todo)
+    made = len(jobs) - (len(todo) - n_rom)
+    print(f"{made} of {len(jobs)} pairs already done; {len(todo) - n_rom} to make"
+          + (f", and {n_rom} calibration clips" if args.rom else ""))  # fmt: skip
     failed: list[tuple[str, str]] = []
     bar = tqdm(total=len(todo), unit="pair", file=sys.stderr, desc="pairs", leave=False)
     with bar:
         if workers <= 1 and todo:
-            for job in todo:
-                _done(bar, job, _safe(worker.run, job, out), failed)
+            for job, kind in todo:
+                _done(bar, _label(job, kind), _safe(worker, job, kind, out), failed)
         elif todo:
             del worker  # spawned workers (never a fork of MediaPipe) that die with this process
             with pool_of.Pool(workers, initializer=_init, initargs=(str(head), str(model))) as pool:
-                futures = {pool.submit(_job, job, str(out)): job for job in todo}
+                futures = {
+                    pool.submit(_job, job, kind, str(out)): _label(job, kind) for job, kind in todo
+                }
                 for f in as_completed(futures):
                     _done(bar, futures[f], f.result(), failed)
-    print(f"made {len(todo) - len(failed)} pairs in {out}")
+    print(f"made {len(todo) - len(failed)} of {len(todo)} in {out}")
     if failed:
         print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
         for name, why in failed:
@@ -174,17 +188,22 @@ def _files(args: argparse.Namespace) -> tuple[Path, Path]:
     return head, model
 
 
-def _done(bar, job, result: tuple[bool, str], failed: list) -> None:
+def _label(job, kind: str) -> str:
+    return job.name if kind == "pair" else f"{job.name} (calibration clip)"
+
+
+def _done(bar, label: str, result: tuple[bool, str], failed: list) -> None:
     ok, text = result
     if not ok:
-        bar.write(f"FAILED {job.name}: {text}", file=sys.stdout)
-        failed.append((job.name, text))
+        bar.write(f"FAILED {label}: {text}", file=sys.stdout)
+        failed.append((label, text))
     bar.update(1)
 
 
-def _safe(fn, job, out) -> tuple[bool, str]:
+def _safe(worker, job, kind: str, out) -> tuple[bool, str]:
+    """One task ("pair" or "rom"), its failure as (False, the reason)."""
     try:
-        meta = fn(job, Path(out))
+        meta = (worker.run if kind == "pair" else worker.run_rom)(job, Path(out))
         return True, f"{job.name}: {meta['frames']} frames, {meta['lost']} lost"
     except FacecleanError as e:
         return False, str(e)
@@ -202,5 +221,5 @@ def _init(head: str, model: str) -> None:
     _WORKER = engine.Worker(head, model)
 
 
-def _job(job, out: str) -> tuple[bool, str]:
-    return _safe(_WORKER.run, job, out)
+def _job(job, kind: str, out: str) -> tuple[bool, str]:
+    return _safe(_WORKER, job, kind, out)

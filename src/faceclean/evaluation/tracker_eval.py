@@ -9,6 +9,11 @@ are all unseen. Rows:
 
 - raw: MediaPipe's scores as they come;
 - one-euro: One Euro tuned on the fold's training pairs (a grid, by MSE);
+- calibration + one-euro: each test pair's own calibration clip (``pairs --rom``: the
+  same face and camera, a neutral hold then a range of motion) measured by
+  ``calibration.calibrate(rom=True)``, its levels applied before the fold's tuned One
+  Euro, as ``calibrate --rom`` then ``clean --calibration`` would (only where every test
+  pair of the fold has its clip);
 - ridge: a per-channel ridge map over all inputs, fitted on the fold's training pairs;
 - lstm: the paper's derivative LSTM trained on the same pairs (optional: slow on a CPU);
 - tracker-map: ours (learned/tracker_map.py).
@@ -21,6 +26,7 @@ weighted by frames for MSE (plain means for the rest).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,10 +44,19 @@ Build = Callable[[Sequence[str]], Cleaner | None]  # names -> a cleaner (None: r
 Report = Callable[[str], None]
 
 
-def outputs(build: Build, pairs: Sequence[Pair]) -> list[Animation]:
+@dataclass(frozen=True)
+class PerPair:
+    """A row whose cleaner is made for each pair (from the pair's own calibration clip)."""
+
+    make: Callable[[Pair], Cleaner]
+
+
+def outputs(build: Build | PerPair, pairs: Sequence[Pair]) -> list[Animation]:
     """Every pair's tracked take cleaned; causal cleaners step all pairs at once as streams."""
     from faceclean.evaluation.harness import run_streams
 
+    if isinstance(build, PerPair):
+        return [build.make(p).clean(p.tracked) for p in pairs]
     names = pairs[0].tracked.names
     cleaner = build(names)
     if cleaner is None:
@@ -148,8 +163,12 @@ def evaluate(
             f"one-euro (tuned {mc:g} Hz, beta {beta:g})": lambda n, mc=mc, beta=beta: OneEuro(
                 names=n, min_cutoff=mc, beta=beta
             ),
-            "ridge map": lambda n, w=ridge: TrackerMap(weights=w, names=n),
         }
+        if all(p.rom is not None for p in test + held):
+            rows["calibration + one-euro"] = PerPair(
+                lambda p, mc=mc, beta=beta: calibrated_one_euro(p, mc, beta)
+            )
+        rows["ridge map"] = lambda n, w=ridge: TrackerMap(weights=w, names=n)
         if lstm:
             path = work / f"lstm-{group}.npz"
             paired_lstm.train_lstm(inner_train, inner_val, path, epochs=lstm_epochs)
@@ -162,6 +181,19 @@ def evaluate(
         }  # fmt: skip
         report(f"fold {group}: " + _line(folds[group]))
     return {"folds": folds, "overall": _overall(folds), "pairs": paired.summary_json(pairs)}
+
+
+def calibrated_one_euro(pair: Pair, min_cutoff: float, beta: float) -> Cleaner:
+    """One Euro behind the levels ``calibrate --rom --tracker mediapipe`` measures on the
+    pair's calibration clip."""
+    from faceclean.adjust import Adjusted
+    from faceclean.calibration import calibrate
+    from faceclean.filters.one_euro import OneEuro
+
+    assert pair.rom is not None
+    names = pair.tracked.names
+    levels = calibrate(pair.rom, rom=True, tracker="mediapipe")
+    return Adjusted(OneEuro(names=names, min_cutoff=min_cutoff, beta=beta), levels, names)
 
 
 def _largest_other(train: Sequence[Pair]) -> str:

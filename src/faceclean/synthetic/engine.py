@@ -194,9 +194,7 @@ class Worker:
 
     def run(self, job: Job, out: Path) -> dict:
         """Render, track and write one pair; returns its metadata record."""
-        from faceclean.synthetic.render import Renderer
         from faceclean.synthetic.scene import Scene
-        from faceclean.synthetic.tracker import NAMES, Tracker
 
         src_t, src_w, src_pose = performance(job)
         times = frame_times(job, float(src_t[-1]))
@@ -210,18 +208,11 @@ class Worker:
             pose = np.nan_to_num(resample(src_t, src_pose, times))
         else:
             pose = drift(times, scene.pose_drift, job.seed)
-        renderer = Renderer(self.head, scene)
-        tracked = np.full((len(times), len(NAMES)), np.nan)
-        with Tracker(self.tracker_path) as tracker:
-            for k, t in enumerate(times):
-                y = tracker.track(renderer.frame(truth[k], pose[k], k), float(t))
-                if y is not None:
-                    tracked[k] = y
-        lost = int(np.all(np.isnan(tracked), axis=1).sum())
+        tracked = self._track(scene, times, truth, pose)
         return write_pair(
             out,
             job.name,
-            Animation(times, tracked, NAMES, {"format": "csv"}),
+            tracked,
             Animation(times, truth, ARKIT52, {"format": "csv"}),
             {
                 "format": FORMAT,
@@ -229,10 +220,49 @@ class Worker:
                 "scene": scene.record(),
                 "tracker": _tracker_version(),
                 "frames": len(times),
-                "lost": lost,
+                "lost": int((~tracked.valid).sum()),
                 "pose": "take" if src_pose is not None else "drift",
             },
         )
+
+    def run_rom(self, job: Job, out: Path) -> dict:
+        """The pair's calibration clip (synthetic/rom.py): the same face, light and camera,
+        at the job's rate, the head still but for a small drift; NAME.rom.{truth,tracked}.csv."""
+        from faceclean import io
+        from faceclean.synthetic import rom
+        from faceclean.synthetic.scene import Scene
+
+        times, truth = rom.clip(job.rate)
+        scene = Scene.draw(job.seed, job.setting, self.head.n_identity)
+        pose = drift(times, 0.3 * scene.pose_drift, job.seed + 1)
+        tracked = self._track(scene, times, truth, pose)
+        io.save(Animation(times, truth, ARKIT52, {"format": "csv"}), rom_path(out, job, "truth"),
+                fmt="csv")  # fmt: skip
+        io.save(tracked, rom_path(out, job, "tracked"), fmt="csv")  # the clip's done mark
+        return {"frames": len(times), "lost": int((~tracked.valid).sum())}
+
+    def _track(self, scene, times: np.ndarray, truth: np.ndarray, pose: np.ndarray) -> Animation:
+        """MediaPipe's scores of the rendered frames (K, 51); a lost face is a NaN row."""
+        from faceclean.synthetic.render import Renderer
+        from faceclean.synthetic.tracker import NAMES, Tracker
+
+        renderer = Renderer(self.head, scene)
+        tracked = np.full((len(times), len(NAMES)), np.nan)
+        with Tracker(self.tracker_path) as tracker:
+            for k, t in enumerate(times):
+                y = tracker.track(renderer.frame(truth[k], pose[k], k), float(t))
+                if y is not None:
+                    tracked[k] = y
+        return Animation(times, tracked, NAMES, {"format": "csv"})
+
+
+def rom_path(out: Path, job: Job, kind: str) -> Path:
+    """NAME.rom.truth.csv or NAME.rom.tracked.csv (the latter written last: its mark)."""
+    return out / f"{job.name}.rom.{kind}.csv"
+
+
+def rom_done(job: Job, out: Path) -> bool:
+    return rom_path(out, job, "tracked").is_file()
 
 
 def write_pair(out: Path, name: str, tracked: Animation, truth: Animation, meta: dict) -> dict:
