@@ -7,9 +7,10 @@ A folder of pairs holds, per pair, two takes in any format faceclean reads:
 
 in the folder or in its subfolders (one per performer or session: the pair's group), and
 optionally ``NAME.json`` (``faceclean pairs`` metadata: the performance ``group`` and the
-render ``setting`` that splits use). The truth is taken at the tracked take's instants
-(linear interpolation when a studio's takes were sampled apart); frames the tracker lost
-stay missing. Nothing here imports torch.
+render ``setting`` that splits use) and ``NAME.rom.tracked.EXT`` (the same face's
+calibration clip, ``faceclean pairs --rom``: a neutral hold, then a range of motion).
+The truth is taken at the tracked take's instants (linear interpolation when a studio's
+takes were sampled apart); frames the tracker lost stay missing. Nothing here imports torch.
 
 Every file is read through ``io.source``: a FIFO or a folder under a pair's name is
 refused, not skipped, and ``NAME.json`` must be a ``faceclean-pair/1`` object. Time: a
@@ -48,6 +49,7 @@ class Pair:
     group: str  # the performance source (split unit)
     setting: str  # render setting, or "studio-take" for a studio's own pair
     meta: dict = field(default_factory=dict)
+    rom: Animation | None = None  # NAME.rom.tracked.*: the same face's calibration clip
 
     def arrays(self, inputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(times (N,), x (N, len(inputs)) tracked in ``inputs`` order, y (N, 52) truth)."""
@@ -82,6 +84,8 @@ def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
             if m is None or m.group(2).lower() not in EXTS:
                 continue
             name = m.group(1)
+            if name.endswith(".rom"):  # NAME.rom.tracked.csv: a pair's calibration clip
+                continue
             want = rf"{re.escape(name)}\.{clean}\.\w+"
             partner = [files[n] for n in sorted(files) if re.fullmatch(want, n)]
             if partner:
@@ -101,6 +105,8 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
         elif require_meta:
             continue  # a pair still being written: its JSON comes last
         tracked, truth = io.load(tracked_path), io.load(truth_path)
+        rom_path = tracked_path.with_name(tracked_path.name.replace(".tracked.", ".rom.tracked."))
+        rom = io.load(rom_path) if rom_path != tracked_path and rom_path.is_file() else None
         job = meta.get("job") if isinstance(meta.get("job"), dict) else {}
         same = tracked_path.name.startswith(f"{name}.{ROLES[0][0]}.")  # tracked + truth
         pairs.append(
@@ -111,6 +117,7 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
                 group=str(job.get("group", tracked_path.resolve().parent.name)),
                 setting=str(job.get("setting", "studio-take")),
                 meta=meta,
+                rom=rom,
             )
         )
     return pairs
