@@ -77,6 +77,7 @@ def test_a_csv_without_a_time_column_is_refused_in_one_line(tmp_path):
         (["0", "33", "67", "20"], "row 4: time 0.02 s is not after the row before"),
         (["0", "1e300", "2e300"], "row 2: time 1e+297 s is beyond"),
         (["0", "inf", "67"], "row 2 has no finite time"),
+        (["0", "33", "-inf"], "row 3 has no finite time"),
     ],
 )
 def test_repeated_backwards_or_absurd_timestamps_are_refused_in_one_line(tmp_path, stamps, said):

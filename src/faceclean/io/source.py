@@ -172,7 +172,7 @@ def check_times(
     """Refuse a time column (R,) s with a row that is not finite, beyond +-``limit`` s, or
     (``increasing``) not later than the row before. The message names the row, counted
     from 1 after the ``first`` rows read before these."""
-    bad = np.flatnonzero(~(np.abs(times) <= limit))  # NaN compares False
+    bad = np.flatnonzero(~np.isfinite(times) | (np.abs(times) > limit))
     if len(bad):
         k = int(bad[0])
         if not np.isfinite(times[k]):
