@@ -35,6 +35,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "evaluation": {
         *("filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"),
         "synthetic",  # the still real face is tracked by the tracker in the loop
+        "calibration",  # the tracker table's calibration row (a pair's own clip)
     },
     "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
     "report": {"evaluation", "face", "io", "faceclean"},
