@@ -205,8 +205,7 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
 
     default = AdaptiveWeights.load(MODELS / "default.npz")
     kind = "inert network: One Euro form" if Adaptive(weights=default).inert else "GRU core"
-    how = "numba" if jit.available() else "numpy"
-    out["default (adaptive)"] = (lambda: Adaptive(weights=default), f"shipped; {kind}, {how}")
+    out["default (adaptive)"] = (lambda: Adaptive(weights=default), f"shipped; {kind}, numpy")
     for name, note in (("fc", "shipped FC baseline, numpy"), ("gbt", "shipped GBT, numpy")):
         out[name] = (lambda n=name: make(n), note)
     try:

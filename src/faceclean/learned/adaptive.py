@@ -264,13 +264,8 @@ class Adaptive(StreamCleaner):
         self._ea = np.where(self._learn, np.exp(np.clip(b[0], A_MIN, A_MAX)), 1.0)  # (M,)
         self._k = np.where(self._learn, sigmoid(b[1]), 0.0)  # (M,)
         self._w_d = 2.0 * np.pi * self.d_cutoff  # (M,) rad/s
-        from faceclean.learned import jit
-
-        self._kernel = jit.inert if self.inert and jit.available() else None
-        self._consts = tuple(
-            np.ascontiguousarray(a, dtype=np.float64)
-            for a in (self._w_d, self.min_cutoff, self.beta, self._ea, self._k)
-        )
+        # numpy, not numba: a compiled inert step saved ~30 us a frame but cost ~1.8 s to
+        # load in every process (numba's start-up), 30x what it saves on a 2,000-frame take
         self.reset()
 
     def _start(self, x: np.ndarray) -> State:
@@ -327,10 +322,6 @@ class Adaptive(StreamCleaner):
         """The step above with a = a0, k = sigmoid(b0) constants (M,): no core, the same
         numbers (the same operations in the same order on every value that matters)."""
         y, edx = state[0], state[1]  # (S, M) weight, (S, M) weight/s
-        if self._kernel is not None and not self._transient:  # one compiled pass (numba)
-            y_out, edx_out = np.empty_like(x), np.empty_like(x)
-            self._kernel(y, edx, x, dt, DT_MIN, *self._consts, y_out, edx_out)
-            return (y_out, edx_out), y_out
         dt = np.maximum(dt, DT_MIN)  # (S, 1) s
         # alpha(d_cutoff, dt) with 2 pi d_cutoff folded (the same product, rounded alike)
         a_d = 1.0 / (1.0 + 1.0 / (self._w_d * dt))

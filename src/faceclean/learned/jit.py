@@ -141,28 +141,9 @@ def _run(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, xs, dts, out):
         step(dt, zs, cs, top, g, cols, hv, wts, head_t, lo, hi, mode, xs[n : n + 1], out[n : n + 1])
 
 
-def _inert(y, edx, x, dt, dt_min, w_d, min_cutoff, beta, ea, k, y_out, edx_out):
-    """The inert adaptive model's step (learned/adaptive.py ``_advance_inert``) in one
-    pass: y, edx, x (S, M), dt (S, 1) s; w_d = 2 pi d_cutoff, min_cutoff, beta, ea, k (M,).
-    The same operations in the same order, no fast-math: the numpy path's numbers."""
-    S, M = x.shape
-    for s in range(S):
-        d = max(dt[s, 0], dt_min)
-        for m in range(M):
-            xv, yv = x[s, m], y[s, m]
-            a_d = 1.0 / (1.0 + 1.0 / (w_d[m] * d))
-            e = edx[s, m] + a_d * ((xv - yv) / d - edx[s, m])
-            fc = (min_cutoff[m] + beta[m] * abs(e)) * ea[m]
-            p = yv + k[m] * d * e
-            v = p + 1.0 / (1.0 + 1.0 / (2.0 * np.pi * fc * d)) * (xv - p)
-            y_out[s, m] = min(max(v, min(xv, 0.0)), max(xv, 1.0))
-            edx_out[s, m] = e
-
-
 if njit is not None:
     _tanh = njit(fastmath=_FAST, inline="always", cache=True)(_tanh)
     step = njit(fastmath=_FAST, boundscheck=False, nogil=True, cache=True)(_step)
     run = njit(boundscheck=False, nogil=True, cache=True)(_run)
-    inert = njit(boundscheck=False, nogil=True, cache=True)(_inert)
 else:  # pragma: no cover
-    step = run = inert = None
+    step = run = None
