@@ -185,15 +185,16 @@ class TrackerMap(Cleaner):
         xi = np.zeros((s, k))
         xi[:, self._in.have] = x[:, self._in.cols]  # absent inputs read 0
         u = self._u
-        if self.prefilter and advance.any():  # One Euro (filters/one_euro.py), inline
-            h = np.maximum(np.where(advance, dt, 1.0), DT_MIN)[:, None]  # (S, 1) s
+        every = bool(advance.all())  # the usual frame: no merge of old and new rows
+        if self.prefilter and (every or advance.any()):  # One Euro (filters/one_euro.py)
+            h = np.maximum(dt if every else np.where(advance, dt, 1.0), DT_MIN)[:, None]  # s
             edx = self._edx + alpha(self.pre.d_cutoff, h) * ((xi - u) / h - self._edx)
             cut = self.pre.min_cutoff + self.pre.beta * np.abs(edx)
             new = u + alpha(cut, h) * (xi - u)
-            u = np.where(advance[:, None], new, u)
-            self._edx = np.where(advance[:, None], edx, self._edx)
+            u = new if every else np.where(advance[:, None], new, u)
+            self._edx = edx if every else np.where(advance[:, None], edx, self._edx)
         elif not self.prefilter:
-            u = np.where(advance[:, None], xi, u)
+            u = xi if every else np.where(advance[:, None], xi, u)
         if start.any():  # rule 3: the filter restarts from the frame
             u = np.where(start[:, None], xi, u)
             self._edx = np.where(start[:, None], 0.0, self._edx)
@@ -210,7 +211,8 @@ class TrackerMap(Cleaner):
     def _map(self, u: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """(S, K) filtered inputs -> (S, M) outputs; rows not started yet stay NaN."""
         a = self.weights.arrays
-        self._r = np.where(moved[:, None], np.fmin(self._r, u), self._r)  # NaN-aware
+        low = np.fmin(self._r, u)  # NaN-aware: the first frame sets it
+        self._r = low if moved.all() else np.where(moved[:, None], low, self._r)
         lin = u @ a["a"].T + a["c"]
         rest = (u - self._r) if self.rest else None
         if rest is not None:
