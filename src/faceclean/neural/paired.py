@@ -30,8 +30,9 @@ T, STRIDE = 200, 50  # frames per chunk; 200 - 150 overlap
 Report = Callable[[dict[str, Any]], None]
 
 
-def chunks(pairs: Sequence[Pair]) -> Chunks:
-    """Every pair cut into (B, T, 52) chunks (the last one padded, padding not valid)."""
+def chunks(pairs: Sequence[Pair], stride: int = STRIDE) -> Chunks:
+    """Every pair cut into (B, T, 52) chunks ``stride`` frames apart (the last one padded,
+    padding not valid)."""
     parts = []
     for p in pairs:
         x, _ = p.tracked.arkit(ARKIT52)
@@ -41,7 +42,7 @@ def chunks(pairs: Sequence[Pair]) -> Chunks:
         x = _held(x, observed)
         truth_ok = ~np.isnan(y).any(axis=1)
         y = np.nan_to_num(y)
-        for s in range(0, max(len(t) - T, 0) + 1, STRIDE):
+        for s in range(0, max(len(t) - T, 0) + 1, stride):
             n = min(T, len(t) - s)
             sl = slice(s, s + n)
             pad = T - n
@@ -85,14 +86,16 @@ def train_lstm(
     seed: int = 0,
     threads: int = 1,
     report: Report | None = None,
+    stride: int = STRIDE,
 ) -> dict[str, Any]:
-    """Train the paper's LSTM on pairs; the best epoch by validation loss goes to ``out``."""
+    """Train the paper's LSTM on pairs; the best epoch by validation loss goes to ``out``.
+    ``stride``: frames between chunk starts (T: no overlap, a quarter of the work)."""
     report = report or (lambda _e: None)
     torch.set_num_threads(max(1, threads))
     torch.manual_seed(seed)
-    tr = chunks(train)
+    tr = chunks(train, stride)
     tr.truth[..., ARKIT52.index("tongueOut")] = 0.0
-    va = chunks(val) if val else tr
+    va = chunks(val, T) if val else tr
     va.truth[..., ARKIT52.index("tongueOut")] = 0.0
     model = LSTMCleaner(ARKIT52, 1, hidden, layers, 0.3)
     feature_stats(model, tr.noisy, tr.truth, tr.times)
