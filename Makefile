@@ -45,7 +45,7 @@ eval: $(STAMP)
 
 # Rendered faces tracked by MediaPipe (hours on 2 cores; resumable, rerun to continue).
 pairs: $(STAMP)
-	$(BIN)/faceclean pairs --shared --synthetic 24 --held-out window -o $(PAIRS) --jobs 2
+	$(BIN)/faceclean pairs --shared --synthetic 24 --held-out window --rom -o $(PAIRS) --jobs 2
 
 clean-venv:
 	rm -rf $(VENV)
