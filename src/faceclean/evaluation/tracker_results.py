@@ -42,6 +42,19 @@ def markdown(result: dict[str, Any], still: dict[str, Any] | None = None,
                 f"{s['blink_closure']:.2f} | {s['jitter_ratio']:.2f} | {s['lag_ms']:.0f} | "
                 f"{s['pairs']} |"
             )
+    lines += [
+        "",
+        "The rows: *one-euro* is tuned per fold on its training pairs (a 16-point grid, by "
+        "MSE). *calibration + one-euro* measures each test face's levels from its own "
+        "calibration clip (`pairs --rom`: 1 s neutral, then 30 poses taking every channel to "
+        "its full range, same face, light and camera), as `calibrate --rom` does (offset = "
+        "neutral, gain = 1 / (top - neutral), capped at 10), then the fold's One Euro: a "
+        "per-channel gain and offset, which cannot undo MediaPipe's cross-channel mixing. "
+        "*ridge map* is a per-channel ridge linear map over all raw inputs. *paper LSTM on "
+        "pairs* is the paper's derivative LSTM (2 x 128) trained on the fold's pairs on a CPU "
+        "budget: 4 epochs of 200-frame chunks without overlap, best epoch by the inner "
+        "validation source. *tracker map (ours)* is learned/tracker_map.py fitted per fold.",
+    ]
     lines += ["", "MSE per channel group (test split):", ""]
     lines += ["| cleaner | " + " | ".join(GROUPS) + " |", "|---|" + "---|" * len(GROUPS)]
     for name, splits in rows.items():
