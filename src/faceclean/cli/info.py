@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-HELP = "describe an animation file (channels, rate, gaps, ranges) or a calibration file"
+HELP = "describe an animation file (channels, rate, gaps, ranges), a calibration or a model file"
 GAP_FACTOR = 1.5  # a step longer than this many median steps has dropped frames
 SHOWN = 8  # level rules listed before "... and N more"
 
@@ -84,6 +84,10 @@ def run(args: argparse.Namespace) -> int:
 
     if is_level_file(args.file):
         return _levels_file(args)
+    from faceclean.learned.formats import is_model_file
+
+    if is_model_file(args.file):
+        return _model_file(args)
     anim = io.load(args.file)
     facts = describe(anim)
     adjust = Adjust.load(args.calibration) if args.calibration else None
@@ -171,6 +175,37 @@ def _levels_file(args: argparse.Namespace) -> int:
         for name, c in chans.items():
             cols = "".join(f"{c.get(k, float('nan')):>9.4f}" for k in ("neutral", "top", "noise"))
             print(f"{'':<12}{name:<20}{cols}")
+    return 0
+
+
+def _model_file(args: argparse.Namespace) -> int:
+    """``info model.npz``: what a checkpoint is (its format, the method that runs it, its
+    channels) and the facts its trainer stored (what it was trained and validated on)."""
+    from faceclean import strict_json
+    from faceclean.learned.formats import METHODS, read
+
+    config, arrays = read(args.file)
+    fmt = config.get("format")
+    if args.json:
+        print(strict_json.dumps({"file": str(args.file), "config": config}, indent=2))
+        return 0
+    method = METHODS.get(fmt)
+    print(f"{'file':<12}{args.file}")
+    print(f"{'format':<12}{fmt} (a model: --method {method} --model FILE)" if method
+          else f"{'format':<12}{fmt!r}: not a model faceclean runs")  # fmt: skip
+    names = config.get("outputs") or config.get("channels") or config.get("names")
+    if isinstance(names, list):
+        print(f"{'channels':<12}{len(names)}")
+    parameters = sum(int(getattr(a, "size", 0)) for a in arrays.values())
+    print(f"{'parameters':<12}{parameters}")
+    skip = {"format", "inputs", "outputs", "channels", "names"}
+    for key, value in config.items():
+        if key not in skip and isinstance(value, str | int | float | bool | list):
+            text = value
+            if isinstance(value, list):  # at most 8 shown, the rest counted
+                more = f" and {len(value) - 8} more" if len(value) > 8 else ""
+                text = ", ".join(map(str, value[:8])) + more
+            print(f"{'':<12}{key}: {text}")
     return 0
 
 

@@ -64,6 +64,22 @@ def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict]:
     return config, arrays
 
 
+def is_model_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` looks like a checkpoint: a regular .npz file (a zip) holding a
+    ``config`` array and no animation arrays. Reads only the zip's directory."""
+    import zipfile
+
+    p = Path(path)
+    try:
+        if not p.is_file() or p.stat().st_size > MAX_MODEL_BYTES:
+            return False
+        with zipfile.ZipFile(p) as z:
+            names = set(z.namelist())
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+    return "config.npy" in names and "values.npy" not in names
+
+
 def method_of(path: str | os.PathLike) -> str:
     """The method ("lstm", "fc", "gbt") a checkpoint file is for, from its format."""
     config, _ = read(path)
