@@ -63,6 +63,17 @@ class Terminated(BaseException):
     """SIGTERM or SIGHUP, raised where the command is: atomic outputs clean up as on Ctrl-C."""
 
 
+EXIT_GRACE_S = 10  # s a stopped command has to unwind and exit before the kernel ends it
+
+
+def _deadline() -> None:
+    """Once a command is told to stop: if unwinding or the interpreter's exit then hangs
+    (a native library's teardown: MediaPipe's graph, seen once under load), SIGALRM's
+    default action ends the process ``EXIT_GRACE_S`` s later, without needing the GIL."""
+    if hasattr(signal, "alarm") and signal.getsignal(signal.SIGALRM) == signal.SIG_DFL:
+        signal.alarm(EXIT_GRACE_S)
+
+
 @contextlib.contextmanager
 def _command() -> Iterator[None]:
     """One command's scope: the output-path policy (io.paths), SIGTERM as an exception,
@@ -72,6 +83,7 @@ def _command() -> Iterator[None]:
     from faceclean.io import paths
 
     def terminate(signum: int, frame: object) -> None:
+        _deadline()
         raise Terminated
 
     on_main = threading.current_thread() is threading.main_thread()
@@ -106,6 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         print("faceclean: terminated", file=sys.stderr)
         return 143
     except KeyboardInterrupt:
+        _deadline()
         print("faceclean: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
