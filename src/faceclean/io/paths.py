@@ -78,8 +78,6 @@ def target(path: str | os.PathLike) -> Path:
     except OSError as e:
         raise FacecleanError(f"cannot write {p}: {e.strerror or e}") from None
     if st is not None and not stat.S_ISREG(st.st_mode):
-        from faceclean.io.source import kind
-
         raise FacecleanError(
             f"output {p} is {kind(st.st_mode)}: faceclean writes regular files only"
         )
@@ -99,3 +97,17 @@ def distinct(*paths: str | os.PathLike | None) -> None:
         if real in seen:
             raise FacecleanError(f"outputs {seen[real]} and {p} are the same file")
         seen[real] = str(p)
+
+
+def kind(mode: int) -> str:
+    """What a non-regular file is, in words."""
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISDIR, "a folder"),
+    ):
+        if test(mode):
+            return name
+    return "not a regular file"

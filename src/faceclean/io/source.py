@@ -46,6 +46,7 @@ import numpy as np
 from faceclean import strict_json
 from faceclean.errors import FacecleanError
 from faceclean.io import paths
+from faceclean.io.paths import kind
 
 MiB = 1 << 20
 MAX_FILE = 1024 * MiB  # bytes of a file read whole
@@ -76,20 +77,6 @@ def regular(path: str | os.PathLike, what: str = "file") -> os.stat_result:
         raise FacecleanError(f"{p}: {kind(st.st_mode)}, not a regular file")
     paths.note_input(st)  # a command never overwrites what it reads (io.paths)
     return st
-
-
-def kind(mode: int) -> str:
-    """What a non-regular file is, in words."""
-    for test, name in (
-        (stat.S_ISFIFO, "a FIFO"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISSOCK, "a socket"),
-        (stat.S_ISDIR, "a folder"),
-    ):
-        if test(mode):
-            return name
-    return "not a regular file"
 
 
 def open_binary(path: str | os.PathLike, what: str = "file") -> BinaryIO:
