@@ -35,7 +35,7 @@ def _performance(n: int, rng) -> np.ndarray:
 def folder(tmp_path_factory):
     out = tmp_path_factory.mktemp("pairs")
     rng = np.random.default_rng(3)
-    for g in ("a", "b", "c"):
+    for g in ("a", "b", engine.SYNTH_GROUP):
         for k, setting in enumerate(("studio", "webcam", "window")):
             job = engine.Job(f"synth:{k}", g, 0.0, 8.0, seed=k, setting=setting, rate=30.0,
                              webcam=False)  # fmt: skip
@@ -46,8 +46,10 @@ def folder(tmp_path_factory):
             rt, ry = rom.clip(30.0)
             from faceclean import io
 
-            if g != "c":  # fold c has no calibration clips: no calibration row there
+            if g != engine.SYNTH_GROUP:  # a fold without calibration clips: no such row
                 io.save(_tracker(rt, ry, rng), engine.rom_path(out, job, "tracked"), fmt="csv")
+            if g == "a":  # the clip's truth too: a training pair of its own
+                io.save(Animation(rt, ry, ARKIT52), engine.rom_path(out, job, "truth"), fmt="csv")
     return out
 
 
@@ -59,7 +61,7 @@ def result(folder):
 
 
 def test_every_fold_scores_every_row_and_level_rows_beat_the_filters(result):
-    assert sorted(result["folds"]) == ["a", "b", "c"]
+    assert sorted(result["folds"]) == ["a", "b", engine.SYNTH_GROUP]
     overall = result["overall"]
     assert list(overall) == [
         "raw", "one-euro", "calibration + one-euro", "ridge map", "tracker map (ours)"
@@ -72,7 +74,27 @@ def test_every_fold_scores_every_row_and_level_rows_beat_the_filters(result):
     assert overall["raw"]["held"]["pairs"] == 3 and overall["raw"]["test"]["pairs"] == 6
     # a fold whose test pairs lack calibration clips has no calibration row
     assert overall["calibration + one-euro"]["test"]["pairs"] == 4
-    assert not any(k.startswith("calibration") for k in result["folds"]["c"])
+    assert not any(k.startswith("calibration") for k in result["folds"][engine.SYNTH_GROUP])
+    # "real": the synthetic performers' fold left out (2 test pairs a fold for a and b)
+    assert result["real"]["raw"]["test"]["pairs"] == 4
+    assert result["real"]["raw"]["held"]["pairs"] == 2
+
+
+def test_calibration_clips_with_their_truth_train_as_pairs_of_their_own(folder):
+    from faceclean.evaluation import paired
+
+    pairs = paired.load(folder, require_meta=True)
+    with_truth = [p for p in pairs if p.rom_truth is not None]
+    assert sorted({p.group for p in with_truth}) == ["a"] and len(with_truth) == 3
+    both = paired.with_clips(pairs)
+    clips = both[len(pairs) :]
+    assert both[: len(pairs)] == pairs and len(clips) == 3
+    rt, ry = rom.clip(30.0)
+    for clip, p in zip(clips, with_truth, strict=True):
+        assert clip.name == f"{p.name}.rom" and (clip.group, clip.setting) == (p.group, p.setting)
+        assert clip.tracked is p.rom
+        np.testing.assert_allclose(clip.truth.arkit(ARKIT52)[0], ry, atol=1e-6)
+        np.testing.assert_array_equal(clip.truth.times, p.rom.times)
 
 
 def test_the_section_has_the_calibration_row_and_replaces_only_its_own(result):
@@ -80,6 +102,8 @@ def test_the_section_has_the_calibration_row_and_replaces_only_its_own(result):
 
     section = tracker_results.markdown(result)
     assert "| calibration + one-euro | test |" in section
+    assert "Performances from the real ARKit takes" in section  # the real folds' own table
+    assert section.count("| tracker map (ours) | test |") == 2
     page = "# Results\n\nkept\n\n" + tracker_results.BEGIN + "\nOLD-SECTION\n" + tracker_results.END
     new = tracker_results.insert(page, section)
     assert "kept" in new and "OLD-SECTION" not in new and new.count(tracker_results.BEGIN) == 1

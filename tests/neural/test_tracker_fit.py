@@ -80,3 +80,27 @@ def test_train_pairs_writes_a_model_that_cleans(tmp_path):
                         str(model)], capture_output=True, text=True)  # fmt: skip
     assert r.returncode == 2 and "no such folder of pairs" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_train_pairs_trains_on_the_calibration_clips_too(tmp_path):
+    from faceclean.learned.tracker_map import MapWeights
+
+    folder = tmp_path / "pairs"
+    folder.mkdir()
+    frames = 0
+    for k, p in enumerate(pairs(4, 10, lambda y: 0.7 * y + 0.03)):
+        io.save(p.tracked, folder / f"{p.name}.tracked.csv")
+        io.save(p.truth, folder / f"{p.name}.truth.csv")
+        frames += len(p.tracked.times)
+        if k < 3:  # the fourth pair has no clip
+            clip = pairs(1, 100 + k, lambda y: 0.7 * y + 0.03)[0]
+            io.save(clip.tracked, folder / f"{p.name}.rom.tracked.csv")
+            io.save(clip.truth, folder / f"{p.name}.rom.truth.csv")
+            frames += len(clip.tracked.times)
+    model = tmp_path / "m.npz"
+    cli = [sys.executable, "-m", "faceclean", "train", "--pairs", str(folder)]
+    r = subprocess.run([*cli, "--arch", "ridge", "--out", str(model)], capture_output=True,
+                       text=True)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "and 3 calibration clips" in r.stdout
+    assert MapWeights.load(model).config["frames"] == frames  # every pair's and clip's frame

@@ -4,7 +4,9 @@
 linear baseline, ``lstm`` the paper's LSTM. The sources named by ``--val-sources`` (the
 pairs' performance groups; default: the largest one) are held out of fitting and used for
 early stopping and the choice of pre-filter; the render settings named by ``--held-out``
-(default ``window``) are never used. The written model runs with ``--model M.npz``.
+(default ``window``) are never used. A pair's calibration clip (``pairs --rom``: its
+NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its own. The written
+model runs with ``--model M.npz``.
 """
 
 from __future__ import annotations
@@ -40,10 +42,13 @@ def run(args: argparse.Namespace) -> int:
         val_groups = {max(groups, key=lambda g: counts[g])}
     val = [p for p in pairs if p.group in val_groups]
     train = [p for p in pairs if p.group not in val_groups] or val
+    clips = sum(p.rom is not None and p.rom_truth is not None for p in train + val)
     print(
         f"{len(train)} training pairs ({', '.join(sorted({p.group for p in train}))}), "
         f"{len(val)} validation ({', '.join(sorted(val_groups)) or 'none'})"
+        + (f", and {clips} calibration clips" if clips else "")
     )
+    train, val = paired.with_clips(train), paired.with_clips(val)
 
     def report(e: dict) -> None:
         if e.get("event") == "candidate":

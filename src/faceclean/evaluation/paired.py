@@ -7,8 +7,9 @@ A folder of pairs holds, per pair, two takes in any format faceclean reads:
 
 in the folder or in its subfolders (one per performer or session: the pair's group), and
 optionally ``NAME.json`` (``faceclean pairs`` metadata: the performance ``group`` and the
-render ``setting`` that splits use) and ``NAME.rom.tracked.EXT`` (the same face's
-calibration clip, ``faceclean pairs --rom``: a neutral hold, then a range of motion).
+render ``setting`` that splits use) and ``NAME.rom.tracked.EXT`` + ``NAME.rom.truth.EXT``
+(the same face's calibration clip, ``faceclean pairs --rom``: a neutral hold, then a
+range of motion; ``with_clips`` adds the clips to a training set).
 The truth is taken at the tracked take's instants (linear interpolation when a studio's
 takes were sampled apart); frames the tracker lost stay missing. Nothing here imports torch.
 
@@ -50,6 +51,7 @@ class Pair:
     setting: str  # render setting, or "studio-take" for a studio's own pair
     meta: dict = field(default_factory=dict)
     rom: Animation | None = None  # NAME.rom.tracked.*: the same face's calibration clip
+    rom_truth: Animation | None = None  # NAME.rom.truth.*: the clip's weights, at its instants
 
     def arrays(self, inputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(times (N,), x (N, len(inputs)) tracked in ``inputs`` order, y (N, 52) truth)."""
@@ -107,6 +109,11 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
         tracked, truth = io.load(tracked_path), io.load(truth_path)
         rom_path = tracked_path.with_name(tracked_path.name.replace(".tracked.", ".rom.tracked."))
         rom = io.load(rom_path) if rom_path != tracked_path and rom_path.is_file() else None
+        rom_truth = None
+        if rom is not None:
+            clip_truth = rom_path.with_name(rom_path.name.replace(".rom.tracked.", ".rom.truth."))
+            if clip_truth.is_file():
+                rom_truth = aligned(io.load(clip_truth), rom, str(rom_path), same_times=True)
         job = meta.get("job") if isinstance(meta.get("job"), dict) else {}
         same = tracked_path.name.startswith(f"{name}.{ROLES[0][0]}.")  # tracked + truth
         pairs.append(
@@ -118,9 +125,29 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
                 setting=str(job.get("setting", "studio-take")),
                 meta=meta,
                 rom=rom,
+                rom_truth=rom_truth,
             )
         )
     return pairs
+
+
+def with_clips(pairs: Sequence[Pair]) -> list[Pair]:
+    """``pairs``, then each one's calibration clip as a pair of its own (where its truth is
+    there): training data that takes every channel to its full range on the same face, which
+    real performances rarely do (docs/MODEL.md: on the real folds, 0.51x raw -> 0.41x)."""
+    clips = [
+        Pair(
+            name=f"{p.name}.rom",
+            tracked=p.rom,
+            truth=p.rom_truth,
+            group=p.group,
+            setting=p.setting,
+            meta={"clip": True},
+        )  # fmt: skip
+        for p in pairs
+        if p.rom is not None and p.rom_truth is not None
+    ]
+    return [*pairs, *clips]
 
 
 def _meta(path: Path) -> dict:

@@ -31,6 +31,7 @@ from faceclean.timing import resample, stream_times
 
 FORMAT = "faceclean-pair/1"
 SYNTH = "synth:"  # source prefix of a synthetic performer: "synth:SEED"
+SYNTH_GROUP = "synthetic"  # the performance group every synthetic performer is in
 POSE = ("HeadYaw", "HeadPitch", "HeadRoll")
 
 
@@ -76,7 +77,7 @@ def plan(
     for path, group, duration in takes:
         n = max(int(duration // seconds), 1)
         clips += [(path, group, k * seconds, min(seconds, duration)) for k in range(n)]
-    clips += [(f"{SYNTH}{seed * 100_000 + k}", "synthetic", 0.0, seconds) for k in range(synthetic)]
+    clips += [(f"{SYNTH}{seed * 100_000 + k}", SYNTH_GROUP, 0.0, seconds) for k in range(synthetic)]
     jobs = []
     for path, group, start, length in _round_robin(clips):
         drawn = settings[rng.integers(len(settings))]
