@@ -108,6 +108,8 @@ def one_run(take: Path, seconds: float, browser, env: dict, pin: bool) -> dict:
     relay = subprocess.Popen(
         args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
     )
+    if pin:  # the relay (every thread it starts after this) alone on CPU 0
+        os.sched_setaffinity(relay.pid, {0})
     line = relay.stdout.readline()
     tab, result = None, {"page": page}
     viewer = None

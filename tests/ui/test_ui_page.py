@@ -240,6 +240,22 @@ def test_live_page_shows_the_stream_as_it_comes(live):
         tab.page.screenshot(path=os.environ["FACECLEAN_SCREENSHOTS"] + "/ui-live.png")
 
 
+def test_on_software_gl_the_live_view_draws_lighter(live):
+    """SwiftShader (this browser's WebGL) is detected, and the live view's draws are capped
+    (faces 8 a second, curves 15) while frames arrive at 60: it leaves the CPU to the relay."""
+    tab, *_ = live
+    tab.until("window.faceclean.faceDraws > 0")
+    assert tab.js("window.faceclean.softwareGL") is True
+    probe = "[performance.now(), faceclean.faceDraws, faceclean.curveDraws, faceclean.frames]"
+    t0, faces0, curves0, frames0 = tab.js(probe)
+    tab.until(f"window.faceclean.frames > {frames0 + 120}")
+    t1, faces1, curves1, frames1 = tab.js(probe)
+    seconds = (t1 - t0) / 1e3
+    assert faces1 > faces0 and curves1 > curves0  # the view moves
+    assert faces1 - faces0 <= 8 * seconds + 1 and curves1 - curves0 <= 15 * seconds + 1
+    assert frames1 - frames0 > faces1 - faces0  # fewer draws than frames
+
+
 def _sent(take_frames, t: float):
     """The take's frame that ``replay --loop`` sent at sender time t (s): a pass lasts
     the take plus one median frame period."""

@@ -17,14 +17,29 @@ export function decode(b64, Type) {
 // per face, turning it about a neck pivot in glTF's frame: faceclean/pose.py, Euler
 // "YXZ" of pitch, -yaw, -roll), renders counts the frames drawn, heads gives each face's
 // head rotation as a quaternion [x, y, z, w].
-export function faceView(canvas, m, background = 0xe9edf2) {
+// True when WebGL draws on the CPU (SwiftShader, llvmpipe: a machine without a GPU, or a
+// browser that has turned it off): a page beside a live relay then draws lighter.
+export function softwareGL() {
+  const probe = document.createElement("canvas");
+  const gl = probe.getContext("webgl2") || probe.getContext("webgl");
+  if (!gl) return false;
+  const info = gl.getExtension("WEBGL_debug_renderer_info");
+  const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+  gl.getExtension("WEBGL_lose_context")?.loseContext();
+  return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+}
+
+// `light`: for a view that redraws live next to work that needs the CPU (software GL):
+// no multisampling, half a sample a CSS pixel each way (a quarter of the fragments), and
+// light computed per vertex (Lambert) instead of per fragment (physically based).
+export function faceView(canvas, m, background = 0xe9edf2, { light = false } = {}) {
   const base = decode(m.positions, Float32Array); // (V*3) mesh units
   const index = decode(m.indices, Uint32Array);
   const colors = m.colors ? decode(m.colors, Uint8Array) : null;
   const tidx = decode(m.target_index, Uint32Array); // concatenated vertex indices
   const tdel = decode(m.target_delta, Int16Array); // (sum n, 3) deltas / q
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
-  renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: !light, preserveDrawingBuffer: true });
+  renderer.setPixelRatio(light ? 0.5 : Math.min(window.devicePixelRatio || 1, 2));
   renderer.setClearColor(background);
   const scene = new THREE.Scene();
   scene.add(new THREE.HemisphereLight(0xffffff, 0x8d7f78, 1.4));
@@ -44,10 +59,10 @@ export function faceView(canvas, m, background = 0xe9edf2) {
   }
   const size = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
   const centre = [(max[0] + min[0]) / 2, (max[1] + min[1]) / 2, (max[2] + min[2]) / 2];
-  const material = new THREE.MeshStandardMaterial({
-    vertexColors: !!colors, color: colors ? 0xffffff : 0xe8bfa8,
-    roughness: 0.62, metalness: 0.0, side: THREE.DoubleSide,
-  });
+  const look = { vertexColors: !!colors, color: colors ? 0xffffff : 0xe8bfa8, side: THREE.DoubleSide };
+  const material = light
+    ? new THREE.MeshLambertMaterial(look)
+    : new THREE.MeshStandardMaterial({ ...look, roughness: 0.62, metalness: 0.0 });
   // the neck pivot the head turns about: behind the jaw, low in the face's bounding box
   const pivot = [centre[0], min[1] + 0.2 * size[1], centre[2] - 0.15 * size[2]];
   const faces = [];
@@ -67,17 +82,22 @@ export function faceView(canvas, m, background = 0xe9edf2) {
     faces.push({ geometry, pos, weights: null, mesh, holder, facing, head, side });
   }
   const euler = new THREE.Euler(0, 0, 0, "YXZ");
+  const before = new THREE.Quaternion();
+  // false when the head already has that turn
   function turn(face, ypr) {
+    before.copy(face.head);
     if (ypr) face.head.setFromEuler(euler.set(ypr[1], -ypr[0], -ypr[2], "YXZ"));
     else face.head.identity();
     face.holder.quaternion.copy(face.facing).multiply(face.head);
+    return !before.equals(face.head);
   }
   const camera = new THREE.PerspectiveCamera(24, 2, size[1] * 0.05, size[1] * 60);
   let renders = 0;
   const draw = () => { renderer.render(scene, camera); renders++; };
 
+  // false when the face already shows w (nothing to draw)
   function pose(face, w) {
-    if (face.weights && face.weights.every((x, j) => Math.abs(x - w[j]) < 1e-5)) return;
+    if (face.weights && face.weights.every((x, j) => Math.abs(x - w[j]) < 1e-5)) return false;
     face.weights = Array.from(w);
     const p = face.pos;
     p.set(base);
@@ -97,6 +117,7 @@ export function faceView(canvas, m, background = 0xe9edf2) {
     }
     face.geometry.attributes.position.needsUpdate = true;
     face.geometry.computeVertexNormals();
+    return true;
   }
 
   return {
@@ -121,12 +142,14 @@ export function faceView(canvas, m, background = 0xe9edf2) {
       camera.updateProjectionMatrix();
       draw();
     },
+    // poses and draws both faces; draws nothing when neither face changed
     show(weights, heads = null) {
+      let changed = renders === 0;
       faces.forEach((face, k) => {
-        pose(face, weights[k]);
-        turn(face, heads ? heads[k] : null);
+        changed = pose(face, weights[k]) || changed;
+        changed = turn(face, heads ? heads[k] : null) || changed;
       });
-      draw();
+      if (changed) draw();
     },
     get renders() { return renders; },
     get heads() { return faces.map((f) => f.head.toArray()); },

@@ -4,7 +4,7 @@
 // answers with the state, or the CLI's one-line refusal, shown below the controls.
 // Offline: the take arrives as ARKit-52 float32 arrays (binary messages); live: frames
 // arrive aggregated, at most ~30 messages a second.
-import { faceView } from "faceclean/face";
+import { faceView, softwareGL } from "faceclean/face";
 import { drawCurve, STYLE } from "/curves.js";
 
 const $ = (id) => document.getElementById(id);
@@ -12,6 +12,10 @@ const params = new URLSearchParams(location.search);
 const token = params.get("token");
 const LIVE_KEEP = 60; // s of live frames kept for the curves
 const DEFAULT_CURVES = ["jawOpen", "eyeBlinkLeft", "mouthSmileLeft", "browInnerUp"];
+// The live view redraws at most this often (Hz), curves and faces: a screen's worth on a
+// GPU; on software GL every draw costs the CPU a relay on the same machine needs (its
+// p99 latency), so the faces move 8 times a second and the curves 15 (docs/UI.md).
+const LIVE_HZ = { gpu: { curves: 60, faces: 30 }, software: { curves: 15, faces: 8 } };
 // Slider ranges of the known smoothing keys: [lo, hi, log scale?] in the key's units.
 const RANGES = {
   min_cutoff: [0.01, 50, true], beta: [0.001, 100, true], d_cutoff: [0.1, 30, true],
@@ -23,7 +27,7 @@ const LEVELS = { gain: [0, 4, false, 1], offset: [-0.5, 0.5, false, 0], curve: [
 const api = {
   ready: false, mode: null, frames: 0, pushes: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
   state: null, sentSeq: 0, setSeq: 0, stats: null, cleanedSeq: null, fullSeq: null, cleanedParts: 0,
-  calibrating: null, countdown: [],
+  calibrating: null, countdown: [], softwareGL: null, faceDraws: 0, curveDraws: 0,
   get time() { return play.t; },
   get cleaned() { return take.cleaned; }, // (N * 52) float32, offline
   get input() { return take.input; },
@@ -138,7 +142,8 @@ function start(m) {
     api.ready = true;
   }
   meshLoaded.then((mesh) => {
-    face = faceView($("fc-canvas"), mesh);
+    api.softwareGL = softwareGL();
+    face = faceView($("fc-canvas"), mesh, undefined, { light: api.softwareGL });
     new ResizeObserver(() => { face.fit(); redraw(); }).observe($("fc-canvas"));
     face.fit();
     api.faceReady = true;
@@ -388,6 +393,37 @@ function redraw() {
   requestAnimationFrame(() => { pending = false; draw(); });
 }
 
+// fn() at most hz() times a second; a call that comes too soon brings a redraw later, so
+// the last state always shows.
+function throttled(fn, hz) {
+  let at = -Infinity, later = null;
+  return () => {
+    const wait = 1000 / hz() - (performance.now() - at);
+    if (wait > 0) {
+      if (later === null) later = setTimeout(() => { later = null; redraw(); }, wait);
+      return;
+    }
+    at = performance.now();
+    fn();
+  };
+}
+const liveRates = () => LIVE_HZ[api.softwareGL ? "software" : "gpu"];
+const liveCurves = throttled(() => {
+  const t0 = live.tLast - play.span;
+  for (const [j, p] of plots) {
+    const series = [
+      { ...liveSeries(live.x, j), style: STYLE.input },
+      { ...liveSeries(live.y, j), style: STYLE.cleaned },
+    ];
+    drawCurve(p.canvas, series, t0, play.span);
+  }
+  api.curveDraws++;
+}, () => liveRates().curves);
+const liveFaces = throttled(() => {
+  face.show([live.fx, live.fy]);
+  api.faceDraws++;
+}, () => liveRates().faces);
+
 function draw() {
   if (!hello) return;
   if (hello.mode === "offline") {
@@ -402,15 +438,8 @@ function draw() {
     }
     if (face) face.show([weightsAt(take.input), weightsAt(take.cleaned)]);
   } else {
-    const t0 = live.tLast - play.span;
-    for (const [j, p] of plots) {
-      const series = [
-        { ...liveSeries(live.x, j), style: STYLE.input },
-        { ...liveSeries(live.y, j), style: STYLE.cleaned },
-      ];
-      drawCurve(p.canvas, series, t0, play.span);
-    }
-    if (face && live.fx) face.show([live.fx, live.fy]);
+    liveCurves();
+    if (face && live.fx) liveFaces();
   }
 }
 
