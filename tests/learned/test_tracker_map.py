@@ -134,3 +134,35 @@ def test_the_inline_pre_filter_is_one_euro():
     got = TrackerMap(weights=w).clean(anim).values
     want = OneEuro(names=NAMES, min_cutoff=1.5, beta=0.5, d_cutoff=1.0).clean(anim).values
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
+
+
+@pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
+def test_the_usual_frame_path_gives_the_general_paths_numbers(names):
+    """``_usual`` (every stream present and advancing) against the general path, forced, on
+    streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
+    three streams together and one alone."""
+    rng = np.random.default_rng(5)
+    n = 150
+    t = np.cumsum(rng.uniform(0.01, 0.05, (n, 3)), axis=0)
+    t[60, 1] = t[59, 1] - 0.01  # an old time: that stream holds
+    t[90:, 2] += 1.0  # a gap: that stream restarts
+    t[100:, 0] += 1.0  # ... and the one stream stepped alone
+    x = rng.uniform(0, 1, (n, 3, len(names)))
+    x[40, 0] = np.nan  # a lost frame
+    w = weights(hidden=0)
+    for streams in (slice(None), 0):
+        fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
+        general._usual = lambda x, tt: None
+        usual, taken = fast._usual, []
+
+        def counted(x, tt, usual=usual, taken=taken):
+            out = usual(x, tt)
+            taken.append(out is not None)
+            return out
+
+        fast._usual = counted
+        for i in range(n):
+            got = fast.step(x[i, streams], t[i, streams])
+            np.testing.assert_allclose(got, general.step(x[i, streams], t[i, streams]),
+                                       rtol=0, atol=1e-12)  # fmt: skip
+        assert sum(taken) > n * 0.8 and not all(taken)  # both paths ran
