@@ -65,6 +65,27 @@ def test_the_head_node_turns_with_the_take(glb):
     np.testing.assert_allclose(back.channel("jawOpen"), np.linspace(0, 1, N), atol=1e-6)
 
 
+def test_the_head_reads_back_as_head_angles(glb, tmp_path):
+    back = load(glb)
+    assert back.meta["pose_names"] == ["HeadYaw", "HeadPitch", "HeadRoll"]
+    np.testing.assert_allclose(back.meta["pose"], _ypr(), atol=2e-6)  # float32 keys
+    # a GLB to Live Link CSV carries the head; cleaning it moves the angles, not the sign
+    out = tmp_path / "back.csv"
+    assert main(["convert", str(glb), "-o", str(out)]) == 0
+    csv = load(out)
+    names = list(csv.meta["pose_names"])
+    got = csv.meta["pose"][:, [names.index(n) for n in ("HeadYaw", "HeadPitch", "HeadRoll")]]
+    np.testing.assert_allclose(got, _ypr(), atol=2e-6)
+
+
+def test_a_face_without_a_head_node_reads_no_head_angles(tmp_path):
+    out = tmp_path / "plain.glb"
+    from faceclean.io import save
+
+    save(Animation(np.arange(3) / 30, np.zeros((3, 1)), ["jawOpen"]), out)
+    assert "pose" not in load(out).meta
+
+
 def test_a_missing_angle_holds_and_keys_stay_in_one_hemisphere():
     ypr = _ypr()
     pose = np.zeros((N, 9))

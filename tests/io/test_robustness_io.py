@@ -382,6 +382,43 @@ def test_streaming_equals_in_memory_byte_for_byte(tmp_path, monkeypatch, method)
         assert (frames, missing) == (anim.n_frames, int((~anim.valid).sum())), name
 
 
+def test_a_plain_csvs_head_angles_are_angles_streamed_or_not(tmp_path, monkeypatch):
+    """Angle columns (Live Link names, any case) of a plain CSV: read as the take's head
+    pose, not as weights; cleaned by the rotation filter; written after the channels; the
+    stream's bytes equal the in-memory path's, tracking loss included."""
+    from faceclean.filters import rotation
+
+    monkeypatch.setattr(stream, "BLOCK", 7)
+    rng = np.random.default_rng(2)
+    rows = []
+    for i in range(60):
+        yaw = float(0.6 * np.sin(i / 9) + rng.normal(0, 0.01))
+        jaw = "" if i == 17 else repr(float(rng.random()))  # frame 17: tracking loss
+        blink = "" if i == 17 else repr(float(rng.random()))
+        rows.append(f"{i / 60!r},{jaw},{yaw!r},{blink},{-0.5 * yaw!r}")
+    src = tmp_path / "take.csv"
+    src.write_text("time,jawOpen,HeadYaw,eyeBlinkLeft,headpitch\n" + "\n".join(rows) + "\n")
+    anim = io.load(src)
+    assert anim.names == ("jawOpen", "eyeBlinkLeft")
+    assert anim.meta["pose_names"] == ["HeadYaw", "HeadPitch"]
+    assert stream.channel_names(src, "csv") == anim.names
+    assert stream.angle_names(src, "csv") == ("HeadYaw", "HeadPitch")
+    choice = resolve("one-euro")
+    mem, streamed = tmp_path / "mem.csv", tmp_path / "str.csv"
+    io.save(rotation.clean_pose(choice.build(anim.names).clean(anim), choice.build_pose), mem)
+    cleaner, pose = choice.build(anim.names), choice.build_pose(("HeadYaw", "HeadPitch"))
+    cleaner.reset()
+    pose.reset()
+    stream.clean_file(src, streamed, cleaner.step, "csv", pose_step=pose.step)
+    assert mem.read_bytes() == streamed.read_bytes()
+    back = io.load(mem)
+    assert back.names == anim.names and back.meta["pose_names"] == ["HeadYaw", "HeadPitch"]
+    assert back.meta["pose"][17, 0] == anim.meta["pose"][17, 0]  # a lost frame's angle kept
+    moved = np.abs(back.meta["pose"] - anim.meta["pose"]).max()
+    assert 0 < moved < 0.1  # cleaned as angles, not clamped to [0, 1] as weights would be
+    assert (back.meta["pose"][:, 1] < 0).any()
+
+
 def test_iter_lines_matches_splitlines():
     import io as stdio
 

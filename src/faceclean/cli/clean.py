@@ -136,7 +136,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
                 cleaner = Adjusted(cleaner, adjust, names)
             guard = None if args.scale is not None else (names, input)
             pose = None
-            if fmt_in == "livelink" and (angles := stream.angle_names(src)):
+            if angles := stream.angle_names(src, fmt_in):
                 pose = choice.build_pose(angles)
             frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard, pose)
             return _line(output, frames, missing, names, what, adjust, choice, pose)

@@ -113,7 +113,45 @@ def _read(
     )
     values = keys[:, 1 if k == 3 else 0, :]
     meta = {"format": "gltf", "gltf": source, "interpolation": sampler.interpolation or "LINEAR"}
+    pose = _head_pose(model, buffers, anim, channel.target.node, times)
+    if pose is not None:
+        meta.update(pose=pose, pose_names=list(HEAD))
     return Animation(times, values, names, meta)
+
+
+HEAD = ("HeadYaw", "HeadPitch", "HeadRoll")  # the angles a head node's rotation reads as
+
+
+def _head_pose(
+    model: pygltflib.GLTF2, buffers: tuple[bytes, ...], anim: Any, face: int, times: np.ndarray
+) -> np.ndarray | None:
+    """(N, 3) yaw, pitch, roll rad at ``times`` from the rotation channel of a node named
+    ``head`` above the animated face (what gltf_take writes: docs/FORMATS.md), or None.
+    Keys at other times are sampled by normalised linear interpolation, held at the ends."""
+    from faceclean.pose import unity_angles
+
+    parent = {c: i for i, n in enumerate(model.nodes) for c in (n.children or [])}
+    above, node = set(), face
+    while node in parent and len(above) < len(model.nodes):  # (a cycle cannot loop)
+        node = parent[node]
+        above.add(node)
+    for ch in anim.channels:
+        node = ch.target.node if ch.target is not None else None
+        if ch.target.path != "rotation" or node not in above:
+            continue
+        if str(model.nodes[node].name or "").lower() != "head":
+            continue
+        sampler = anim.samplers[ch.sampler]
+        t = accessor(model, buffers, sampler.input)[:, 0]
+        q = accessor(model, buffers, sampler.output, normalized=True)
+        step = 3 if sampler.interpolation == pygltflib.ANIM_CUBICSPLINE else 1
+        q = q[1::3] if step == 3 else q  # the values between the tangents
+        if q.shape != (len(t), 4) or not len(t) or not np.all(np.diff(t) > 0):
+            raise FacecleanError("the head node's rotation keys do not match their times")
+        if not np.array_equal(t, times):
+            q = np.stack([np.interp(times, t, q[:, j]) for j in range(4)], axis=1)
+        return unity_angles(q * np.array([1.0, -1.0, -1.0, 1.0]))  # glTF -> Unity frame
+    return None
 
 
 WRITE_NEEDS_PATH = True  # io.save passes the target path: its suffix picks GLB or .gltf

@@ -5,7 +5,11 @@ endings. Numbers are written with Python's ``repr(float)`` (the shortest text th
 back to the same float64), so a write-read round trip is exact. An empty cell is NaN; a
 missing frame (tracking loss) is a row whose channel cells are all empty. On read, the
 ``time`` column may sit anywhere (matched case-insensitively); every other column is a
-channel, ARKit or not (unknown names pass through as channels).
+channel, ARKit or not (unknown names pass through as channels), except head and eye
+angles: a column named as Live Link names them (``HeadYaw``, ``leftEyePitch``, any case;
+radians) is an angle, kept in ``meta["pose"]`` with ``meta["pose_names"]`` (Live Link
+spelling), cleaned by the rotation filter rather than as a weight, and written back after
+the channels. A file of angles alone keeps them as channels (there is nothing else).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from typing import BinaryIO
 import numpy as np
 
 from faceclean.animation import Animation
+from faceclean.channels import pose_name
 from faceclean.errors import FacecleanError
 from faceclean.io import source
 
@@ -41,7 +46,20 @@ def read(path: str | os.PathLike) -> Animation:
         raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
     t_col, names = parse_header(lines[0])
     times, values, _ = parse_rows(lines[1:], 0, t_col, len(names) + 1, p.name)
-    return Animation(times, values, names, {"format": "csv"})
+    angles = angle_columns(names)
+    meta: dict = {"format": "csv"}
+    if len(angles):
+        meta.update(pose=values[:, angles], pose_names=[pose_name(names[j]) for j in angles])
+        keep = [j for j in range(len(names)) if j not in set(angles.tolist())]
+        names, values = tuple(names[j] for j in keep), values[:, keep]
+    return Animation(times, values, names, meta)
+
+
+def angle_columns(names: tuple[str, ...]) -> np.ndarray:
+    """Indices into ``names`` of the head/eye angle columns (none when nothing else is
+    there: a file of angles alone keeps them as its channels)."""
+    angles = np.array([j for j, n in enumerate(names) if pose_name(n) is not None], int)
+    return angles if len(angles) < len(names) else np.zeros(0, int)
 
 
 def parse_header(line: bytes) -> tuple[int, tuple[str, ...]]:
@@ -77,9 +95,15 @@ def parse_rows(
 
 
 def write(anim: Animation, f: BinaryIO) -> None:
-    """Write ``time`` and every channel, repr-exact; NaN as an empty cell."""
-    f.write(header_text(anim.names))
-    f.write(rows_text(anim.times, anim.values))
+    """Write ``time``, every channel, then the head/eye angles (``meta["pose"]``, when
+    the take has them), repr-exact; NaN as an empty cell."""
+    pose, pose_names = anim.meta.get("pose"), list(anim.meta.get("pose_names", ()))
+    if pose is None or not pose_names:
+        f.write(header_text(anim.names))
+        f.write(rows_text(anim.times, anim.values))
+        return
+    f.write(header_text((*anim.names, *(str(n) for n in pose_names))))
+    f.write(rows_text(anim.times, np.concatenate([anim.values, np.asarray(pose, float)], 1)))
 
 
 def header_text(names: tuple[str, ...]) -> bytes:

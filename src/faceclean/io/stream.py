@@ -61,16 +61,21 @@ def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
         head = plain_csv.header_line(first)
         if not plain_csv.sniff(head):
             raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
-        return plain_csv.parse_header(head)[1]
+        names = plain_csv.parse_header(head)[1]
+        angles = set(plain_csv.angle_columns(names).tolist())
+        return tuple(n for j, n in enumerate(names) if j not in angles)
     except UnicodeDecodeError as e:
         raise FacecleanError(f"{p.name}: header is not UTF-8 ({e})") from None
 
 
-def angle_names(path: str | os.PathLike) -> tuple[str, ...]:
-    """The head/eye angle columns of a Live Link file (Live Link spelling, file order)."""
+def angle_names(path: str | os.PathLike, fmt: str = "livelink") -> tuple[str, ...]:
+    """The head/eye angle columns of a row-format file (Live Link spelling, file order)."""
     p = Path(path)
     with source.open_binary(p) as f:
         first = next(iter_lines(f), b"")
+    if fmt == "csv":
+        names = plain_csv.parse_header(plain_csv.header_line(first))[1]
+        return tuple(pose_name(names[j]) for j in plain_csv.angle_columns(names))
     head = livelink_csv.parse_header(first, p.name)
     return tuple(n for j in head.pose_cols if (n := pose_name(head.fields[j])) is not None)
 
@@ -100,7 +105,7 @@ def clean_file(
         try:
             if fmt == "livelink":
                 return _livelink(p.name, _counted(f, progress), out, rows, pose)
-            return _plain(p.name, _counted(f, progress), out, rows)
+            return _plain(p.name, _counted(f, progress), out, rows, pose)
         except UnicodeDecodeError as e:
             raise FacecleanError(f"{p.name}: not UTF-8 text ({e})") from None
 
@@ -235,18 +240,34 @@ def _decimals(sample: list[np.ndarray]) -> int:
     return livelink_csv.decimals_of(table[: livelink_csv.DECIMALS_SAMPLE])
 
 
-def _plain(name: str, blocks: Iterator[list[bytes]], out: BinaryIO, clean_rows: _Rows):
+def _plain(
+    name: str,
+    blocks: Iterator[list[bytes]],
+    out: BinaryIO,
+    clean_rows: _Rows,
+    clean_pose: _Rows | None = None,
+):
     first = next(blocks, None)
     head = plain_csv.header_line(first[0]) if first else b""
     if not first or not plain_csv.sniff(head):
         raise FacecleanError(f"{name}: not a plain CSV (no 'time' column in the header)")
     t_col, names = plain_csv.parse_header(head)
-    out.write(plain_csv.header_text(names))
+    angles = plain_csv.angle_columns(names)  # written after the channels, as io.save does
+    cols = np.array([j for j in range(len(names)) if j not in set(angles.tolist())], int)
+    order = (*(names[j] for j in cols), *(pose_name(names[j]) for j in angles))
+    out.write(plain_csv.header_text(order))
     done = frames = missing = 0
     for lines in _chain([first[1:]], blocks):
         stripped = [line.rstrip(b"\r\n") for line in lines]
-        times, values, done = plain_csv.parse_rows(stripped, done, t_col, len(names) + 1, name)
+        times, table, done = plain_csv.parse_rows(stripped, done, t_col, len(names) + 1, name)
+        values = table[:, cols]
         new = clean_rows(times, values)
+        if len(angles):
+            pose = table[:, angles]  # (R, A) rad
+            if clean_pose is not None:  # tracking loss: missing to the filter, kept as read
+                seen = ~np.all(np.isnan(values), axis=1)[:, None]
+                pose = np.where(seen, clean_pose(times, np.where(seen, pose, np.nan)), pose)
+            new = np.concatenate([new, pose], axis=1)
         out.write(plain_csv.rows_text(times, new))
         frames += len(times)
         missing += int(np.all(np.isnan(values), axis=1).sum()) if values.shape[1] else 0
