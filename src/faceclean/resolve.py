@@ -160,11 +160,14 @@ def resolve(
     settings: Iterable[str] | Mapping[str, Any] = (),
     *,
     backend: str | None = None,
+    pose_preset: str | os.PathLike | None = None,
 ) -> Choice:
     """The cleaner ``words`` name (module docstring), with ``settings`` applied.
 
     backend: "numpy" (the torch-free runtime) or "onnx" (ONNX Runtime) for learned
-    models; None: numpy for .npz, onnx for .onnx.
+    models; None: numpy for .npz, onnx for .onnx. ``pose_preset``: a ``rotation`` preset
+    (``faceclean tune --method rotation``) for the head/eye angles instead of the shipped
+    one; the ``head.*``/``eyes.*`` settings go on top of it.
     """
     if backend is not None and backend not in BACKENDS:
         raise FacecleanError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
@@ -201,7 +204,8 @@ def resolve(
                 f"{pattern}.{key}: {key} is neither a per-channel setting of "
                 f"{choice.method} nor one of the rotation filter's ({', '.join(_POSE_KEYS)})"
             )
-    pose, pose_source = pose_factory(pose_items + [it for it in shared if it[1] in _POSE_KEYS])
+    pose_items += [it for it in shared if it[1] in _POSE_KEYS]
+    pose, pose_source = pose_factory(pose_items, pose_preset)
     return dataclasses.replace(choice, levels=levels, pose=pose, pose_source=pose_source)
 
 
@@ -225,13 +229,21 @@ def _split_pose(items: list[Item]) -> tuple[list[Item], list[Item], list[Item]]:
     return blend, shared, pose
 
 
-def pose_factory(items: list[Item]) -> tuple[Factory, str]:
-    """The head/eye angles' cleaner: the shipped tuned ``rotation`` preset with ``items``
-    (pattern, key, value) on top; (factory(names), how to name it)."""
+def pose_factory(items: list[Item], preset: str | os.PathLike | None = None) -> tuple[Factory, str]:
+    """The head/eye angles' cleaner: ``preset`` (a rotation preset; default the shipped
+    tuned one) with ``items`` (pattern, key, value) on top; (factory(names), its name)."""
     from faceclean.filters import presets
     from faceclean.filters.rotation import Rotation, pose_matches
 
-    doc = presets.read("rotation") if "rotation" in presets.shipped() else None
+    if preset is not None:
+        doc = presets.read(preset)
+        if doc["method"] != "rotation":
+            raise FacecleanError(
+                f"{preset}: a {doc['method']} preset, not one for head and eye angles "
+                "(faceclean tune --method rotation makes those)"
+            )
+    else:
+        doc = presets.read("rotation") if "rotation" in presets.shipped() else None
     for pattern, key, value in items:
         if key not in Rotation.PER_CHANNEL:
             raise FacecleanError(
@@ -252,6 +264,7 @@ def pose_factory(items: list[Item]) -> tuple[Factory, str]:
 
     factory(POSE)  # bad values fail now, with the parameter's reason
     what = "rotation (tuned preset)" if doc else "rotation (defaults)"
+    what = f"rotation (preset {preset})" if preset is not None else what
     return factory, _shown(what, items)
 
 

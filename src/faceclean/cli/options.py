@@ -17,6 +17,8 @@ choosing the cleaner (one of --method, --model, --preset; default: the shipped m
   --method lstm | fc | gbt          a shipped learned model
   --model my.npz | my.onnx          a learned model file (also --method my.npz)
   --preset tuned.json | one-euro    a preset file from 'faceclean tune', or a shipped one
+                                    (a rotation preset, 'tune --method rotation', is the
+                                    head and eye angles' and goes with --method/--model)
   --tracker mediapipe               the cleaner shipped for MediaPipe's output (levels too)
 settings (--set, repeatable; values: true/false, numbers, JSON lists, else text):
   --set min_cutoff=2                one setting for every channel; the rest of a tuned
@@ -81,11 +83,25 @@ def calibration(args: argparse.Namespace):
     return Adjust.load(path) if path else None
 
 
+def pose_preset(args: argparse.Namespace) -> str | None:
+    """--preset when it names a rotation preset (head and eye angles, ``tune --method
+    rotation``): it goes with the blendshapes' own --method/--model, not instead of them."""
+    from faceclean.filters import presets
+
+    preset = getattr(args, "preset", None)
+    if not preset or not (str(preset).lower().endswith(".json") or preset == "rotation"):
+        return None
+    return preset if presets.read(preset)["method"] == "rotation" else None
+
+
 def words(args: argparse.Namespace) -> str | None:
-    """What --method/--model/--preset name (None: the shipped default)."""
+    """What --method/--model/--preset name (None: the shipped default); a rotation
+    --preset names the angles' cleaner (``pose_preset``), not this one."""
     from faceclean.errors import FacecleanError
 
     given = [o for o in ("method", "model", "preset") if getattr(args, o, None)]
+    if "preset" in given and pose_preset(args) is not None:
+        given.remove("preset")
     if len(given) > 1:
         if "model" in given:
             raise FacecleanError("--model is the cleaner: give it without --method/--preset")
@@ -104,4 +120,4 @@ def choice(args: argparse.Namespace) -> Choice:
     """The cleaner the options name, settings applied (faceclean.resolve)."""
     from faceclean.resolve import resolve
 
-    return resolve(words(args), args.params)
+    return resolve(words(args), args.params, pose_preset=pose_preset(args))

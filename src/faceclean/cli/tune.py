@@ -4,6 +4,11 @@ Searches a classical cleaner's parameters so that cleaning NOISY comes closest (
 CLEAN, globally or per channel group, and saves a preset that ``clean --preset`` loads.
 Several NOISY/CLEAN pairs may be given, in the same order. The files may be in any
 readable format and at different instants: CLEAN is interpolated at NOISY's times.
+
+``--method rotation`` tunes the head and eye angles' filter instead, on the takes' angles
+(Live Link's 9, or a plain CSV's angle columns; per group: head, eyes), the angles of a
+tracking-loss frame missing as ``clean`` treats them; its preset goes to ``clean
+--preset`` beside the blendshapes' own ``--method``/``--model``.
 """
 
 from __future__ import annotations
@@ -19,7 +24,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--truth", metavar="CLEAN", nargs="+", required=True, help="clean file(s), same order"
     )
-    p.add_argument("--method", default="one-euro", help="ema, one-euro, kalman, gaussian, savgol")
+    p.add_argument(
+        "--method",
+        default="one-euro",
+        help="ema, one-euro, kalman, gaussian, savgol; rotation: the head and eye angles",
+    )
     p.add_argument("--per-group", action="store_true", help="tune each channel group apart")
     p.add_argument("-o", "--output", metavar="PRESET", required=True, help="preset JSON to write")
 
@@ -41,8 +50,10 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(f"{args.output}: a preset is a .json file")
     pairs = []
     for n, c in zip(args.noisy, args.truth, strict=True):
-        noisy = io.load(n)
-        pairs.append((noisy, tune.align(noisy, io.load(c))))
+        noisy, truth = io.load(n), io.load(c)
+        if args.method == "rotation":  # the head and eye angles, not the blendshapes
+            noisy, truth = angles(noisy, n), angles(truth, c)
+        pairs.append((noisy, tune.align(noisy, truth)))
     io.check_output(args.output, "json")  # refused now (e.g. it names the truth), not after
     bar = tqdm(
         total=1 + tune.REFINE, desc="tuning", unit="pass", file=sys.stderr, leave=False, delay=1.0
@@ -67,3 +78,23 @@ def run(args: argparse.Namespace) -> int:
         print(f"{unit:<12} {result.raw_mse[unit]:>10.3g} {result.mse[unit]:>10.3g}  {text}")
     print(f"wrote {args.output} ({args.method}{', per group' if args.per_group else ''})")
     return 0
+
+
+def angles(anim, label: str):
+    """The take's head/eye angles (rad) as an animation of their own; a tracking-loss
+    frame's angles missing (as ``clean`` steps them)."""
+    import numpy as np
+
+    from faceclean.animation import Animation
+    from faceclean.errors import FacecleanError
+    from faceclean.filters.rotation import pose_columns
+
+    cols, names = pose_columns(anim)
+    if not cols:
+        raise FacecleanError(
+            f"{label}: no head or eye angles (HeadYaw, LeftEyePitch, ...) to tune the rotation "
+            "filter on"
+        )
+    a = np.array(anim.meta["pose"], dtype=np.float64)[:, cols]
+    a[~anim.valid] = np.nan
+    return Animation(anim.times, a, names)
