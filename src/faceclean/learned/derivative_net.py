@@ -153,7 +153,8 @@ class _DerivativeNet(StreamCleaner):
         for k in range(1, K + 1):  # backward differences ending at the new frame
             d = (d_new[k - 1] - d_old[k - 1]) / dt  # finite inputs: at worst +-inf
             d_new.append(_clip(d, -BIG, BIG))  # finite for any dt
-        feats = np.stack([d_new[0], *d_new[1:], *d_old[1:]], axis=-1)  # (S, M, 1 + 2K)
+        # (S, M, 1 + 2K), a view of the feature-major (S, 1 + 2K, M) FC reads without a copy
+        feats = np.stack([d_new[0], *d_new[1:], *d_old[1:]], axis=1).transpose(0, 2, 1)
         if self._record is not None:
             self._record.append(feats)
             self._ages.append(age.copy())
@@ -238,16 +239,31 @@ class FullyConnected(_DerivativeNet):
         # products are memory-bound for one stream); features and output stay float64
         self._w = [np.ascontiguousarray(a[f"fc.{i}.w"].astype(np.float32).T) for i in range(n)]
         self._b = [a[f"fc.{i}.b"].astype(np.float32) for i in range(n)]
-        self._fm, self._fs = a["feat_mean"].astype(np.float64), a["feat_std"].astype(np.float64)
+        fm, fs = a["feat_mean"].astype(np.float64), a["feat_std"].astype(np.float64)
         self._om, self._os = a["out_mean"].astype(np.float64), a["out_std"].astype(np.float64)
+        # The scaling folded into layer 0 (one pass over the features, not three):
+        #   clip((f - fm) / fs, -c, c) W0 = clip(f, fm - c fs, fm + c fs) (W0 / fs) - (fm / fs) W0
+        self._feat_scaling = (fm, fs)  # as stored (the float64 reference of the tests)
+        self._fold_scaling()
+
+    def _fold_scaling(self) -> None:
+        fm, fs = self._feat_scaling
+        w0 = self._w[0].astype(np.float64)  # (F M, H)
+        self._w0 = np.ascontiguousarray(w0 / fs[:, None]).astype(np.float32)
+        self._b0 = (self._b[0] - (fm / fs) @ w0).astype(np.float32)
+        self._lo, self._hi = None, None  # the clip bounds, set once the config is known
 
     def predict(self, feats: np.ndarray) -> np.ndarray:
         n, m, f = feats.shape
-        h = (feats.transpose(0, 2, 1).reshape(n, f * m) - self._fm) / self._fs  # feature-major
-        clip = float(self.config.get("feat_clip", np.inf))  # scaled features kept in +-clip
-        h = _clip(h, -clip, clip).astype(np.float32)
-        for i, (w, b) in enumerate(zip(self._w, self._b, strict=True)):  # w (in, out)
-            h = h @ w
+        if self._lo is None:
+            (fm, fs), c = self._feat_scaling, float(self.config.get("feat_clip", np.inf))
+            self._lo, self._hi = (fm - c * fs).astype(np.float32), (fm + c * fs).astype(np.float32)
+        x = feats.transpose(0, 2, 1).reshape(n, f * m)  # feature-major: a view from _advance
+        h = np.maximum(x, self._lo, out=np.empty((n, f * m), np.float32), casting="same_kind")
+        np.minimum(h, self._hi, out=h)  # raw features kept where their scaled form is +-clip
+        for i, (w, b) in enumerate(zip((self._w0, *self._w[1:]), (self._b0, *self._b[1:]),
+                                       strict=True)):  # fmt: skip
+            h = h @ w  # w (in, out)
             h += b
             if i < len(self._w) - 1:
                 np.maximum(h, 0.0, out=h)

@@ -193,7 +193,7 @@ class DerivativeReference:
                     lin.bias.copy_(torch.from_numpy(b))
                 layers += [lin] + ([nn.ReLU()] if i < len(cleaner._w) - 1 else [])
             self.mlp = nn.Sequential(*layers)
-            self.fm, self.fs = t64(cleaner._fm), t64(cleaner._fs)
+            self.fm, self.fs = (t64(a) for a in cleaner._feat_scaling)
             self.om, self.os = t64(cleaner._om), t64(cleaner._os)
             self.clip = float(cleaner.config.get("feat_clip", np.inf))
         self.state: tuple | None = None
