@@ -150,6 +150,13 @@ def with_clips(pairs: Sequence[Pair]) -> list[Pair]:
     return [*pairs, *clips]
 
 
+def performances(pairs: Sequence[Pair]) -> list[Pair]:
+    """``pairs`` without the calibration clips ``with_clips`` added: what a validation set
+    scores choices on (a clip's poses are training data; its large, isolated moves would
+    hide a candidate's jitter on a performance)."""
+    return [p for p in pairs if not p.meta.get("clip")]
+
+
 def _meta(path: Path) -> dict:
     """A pair's ``NAME.json``: a ``faceclean-pair/1`` object, else one line."""
     from faceclean.io.source import read_json

@@ -19,7 +19,7 @@ import torch
 
 from faceclean.channels import ARKIT52
 from faceclean.evaluation.dataset import Chunks, batches, concat
-from faceclean.evaluation.paired import Pair
+from faceclean.evaluation.paired import Pair, performances
 from faceclean.face.pairs import load_face
 from faceclean.neural import checkpoint
 from faceclean.neural.losses import Loss, Weights
@@ -95,7 +95,7 @@ def train_lstm(
     torch.manual_seed(seed)
     tr = chunks(train, stride)
     tr.truth[..., ARKIT52.index("tongueOut")] = 0.0
-    va = chunks(val, T) if val else tr
+    va = chunks(performances(val), T) if performances(val) else tr  # not on clips
     va.truth[..., ARKIT52.index("tongueOut")] = 0.0
     model = LSTMCleaner(ARKIT52, 1, hidden, layers, 0.3)
     feature_stats(model, tr.noisy, tr.truth, tr.times)

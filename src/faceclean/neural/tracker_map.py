@@ -18,14 +18,14 @@ import numpy as np
 import torch
 
 from faceclean.channels import ARKIT52
-from faceclean.evaluation.paired import Pair
+from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.tracker_map import MapWeights
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter)
 PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
-    None, (4.0, 1.0, 1.0), (2.0, 0.5, 1.0), (1.0, 0.3, 1.0))  # fmt: skip
+    None, (8.0, 1.0, 1.0), (6.0, 0.5, 1.0), (4.0, 1.0, 1.0), (2.0, 0.5, 1.0), (1.0, 0.3, 1.0))  # fmt: skip
 LAMBDAS = (1e-2, 1e-1, 3e-1, 1.0)  # ridge shrinkage, relative to the inputs' mean square
 LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
@@ -133,7 +133,7 @@ def fit_ridge(
     names = channels(train)
     w = blank(names, 0, LIGHT, rest=False, prefilter=False)
     feats = features(w, train)
-    vfeats = features(w, val) if val else feats
+    vfeats = features(w, performances(val)) if performances(val) else feats
     z, y = _stack(feats, False)
     best = None
     for lam in lams:
@@ -170,7 +170,7 @@ def fit(
     for pre in prefilters:
         w = blank(names, hidden, pre or LIGHT, rest, prefilter=pre is not None)
         feats = features(w, train)
-        vfeats = features(w, val) if val else feats
+        vfeats = features(w, performances(val)) if performances(val) else feats
         z, y = _stack(feats, rest)
         for lam in lams:
             _set_linear(w, *ridge(z, y, lam))
