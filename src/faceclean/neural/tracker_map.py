@@ -25,7 +25,8 @@ from faceclean.learned.tracker_map import MapWeights
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter)
 PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
-    None, (8.0, 1.0, 1.0), (6.0, 0.5, 1.0), (4.0, 1.0, 1.0), (2.0, 0.5, 1.0), (1.0, 0.3, 1.0))  # fmt: skip
+    None, (8.0, 1.0, 1.0), (6.0, 0.5, 1.0), (4.0, 1.0, 1.0), (2.0, 0.5, 1.0),
+    (1.0, 0.3, 1.0))  # fmt: skip
 LAMBDAS = (1e-2, 1e-1, 3e-1, 1.0)  # ridge shrinkage, relative to the inputs' mean square
 LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
