@@ -27,7 +27,7 @@ const LEVELS = { gain: [0, 4, false, 1], offset: [-0.5, 0.5, false, 0], curve: [
 const api = {
   ready: false, mode: null, frames: 0, pushes: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
   state: null, sentSeq: 0, setSeq: 0, stats: null, cleanedSeq: null, fullSeq: null, cleanedParts: 0,
-  calibrating: null, countdown: [], softwareGL: null, faceDraws: 0, curveDraws: 0,
+  calibrating: null, countdown: [], softwareGL: null, faceDraws: 0, curveDraws: 0, firstFaceMs: null,
   get time() { return play.t; },
   get cleaned() { return take.cleaned; }, // (N * 52) float32, offline
   get input() { return take.input; },
@@ -422,6 +422,7 @@ const liveCurves = throttled(() => {
 const liveFaces = throttled(() => {
   face.show([live.fx, live.fy]);
   api.faceDraws++;
+  if (api.firstFaceMs === null) api.firstFaceMs = performance.now(); // ms from the page's start
 }, () => liveRates().faces);
 
 function draw() {
