@@ -223,7 +223,7 @@ def test_subprocess_entry_point(tmp_path):
 
 def test_progress_path_equals_batch_clean():
     from faceclean.animation import Animation
-    from faceclean.cli.clean import PROGRESS_FRAMES, clean_with_progress
+    from faceclean.cli.clean_take import PROGRESS_FRAMES, clean_with_progress
     from faceclean.resolve import resolve
 
     if not _have("one-euro"):

@@ -27,7 +27,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean import workers
     from faceclean.channels import ARKIT52
     from faceclean.cli import options
-    from faceclean.cli.clean import build_cleaner, build_levels
+    from faceclean.cli.clean_take import build_cleaner, build_levels
 
     workers.count(args.jobs, None)  # --jobs 0: refused before anything is read
     if args.fmt is not None:
@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     build_levels(args, choice, ARKIT52)
     jobs = plan(args.input, args.output)
     if not args.in_place:
-        from faceclean.cli.clean import same_file
+        from faceclean.cli.clean_take import same_file
 
         onto = [job for job in jobs if same_file(job.src, job.dst)]
         if onto:
@@ -83,7 +83,7 @@ def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:
     """(True, the written line) or (False, why); never raises for a bad file."""
     import os
 
-    from faceclean.cli.clean import clean_one
+    from faceclean.cli.clean_take import clean_one
 
     made = []  # output folders made for this file, removed again if it fails
     folder = job.dst.parent

@@ -1,0 +1,181 @@
+"""One take through ``faceclean clean``: ``clean_one(args, IN, OUT)`` and the pieces a batch
+shares with it (the cleaner and the levels the options name, the same-file check). The
+command's options and its batch mode are cli/clean.py's and cli/clean_batch.py's; both
+come here for a take.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import TYPE_CHECKING
+
+from faceclean.cli import options
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from faceclean.animation import Animation
+    from faceclean.filters.base import Cleaner
+    from faceclean.resolve import Choice
+
+PROGRESS_FRAMES = 5000  # show a progress bar from this many frames on
+PROGRESS_BYTES = 8 << 20  # ... or, when streaming a file, from this many bytes on
+
+
+def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool = True) -> str:
+    """Clean one file as the options ask; the line that says what was written."""
+    from pathlib import Path
+
+    from faceclean import io
+    from faceclean.adjust import Adjusted, check_range
+    from faceclean.errors import FacecleanError
+    from faceclean.filters import rotation
+    from faceclean.io import stream
+
+    choice = options.choice(args)
+    src = Path(input)
+    if same_file(src, output):
+        if not getattr(args, "in_place", False):
+            raise FacecleanError(
+                f"-o {output} is the input {input}: a raw take is never overwritten; "
+                "name another file, or add --in-place to replace it"
+            )
+        io.paths.rewritable(src)  # --in-place: replaces IN atomically, once complete
+    fmt_in = io.detect(src) if src.is_file() else None
+    fmt_out = io.output_format(output, fmt_in, args.fmt) if fmt_in in stream.FORMATS else None
+    if stream.can_stream(fmt_in, fmt_out):
+        names = stream.channel_names(src, fmt_in)
+        cleaner, what = build_cleaner(choice, names)
+        if names and cleaner.stepwise:
+            adjust = build_levels(args, choice, names)
+            if not adjust.is_identity:
+                cleaner = Adjusted(cleaner, adjust, names)
+            guard = None if args.scale is not None else (names, input)
+            pose = None
+            if angles := stream.angle_names(src, fmt_in):
+                pose = choice.build_pose(angles)
+            frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard, pose)
+            return _line(output, frames, missing, names, what, adjust, choice, pose)
+    anim = io.load(src)
+    if args.scale is None:  # the same judgement as the stream's, block by block
+        for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
+            check_range(anim.values[a : a + stream.BLOCK], anim.names, input)
+    cleaner, what = build_cleaner(choice, anim.names)
+    adjust = build_levels(args, choice, anim.names)
+    mapped = anim.with_values(adjust.apply(anim.values, anim.names))
+    cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
+    cleaned = rotation.clean_pose(cleaned, choice.build_pose)
+    io.save(cleaned, output, fmt=args.fmt)
+    angles = rotation.pose_columns(anim)[1]
+    missing = int((~anim.valid).sum())
+    return _line(output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether paths a and b name one existing file (``./``, symlinks, hard links)."""
+    import os
+
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either one missing: not the same file
+        return False
+
+
+def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...]):
+    """The level mapping: ``--calibration``, then the ``--set`` level items on top."""
+    from faceclean.adjust import Adjust
+
+    base = options.calibration(args) or Adjust()
+    levels = base.merged(choice.adjust(names))
+    scale = getattr(args, "scale", None)
+    return levels if scale is None else levels.scaled(scale)
+
+
+def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Cleaner, str]:
+    """The cleaner the options chose, for these channels, and how to name it."""
+    return choice.build(names), choice.source
+
+
+def _line(
+    out: str,
+    frames: int,
+    missing: int,
+    names: tuple[str, ...],
+    what: str,
+    adjust,
+    choice: Choice,
+    angles=None,
+) -> str:
+    n = 0 if adjust.is_identity else len(adjust.levels(names).active)
+    n_angles = len(getattr(angles, "names", angles) or ())
+    return (
+        f"wrote {out}: {frames} frames"
+        + (f" ({missing} missing)" if missing else "")
+        + f", {len(names)} channels, cleaned with {what}"
+        + (f" after levels on {n} channels" if n else "")
+        + (f"; {n_angles} head/eye angles with {choice.pose_source}" if n_angles else "")
+    )
+
+
+def _stream(
+    src: Path,
+    out: str,
+    cleaner: Cleaner,
+    fmt: str,
+    progress: bool = True,
+    guard: tuple[tuple[str, ...], str] | None = None,
+    pose=None,
+) -> tuple[int, int]:
+    """``stream.clean_file`` with a progress bar (bytes) on stderr for big files;
+    ``guard`` (names, label): refuse a block of values far outside [0, 1]; ``pose``: the
+    head/eye angles' cleaner, or None (its output gets the finite check only)."""
+    import functools
+
+    from tqdm import tqdm
+
+    from faceclean.adjust import check_range
+    from faceclean.filters.base import check_finite
+    from faceclean.io import stream
+
+    cleaner.reset()
+
+    def check(inp, outp) -> None:
+        if guard is not None:
+            check_range(inp, *guard)
+        check_finite(inp, outp, cleaner.name)
+
+    size = src.stat().st_size
+    angles = {}
+    if pose is not None:
+        pose.reset()
+        angles = {
+            "pose_step": pose.step,
+            "pose_check": functools.partial(check_finite, name=pose.name),
+        }
+    if size < PROGRESS_BYTES or not progress:
+        return stream.clean_file(src, out, cleaner.step, fmt, check=check, **angles)
+    with tqdm(total=size, unit="B", unit_scale=True, file=sys.stderr, leave=False) as bar:
+        return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check, **angles)
+
+
+def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
+    """``cleaner.clean(anim)``, with a progress bar on stderr for long stream cleans.
+
+    A stream cleaner that keeps the base batch path is stepped here frame by frame, which
+    is the same computation (reset, then step every valid frame).
+    """
+    import numpy as np
+    from tqdm import tqdm
+
+    from faceclean.filters.base import Cleaner, check_finite
+
+    valid = np.flatnonzero(anim.valid)
+    if cleaner.offline or type(cleaner).clean is not Cleaner.clean or len(valid) < PROGRESS_FRAMES:
+        return cleaner.clean(anim)
+    cleaner.reset()
+    out = np.full_like(anim.values, np.nan)
+    for i in tqdm(valid, unit="frame", file=sys.stderr, leave=False, desc="cleaning"):
+        out[i] = cleaner.step(anim.values[i], anim.times[i])
+    check_finite(anim.values, out, cleaner.name)
+    return anim.with_values(out)
