@@ -386,9 +386,10 @@ def test_nonfinite_config_json_is_refused(tmp_path, take, capsys):
 
 def test_truncated_mesh_is_one_line(tmp_path, take, capsys):
     from faceclean.face import mesh as facemesh
+    from faceclean.io import gltf_take
 
     good = tmp_path / "face.glb"
-    facemesh.save_glb(facemesh.stylised(), good)
+    gltf_take.save_mesh(facemesh.stylised(), good)
     for cut in (0.5, 0.9):
         bad = tmp_path / "cut.glb"
         data = good.read_bytes()

@@ -10,6 +10,7 @@ from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.face import mesh as facemesh
+from faceclean.io import gltf_take
 from faceclean.settings import data_dir
 
 MESHES = data_dir() / "meshes" if data_dir() is not None else None
@@ -27,7 +28,7 @@ def face() -> facemesh.FaceMesh:
 @pytest.fixture(scope="module")
 def glb(face, tmp_path_factory):
     path = tmp_path_factory.mktemp("mesh") / "face.glb"
-    facemesh.save_glb(face, path)
+    gltf_take.save_mesh(face, path)
     return path
 
 

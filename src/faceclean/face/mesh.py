@@ -3,8 +3,8 @@
 A :class:`FaceMesh` is a triangle mesh with one morph target per ARKit channel, in
 canonical order (zeros where the mesh lacks a shape), and optional vertex colours.
 Vertices for weights w (52,): ``v = vertices + tensordot(w, deltas, 1)``. The one type the
-report's viewer, the glTF writer (:mod:`faceclean.io.gltf_take`) and the distance loss
-(:mod:`faceclean.face.pairs`) use.
+report's viewer, the glTF writer (:mod:`faceclean.io.gltf_take`, which also saves a mesh
+alone: ``save_mesh``) and the distance loss (:mod:`faceclean.face.pairs`) use.
 
 GLB files carry the targets on the first primitive of the first mesh that has them, with
 their ARKit names in ``mesh.extras.targetNames`` (the convention Blender and three.js
@@ -14,7 +14,6 @@ read); node transforms are ignored (the viewer frames the mesh by its bounding b
 from __future__ import annotations
 
 import os
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,7 +22,6 @@ import numpy as np
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.io.atomic import atomic_write
 
 
 @dataclass(eq=False)
@@ -175,22 +173,3 @@ def normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         np.add.at(n, faces[:, k].astype(np.int64), fn)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 0.0, 1.0])
-
-
-def to_glb(mesh: FaceMesh) -> bytes:
-    """The mesh as GLB bytes: positions, normals, colours, indices and 52 dense morph
-    targets named in ``mesh.extras.targetNames`` (weights 0), no animation; the layout of
-    :mod:`faceclean.io.gltf_take`, which also writes animated ones."""
-    from faceclean.io import gltf_take
-    from faceclean.io.gltf_container import glb
-
-    doc, data, _ = gltf_take.document(mesh)
-    return glb(doc, data)
-
-
-def save_glb(mesh: FaceMesh, path: str | os.PathLike) -> None:
-    """Write the mesh as a GLB file, atomically."""
-    data = to_glb(mesh)
-    if data[:4] != b"glTF" or struct.unpack_from("<I", data, 8)[0] != len(data):
-        raise FacecleanError("internal: malformed GLB")  # pragma: no cover
-    atomic_write(path, data)

@@ -243,3 +243,13 @@ def write(
     doc, data, counts = document(mesh, anim, label)
     f.write(encode(doc, data, binary=p is None or p.suffix.lower() != ".gltf"))
     return counts
+
+
+def save_mesh(mesh: FaceMesh, path: str | os.PathLike) -> None:
+    """The mesh alone as a GLB file, atomically: positions, normals, colours, indices and
+    52 dense morph targets named in ``mesh.extras.targetNames`` (weights 0), no animation
+    (``faceclean face-mesh``)."""
+    from faceclean.io.atomic import atomic_write
+
+    doc, data, _ = document(mesh)
+    atomic_write(path, glb(doc, data))
