@@ -195,8 +195,7 @@ class TrackerMap(Cleaner):
         dt = tt - self._t
         start, advance = frame_rules(missing, dt, self.pre.max_gap)
         moved = start | advance  # the rest hold: the last output (rules 1, 4)
-        xi = np.zeros((s, k))
-        xi[:, self._in.have] = x[:, self._in.cols]  # absent inputs read 0
+        xi = self._in_matrix(x)
         u = self._u
         every = bool(advance.all())  # the usual frame: no merge of old and new rows
         if self.prefilter and (every or advance.any()):  # One Euro (filters/one_euro.py)
