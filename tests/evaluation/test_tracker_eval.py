@@ -89,6 +89,7 @@ def test_calibration_clips_with_their_truth_train_as_pairs_of_their_own(folder):
     both = paired.with_clips(pairs)
     clips = both[len(pairs) :]
     assert both[: len(pairs)] == pairs and len(clips) == 3
+    assert paired.performances(both) == pairs  # what validation scores: no clip
     rt, ry = rom.clip(30.0)
     for clip, p in zip(clips, with_truth, strict=True):
         assert clip.name == f"{p.name}.rom" and (clip.group, clip.setting) == (p.group, p.setting)
