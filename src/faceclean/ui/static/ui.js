@@ -28,6 +28,7 @@ const api = {
   ready: false, mode: null, frames: 0, pushes: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
   state: null, sentSeq: 0, setSeq: 0, stats: null, cleanedSeq: null, fullSeq: null, cleanedParts: 0,
   calibrating: null, countdown: [], softwareGL: null, faceDraws: 0, curveDraws: 0, firstFaceMs: null,
+  sentAt: {}, cleanedAt: {}, fullAt: {}, // ms (page clock) a message went, its first cleaned part and whole take came
   get time() { return play.t; },
   get cleaned() { return take.cleaned; }, // (N * 52) float32, offline
   get input() { return take.input; },
@@ -61,6 +62,7 @@ ws.onclose = () => { $("fc-status").textContent = "disconnected: the server stop
 function send(m) {
   m.seq = ++seq;
   api.sentSeq = seq;
+  api.sentAt[seq] = performance.now();
   ws.send(JSON.stringify(m));
   return seq;
 }
@@ -104,7 +106,11 @@ function onBinary(buf) {
   } else {
     take.cleaned.set(values, head.start * 52);
     api.cleanedSeq = head.seq;
-    if (head.start === 0 && head.count === take.n) api.fullSeq = head.seq ?? 0;
+    api.cleanedAt[head.seq] ??= performance.now();
+    if (head.start === 0 && head.count === take.n) {
+      api.fullSeq = head.seq ?? 0;
+      api.fullAt[head.seq] ??= performance.now();
+    }
     api.cleanedParts++;
   }
   api.ready = !!take.input;
