@@ -68,8 +68,9 @@ def main() -> None:
                 before = tab.evaluate("faceclean.setSeq")
                 x = box["x"] + (0.2 + 0.6 * k / max(a.trials - 1, 1)) * box["width"]
                 tab.mouse.click(x, box["y"] + box["height"] / 2)
-                until(tab, f"faceclean.setSeq > {before}"
-                      " && faceclean.state.seq >= faceclean.setSeq")
+                until(
+                    tab, f"faceclean.setSeq > {before} && faceclean.state.seq >= faceclean.setSeq"
+                )
                 seq = tab.evaluate("faceclean.setSeq")
                 until(tab, f"faceclean.fullAt[{seq}] !== undefined")
                 sent, part, full = tab.evaluate(
