@@ -244,20 +244,17 @@ class FullyConnected(_DerivativeNet):
         # The scaling folded into layer 0 (one pass over the features, not three):
         #   clip((f - fm) / fs, -c, c) W0 = clip(f, fm - c fs, fm + c fs) (W0 / fs) - (fm / fs) W0
         self._feat_scaling = (fm, fs)  # as stored (the float64 reference of the tests)
-        self._fold_scaling()
-
-    def _fold_scaling(self) -> None:
-        fm, fs = self._feat_scaling
         w0 = self._w[0].astype(np.float64)  # (F M, H)
         self._w0 = np.ascontiguousarray(w0 / fs[:, None]).astype(np.float32)
         self._b0 = (self._b[0] - (fm / fs) @ w0).astype(np.float32)
-        self._lo, self._hi = None, None  # the clip bounds, set once the config is known
+
+    def _setup(self, config: dict, names, alpha, per_frame: bool = False) -> None:
+        (fm, fs), c = self._feat_scaling, float(config.get("feat_clip", np.inf))
+        self._lo, self._hi = (fm - c * fs).astype(np.float32), (fm + c * fs).astype(np.float32)
+        super()._setup(config, names, alpha, per_frame)
 
     def predict(self, feats: np.ndarray) -> np.ndarray:
         n, m, f = feats.shape
-        if self._lo is None:
-            (fm, fs), c = self._feat_scaling, float(self.config.get("feat_clip", np.inf))
-            self._lo, self._hi = (fm - c * fs).astype(np.float32), (fm + c * fs).astype(np.float32)
         x = feats.transpose(0, 2, 1).reshape(n, f * m)  # feature-major: a view from _advance
         h = np.maximum(x, self._lo, out=np.empty((n, f * m), np.float32), casting="same_kind")
         np.minimum(h, self._hi, out=h)  # raw features kept where their scaled form is +-clip
