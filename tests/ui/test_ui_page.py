@@ -272,7 +272,9 @@ def _roughness(frames) -> float:
 
 def test_moving_a_smoothing_slider_changes_what_the_receiver_gets(live):
     tab, receiver, take_frames, *_ = live
-    tab.until("window.faceclean.frames > 30")
+    # 600 frames (10 s) of the light stream first: a shorter window may fall on a still
+    # stretch of the take (a 60-frame window's roughness ranges 3e-5..2e-3 over the take)
+    tab.until("window.faceclean.frames > 600")
     before = len(receiver.frames)
     seq = tab.slide("min_cutoff", 0.0)  # 0.01 Hz: the heaviest smoothing
     tab.until(f"window.faceclean.state.seq >= {seq} || window.faceclean.errors.length")
@@ -280,12 +282,12 @@ def test_moving_a_smoothing_slider_changes_what_the_receiver_gets(live):
     assert tab.js("window.faceclean.state.items")[-1] == "min_cutoff=0.01"
     swapped = len(receiver.frames)
     tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 60}")
-    light = _roughness(receiver.frames[max(0, before - 60) : before])
+    light = _roughness(receiver.frames[max(0, before - 600) : before])
     heavy = _roughness(receiver.frames[swapped + 5 :])
     # mean |change| from one received frame to the next, weight units: the light filter
     # passes the take's motion, the heaviest one all but holds (independent of timing,
     # unlike a match by send time, which a loaded machine blurs)
-    assert light > 3e-4 and heavy < light / 5, (light, heavy)
+    assert light > 1e-4 and heavy < light / 5, (light, heavy)
 
 
 def test_calibrate_sets_the_neutral_from_the_held_seconds(live):
