@@ -94,19 +94,18 @@ def test_gbt_batched_clean_equals_stepping(gbt_model):
 
 def test_blend_alpha_zero_follows_prediction_and_one_holds():
     rng = np.random.default_rng(8)
-    r = list(rng.normal(size=(K, 3, M)))
-    d_hat = list(rng.normal(size=(K, 3, M)))
+    r = rng.normal(size=(3, K, M))  # X_r^(0..K-1) of 3 streams
+    d_hat = rng.normal(size=(3, K, M))
     x = rng.normal(size=(3, M))
     out = blend(r, d_hat, x, 0.02, alpha=0.0)
-    np.testing.assert_array_equal(out[0], x)  # X_r^(0) = X̂^(0) = X_i
+    np.testing.assert_array_equal(out[:, 0], x)  # X_r^(0) = X̂^(0) = X_i
     for k in range(1, K):
-        np.testing.assert_array_equal(out[k], d_hat[k - 1])
-    zero = [np.zeros((3, M))] * K
-    held = blend(r, zero, x, 0.02, alpha=1.0)
-    for k in range(K):
-        np.testing.assert_array_equal(held[k], r[k])
+        np.testing.assert_array_equal(out[:, k], d_hat[:, k - 1])
+    held = blend(r, np.zeros_like(r), x, 0.02, alpha=1.0)
+    np.testing.assert_array_equal(held, r)
     mid = blend(r, d_hat, x, 0.02, alpha=0.9)  # the complementary mix, by hand
-    np.testing.assert_allclose(mid[0], 0.9 * (r[0] + 0.02 * d_hat[0]) + 0.1 * x)
+    np.testing.assert_allclose(mid[:, 0], 0.9 * (r[:, 0] + 0.02 * d_hat[:, 0]) + 0.1 * x)
+    np.testing.assert_allclose(mid[:, 2], 0.9 * (r[:, 2] + 0.02 * d_hat[:, 2]) + 0.1 * d_hat[:, 1])
 
 
 def test_features_are_backward_derivatives_in_seconds():

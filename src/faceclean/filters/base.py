@@ -223,8 +223,9 @@ class StreamCleaner(Cleaner):
 
 
 def _merge(rows: np.ndarray, new: State, old: State) -> State:
-    """Per stream: ``new`` where rows (S,) is True, else ``old``."""
-    return tuple(np.where(rows[:, None], a, b) for a, b in zip(new, old, strict=True))
+    """Per stream: ``new`` where rows (S,) is True, else ``old`` (state arrays (S, ...))."""
+    return tuple(np.where(rows.reshape(-1, *[1] * (a.ndim - 1)), a, b)
+                 for a, b in zip(new, old, strict=True))  # fmt: skip
 
 
 class OfflineCleaner(Cleaner):

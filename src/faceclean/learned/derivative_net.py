@@ -67,16 +67,15 @@ def load_checkpoint(path: str | os.PathLike, fmt: str) -> tuple[dict[str, Any], 
     return config, arrays
 
 
-def blend(
-    r: Sequence[np.ndarray], d_hat: Sequence[np.ndarray], x: np.ndarray, dt, alpha
-) -> list[np.ndarray]:
-    """One complementary-blend step. r: X_r^(0..K-1)[n]; d_hat: X̂^(1..K); x: X_i[n+1].
+def blend(r: np.ndarray, d_hat: np.ndarray, x: np.ndarray, dt, alpha) -> np.ndarray:
+    """One complementary-blend step, every order at once. r: X_r^(0..K-1)[n] (..., K, M);
+    d_hat: X̂^(1..K) (..., K, M); x: X_i[n+1] (..., M); dt, alpha: scalars or (..., 1, 1).
 
-    Returns X_r^(0..K-1)[n+1]. α = 0 follows the prediction (the input for k = 0);
-    α = 1 with zero derivatives holds.
+    Returns X_r^(0..K-1)[n+1] (..., K, M). α = 0 follows the prediction (the input for
+    k = 0); α = 1 with zero derivatives holds.
     """
-    target = [x, *d_hat]  # X̂^(0..K)
-    return [alpha * (r[k] + dt * target[k + 1]) + (1.0 - alpha) * target[k] for k in range(len(r))]
+    below = np.concatenate([x[..., None, :], d_hat[..., :-1, :]], axis=-2)  # X̂^(0..K-1)
+    return alpha * (r + dt * d_hat) + (1.0 - alpha) * below
 
 
 def group_index(names: Sequence[str]) -> np.ndarray:
@@ -124,6 +123,11 @@ class _DerivativeNet(StreamCleaner):
         # frame column of each model channel (-1: the frame lacks it; it sees zeros)
         self._cols = ChannelMap(self.channels, names).src
         self._have = self._cols >= 0
+        self._dst = self._cols[self._have]  # frame columns the output writes
+        # the frame is the model's channels in its order: no gather, no scatter
+        self._same = len(names) == len(self.channels) and bool(
+            (self._cols == np.arange(len(self.channels))).all()
+        )
         self._pending: list[np.ndarray] | None = None  # batch path: precomputed predictions
         self._record: list[np.ndarray] | None = None  # batch path: recorded features
         self._ages: list[np.ndarray] = []  # advances since the start, per recorded step
@@ -136,40 +140,54 @@ class _DerivativeNet(StreamCleaner):
         """Derivative predictions (n, M, K) from features (n, M, 1 + 2K)."""
         raise NotImplementedError
 
+    def _predict_fm(self, f: np.ndarray) -> np.ndarray:
+        """``predict`` on the feature-major layout: (S, 1 + 2K, M) -> (S, K, M)."""
+        return self.predict(f.transpose(0, 2, 1)).transpose(0, 2, 1)
+
     def _model_frame(self, x: np.ndarray) -> np.ndarray:
         """(S, M_in) frame -> (S, M) model channels (zeros where absent)."""
+        if self._same:
+            return x
         return np.where(self._have, x[:, np.maximum(self._cols, 0)], 0.0)
 
-    # State: d^(0..K) of the input, X_r^(0..K-1), age (advances since the start); each (S, M).
+    # State, per stream: f (S, 1 + 2K, M) the features of the last step, feature-major
+    # [d^(0..K)[n], d^(1..K)[n-1]]; r (S, K, M) X_r^(0..K-1)[n]; age (S, M) advances since
+    # the start. f's first K + 1 rows are what the next step differences against.
     def _start(self, x: np.ndarray) -> State:
         xm = self._model_frame(x)
-        zero = np.zeros_like(xm)
-        return (xm, *[zero] * self.K, xm, *[zero] * (self.K - 1), zero)
+        f = np.zeros((len(xm), 1 + 2 * self.K, xm.shape[1]))
+        r = np.zeros((len(xm), self.K, xm.shape[1]))
+        f[:, 0] = r[:, 0] = xm
+        return f, r, np.zeros_like(xm)
 
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         K = self.K
-        d_old, r_old, age = state[: K + 1], state[K + 1 : 2 * K + 1], state[2 * K + 1]
-        d_new = [self._model_frame(x)]
+        f_old, r_old, age = state
+        f = np.empty_like(f_old)
+        f[:, 0] = self._model_frame(x)
+        f[:, K + 1 :] = f_old[:, 1 : K + 1]  # d^(1..K) ending at the previous frame
         for k in range(1, K + 1):  # backward differences ending at the new frame
-            d = (d_new[k - 1] - d_old[k - 1]) / dt  # finite inputs: at worst +-inf
-            d_new.append(_clip(d, -BIG, BIG))  # finite for any dt
-        # (S, M, 1 + 2K), a view of the feature-major (S, 1 + 2K, M) FC reads without a copy
-        feats = np.stack([d_new[0], *d_new[1:], *d_old[1:]], axis=1).transpose(0, 2, 1)
+            d = np.subtract(f[:, k - 1], f_old[:, k - 1], out=f[:, k])
+            _clip(np.divide(d, dt, out=d), -BIG, BIG)  # finite inputs: at worst +-inf
         if self._record is not None:
-            self._record.append(feats)
+            self._record.append(f.transpose(0, 2, 1))  # (S, M, 1 + 2K)
             self._ages.append(age.copy())
-            pred = np.zeros((*feats.shape[:2], K))
+            pred = np.zeros((len(f), K, f.shape[2]))
         elif self._pending is not None:
-            pred = self._pending.pop()
+            pred = self._pending.pop().transpose(0, 2, 1)
         else:
-            pred = self.predict(feats)  # (S, M, K)
+            pred = self._predict_fm(f)  # (S, K, M)
         # α per frame at ALPHA_RATE, as a time constant: the same blend at every rate.
         alpha = self.alpha if self.per_frame else self.alpha ** (dt * ALPHA_RATE)  # (S, 1)
-        r_new = blend(r_old, [pred[..., k] for k in range(K)], d_new[0], dt, alpha)
-        r_new[0] = _clip(r_new[0], self.lo, self.hi)
-        y = x.copy()
-        y[:, self._cols[self._have]] = r_new[0][:, self._have]
-        return (*d_new, *r_new, age + 1.0), y
+        dt3 = dt[:, :, None]
+        r_new = blend(r_old, pred, f[:, 0], dt3, alpha if self.per_frame else alpha[:, :, None])
+        out = _clip(r_new[:, 0], self.lo, self.hi)  # a view: r_new's X_r^(0) clipped too
+        if self._same:
+            y = out.copy()
+        else:
+            y = x.copy()
+            y[:, self._dst] = out[:, self._have]
+        return (f, r_new, age + 1.0), y
 
     def features(self, anim: Animation) -> tuple[np.ndarray, np.ndarray]:
         """Features of every advancing step: ((n, M, 1 + 2K), ages (n, M)).
@@ -277,18 +295,30 @@ class BoostedTrees(_DerivativeNet):
     batched = True
 
     def _load(self, a: dict) -> None:
-        self._feat = a["tree.feature"].astype(np.intp)  # (T, 2^D - 1)
-        self._thr = a["tree.threshold"].astype(np.float64)  # (T, 2^D - 1)
-        self._val = a["tree.value"].astype(np.float64)  # (T, 2^D)
-        self._order = a["tree.order"].astype(np.intp)  # (T,)
+        # trees grouped by the order they predict (a stable sort: each order's sum adds
+        # its trees in the stored order), so an order's leaves are one slice
+        by = np.argsort(a["tree.order"].astype(np.intp), kind="stable")
+        self._feat = a["tree.feature"].astype(np.intp)[by]  # (T, 2^D - 1)
+        self._thr = a["tree.threshold"].astype(np.float64)[by]  # (T, 2^D - 1)
+        self._val = a["tree.value"].astype(np.float64)[by]  # (T, 2^D)
+        self._order = a["tree.order"].astype(np.intp)[by]  # (T,)
         self._base = a["baseline"].astype(np.float64)  # (K,)
         self._ostd = a["out_std"].astype(np.float64)  # (K,)
         t, n_in = self._feat.shape
         self._depth = int(np.log2(n_in + 1))
+        # flat node index i = tree * n_in + node; a step down: node -> 2 node + 1 + right,
+        # i.e. i -> 2 i + 1 + right - tree * n_in; the leaf at node p of tree is value
+        # [tree, p - n_in], flat tree * (n_in + 1) + p - n_in = i + tree - n_in
         self._in_off = np.arange(t) * n_in  # (T,) first internal node of each tree
         self._leaf_off = np.arange(t) * (n_in + 1) - n_in  # leaf position -> flat index
+        self._down = 1 - self._in_off  # (T,)
+        self._to_leaf = np.arange(t) - n_in  # (T,)
+        self._feat_flat, self._thr_flat = self._feat.ravel(), self._thr.ravel()
+        self._val_flat = self._val.ravel()
         self._groups: np.ndarray | None = None
-        self._by_order = [np.flatnonzero(self._order == k) for k in range(len(self._base))]
+        self._jit = None  # the compiled trees (learned/jit.py), False without numba
+        ends = np.searchsorted(self._order, np.arange(len(self._base) + 1))
+        self._slices = [slice(a, b) for a, b in zip(ends[:-1], ends[1:], strict=True)]
 
     def predict(self, feats: np.ndarray) -> np.ndarray:
         n, m, _ = feats.shape
@@ -296,6 +326,8 @@ class BoostedTrees(_DerivativeNet):
             self._groups = group_index(self.channels)
         x = np.concatenate([feats, np.broadcast_to(self._groups[None, :, None], (n, m, 1))], -1)
         x = x.reshape(n * m, -1)
+        if n * m * len(self._order) <= 400_000:  # one stream's step: no chunks
+            return self.predict_features(x).reshape(n, m, self.K)
         out = np.empty((n * m, self.K))
         step = max(1, 400_000 // len(self._order))  # samples per chunk: bounded memory
         for s in range(0, n * m, step):
@@ -304,19 +336,33 @@ class BoostedTrees(_DerivativeNet):
 
     def predict_features(self, x: np.ndarray) -> np.ndarray:
         """(n, K) predictions from (n, F) raw per-channel features (last one: group)."""
-        feat, thr = self._feat.ravel(), self._thr.ravel()
         n, f = x.shape
         xf, row = x.ravel(), (np.arange(n) * f)[:, None]  # x[i, j] = xf[i f + j]
-        pos = np.zeros((n, len(self._order)), np.intp)  # (n, T) node in each tree
+        at = np.broadcast_to(self._in_off, (n, len(self._order)))  # (n, T) flat node
         for _ in range(self._depth):  # every tree descends one level per pass
-            flat = pos + self._in_off
-            right = xf.take(row + feat.take(flat)) > thr.take(flat)  # left when x <= thr
-            pos = 2 * pos + 1 + right
-        leaf = self._val.ravel().take(pos + self._leaf_off)  # (n, T)
-        out = np.zeros((len(x), self.K))
-        for k, trees in enumerate(self._by_order):  # each row summed alone: same bits, any n
-            out[:, k] = leaf[:, trees].sum(axis=1)
+            right = xf.take(row + self._feat_flat.take(at)) > self._thr_flat.take(at)
+            at = 2 * at + self._down + right  # left when x <= thr
+        leaf = self._val_flat.take(at + self._to_leaf)  # (n, T)
+        out = np.empty((len(x), self.K))
+        for k, trees in enumerate(self._slices):  # tree after tree (learned/jit.py's order)
+            out[:, k] = np.cumsum(leaf[:, trees], axis=1)[:, -1] if len(leaf) else 0.0
         return (out + self._base) * self._ostd
+
+    def _predict_fm(self, f: np.ndarray) -> np.ndarray:
+        """A step's predictions (S, K, M): learned/jit.py's compiled trees when numba is
+        installed (loaded at the first step: ``clean`` predicts batched, in numpy), the
+        same numbers as numpy's."""
+        if self._jit is None:
+            from faceclean.learned import jit
+
+            self._jit = jit.trees if jit.available() else False
+        if not self._jit:
+            return super()._predict_fm(f)
+        if self._groups is None:
+            self._groups = group_index(self.channels)
+        out = np.zeros((len(f), self.K, f.shape[2]))
+        self._jit(f, self._groups, self._feat, self._thr, self._val, self._order, self._depth, out)
+        return (out + self._base[:, None]) * self._ostd[:, None]
 
 
 class DerivativeFeatures(_DerivativeNet):
