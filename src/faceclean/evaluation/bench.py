@@ -206,7 +206,8 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
     default = AdaptiveWeights.load(MODELS / "default.npz")
     kind = "inert network: One Euro form" if Adaptive(weights=default).inert else "GRU core"
     out["default (adaptive)"] = (lambda: Adaptive(weights=default), f"shipped; {kind}, numpy")
-    for name, note in (("fc", "shipped FC baseline, numpy"), ("gbt", "shipped GBT, numpy")):
+    gbt = "shipped GBT, numba trees a step when installed"
+    for name, note in (("fc", "shipped FC baseline, numpy"), ("gbt", gbt)):
         out[name] = (lambda n=name: make(n), note)
     try:
         from faceclean.learned.export import build
