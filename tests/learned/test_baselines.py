@@ -78,6 +78,21 @@ def test_gbt_numpy_runtime_equals_sklearn(gbt_model):
     assert gbt.alpha == 0.97
 
 
+def test_gbt_compiled_step_gives_numpys_bits(gbt_model):
+    """learned/jit.trees (a step's trees with numba) against the numpy descent, on
+    features with NaN (it goes left) and the shipped model's trees, grouped by order."""
+    pytest.importorskip("numba")
+    feats = _features(7, 9)
+    feats[2, 5, 3] = np.nan
+    for gbt in (BoostedTrees(model=gbt_model[2]), BoostedTrees()):
+        f = np.ascontiguousarray(feats.transpose(0, 2, 1))  # (S, 1 + 2K, M), a step's state
+        compiled = gbt._predict_fm(f)
+        assert gbt._jit  # the kernel ran
+        numpy = gbt.predict(feats).transpose(0, 2, 1)
+        np.testing.assert_array_equal(compiled, numpy)
+        assert np.ptp(numpy) > 0
+
+
 def test_gbt_batched_clean_equals_stepping(gbt_model):
     t = np.cumsum(np.random.default_rng(7).uniform(0.5, 1.5, 120)) / 60.0
     x = np.clip(0.5 + 0.2 * np.sin(t[:, None] * np.arange(1, M + 1) / 7), 0, 1)
