@@ -104,3 +104,31 @@ def test_train_pairs_trains_on_the_calibration_clips_too(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "and 3 calibration clips" in r.stdout
     assert MapWeights.load(model).config["frames"] == frames  # every pair's and clip's frame
+
+
+def test_the_choice_is_made_leaving_each_source_out():
+    """Three sources: the pre-filter and shrinkage are chosen leaving one source out in
+    turn, each scored on a fit that never saw it; a noisy tracker gets a pre-filter."""
+    rng = np.random.default_rng(3)
+    noisy = lambda y: 0.7 * y + 0.05 + rng.normal(0, 0.04, y.shape)  # noqa: E731
+    pool = []
+    for g in range(3):
+        for p in pairs(2, 10 * g, noisy):
+            pool.append(paired.Pair(p.name + f"s{g}", p.tracked, p.truth, f"src{g}", "studio"))
+    seen = []
+    pres = (None, (2.0, 0.5, 1.0))
+    w = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=(1e-2, 1.0), report=seen.append)
+    cands = [e for e in seen if e.get("event") == "candidate"]
+    assert len(cands) == 4 and all(e["cv"] == 3 for e in cands)  # every candidate, 3 sources
+    assert w.config["selected"] == "leave one source out: src0, src1, src2"
+    assert w.config["prefilter"] and w.arrays["min_cutoff"][0] == 2.0  # the jitter's price
+    score = lambda e: e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1))  # noqa: E731
+    top = min(map(score, cands))
+    near = [e for e in cands if score(e) <= top * (1 + fit.TIE)]  # equal within noise
+    chosen = min(near, key=lambda e: e["jitter"])  # the smoothest of them
+    assert w.config["lam"] == chosen["lam"] and w.config["val_mse"] == chosen["val_mse"]
+    # a source's score comes from the others' fit: it differs from the score with it in
+    inside = fit._score(w, fit.features(w, pool[:2]))[0]
+    alone = fit.fit(pool[2:], [], prefilters=[(2.0, 0.5, 1.0)], lams=(w.config["lam"],), cv=False)
+    held_out = fit._score(alone, fit.features(alone, pool[:2]))[0]
+    assert inside < held_out

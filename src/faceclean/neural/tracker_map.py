@@ -17,19 +17,24 @@ from typing import Any
 import numpy as np
 import torch
 
+from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.tracker_map import MapWeights
 
-# (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter)
+# (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
+# last five hold a face at rest hard (0.5-1 Hz) and open up fast when it moves (beta
+# 5-20, the speed estimate itself at 4 Hz): less still-face jitter and less lag at once.
 PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
     None, (8.0, 1.0, 1.0), (6.0, 0.5, 1.0), (4.0, 1.0, 1.0), (2.0, 0.5, 1.0),
-    (1.0, 0.3, 1.0))  # fmt: skip
+    (1.0, 0.3, 1.0), (1.0, 5.0, 4.0), (0.5, 5.0, 4.0), (1.0, 10.0, 4.0), (0.5, 10.0, 4.0),
+    (1.0, 20.0, 4.0))  # fmt: skip
 LAMBDAS = (1e-2, 1e-1, 3e-1, 1.0)  # ridge shrinkage, relative to the inputs' mean square
 LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
+TIE = 0.005  # cross-validated scores this close to the best (relative) count as equal
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -78,11 +83,8 @@ def features(w: MapWeights, pairs: Sequence[Pair]) -> list[tuple[np.ndarray, ...
         y = p.truth.arkit(names)[0]
         valid = ~np.isnan(x).all(axis=1)
         t, x, y = p.tracked.times[valid], np.nan_to_num(x[valid]), y[valid]
-        if w.config["prefilter"]:
-            pre.reset()
-            u = np.stack([pre.step(x[i], t[i]) for i in range(len(t))]) if len(t) else x
-        else:
-            u = x
+        # clean: reset, then step every frame
+        u = pre.clean(Animation(t, x, names)).values if w.config["prefilter"] and len(t) else x
         r = np.minimum.accumulate(u, axis=0)
         ok = ~np.isnan(y).any(axis=1)
         out.append((t[ok], u[ok], r[ok], y[ok]))
@@ -98,12 +100,20 @@ def _stack(feats: list[tuple[np.ndarray, ...]], rest: bool) -> tuple[np.ndarray,
 def ridge(u: np.ndarray, y: np.ndarray, lam: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
     """(A (M, D), c (M,)) minimising |A u + c - y|^2 + lam s |A|^2, s the mean of diag(u'u)
     (the shrinkage in proportion to the data, whatever its length and levels)."""
-    f, k = u.shape
-    x = np.concatenate([u, np.ones((f, 1))], axis=1)
-    gram = x.T @ x
+    return _solve(*_moments(u, y), lam)
+
+
+def _moments(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x'x (D+1, D+1), x'y (D+1, M)) of x = [u, 1]: what a ridge fit needs of the data."""
+    x = np.concatenate([u, np.ones((len(u), 1))], axis=1)
+    return x.T @ x, x.T @ y
+
+
+def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    k = len(gram) - 1
     reg = lam * float(np.mean(np.diag(gram)[:k])) * np.eye(k + 1)
     reg[-1, -1] = 0.0  # the offset is not shrunk
-    sol = np.linalg.solve(gram + reg, x.T @ y)  # (D+1, M)
+    sol = np.linalg.solve(gram + reg, xty)  # (D+1, M)
     return sol[:-1].T, sol[-1]
 
 
@@ -159,14 +169,26 @@ def fit(
     lams: Sequence[float] = LAMBDAS,
     report: Report | None = None,
     refit: bool = True,
+    cv: bool = True,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
     ``val`` by MSE x (1 + jitter over JITTER_BUDGET x the truth's, when over): the best,
-    refitted on ``train`` and ``val`` together when ``refit`` (a linear map only)."""
+    refitted on ``train`` and ``val`` together when ``refit`` (a linear map only).
+
+    ``cv`` (a linear map, three sources or more among ``train`` and ``val``): the choice
+    is made leaving one source out in turn instead (``_cross_validate``), not on ``val``
+    alone: one source's faces are too few to tell pre-filters apart."""
     report = report or (lambda _e: None)
     torch.set_num_threads(1)  # a tiny net: more threads only contend
     names = channels(train)
+    pool = [*train, *val]
+    if cv and not hidden and len({p.group for p in performances(pool)}) >= 3:
+        w = _cross_validate(pool, names, prefilters, lams, rest, report)
+        if refit:
+            _set_linear(w, *ridge(*_stack(features(w, pool), rest), w.config["lam"]))
+        w.config.update(frames=int(sum(len(f[0]) for f in features(w, pool))))
+        return w
     best: tuple[float, MapWeights] | None = None
     for pre in prefilters:
         w = blank(names, hidden, pre or LIGHT, rest, prefilter=pre is not None)
@@ -189,6 +211,49 @@ def fit(
         _set_linear(w, *ridge(*_stack(features(w, [*train, *val]), rest), w.config["lam"]))
     w.config.update(frames=int(sum(len(f[0]) for f in features(w, [*train, *val]))))
     return w
+
+
+def _cross_validate(pool, names, prefilters, lams, rest: bool, report: Report) -> MapWeights:
+    """The pre-filter and shrinkage that score best leaving one source out: for each
+    source, the ridge fitted on every other source's pairs and clips, scored on its own
+    performances by MSE as x raw (each source alike, whatever its error's size), the mean
+    over sources x (1 + jitter over JITTER_BUDGET x the truth's, when over). Of the
+    candidates within TIE of the best score, the smoothest (least jitter) is taken: a
+    difference that small is noise over a few sources, and a smoother map does less harm
+    to a face at rest. The weights returned hold the choice (their linear part still to
+    be fitted)."""
+    groups = sorted({p.group for p in performances(pool)})
+    perf = {id(p) for p in performances(pool)}
+    scored = [p.group if id(p) in perf else None for p in pool]  # (P,) source, or None: a clip
+    raw = blank(names, 0, LIGHT, rest, prefilter=False)
+    raw_mse = {g: _score(raw, [f for f, s in zip(features(raw, pool), scored, strict=True)
+                               if s == g])[0] for g in groups}  # fmt: skip
+    found: list[tuple[float, float, MapWeights]] = []  # (score, jitter, weights)
+    for pre in prefilters:
+        w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None)
+        feats = features(w, pool)
+        moments = [_moments(*_stack([f], rest)) for f in feats]  # per pair
+        total = [sum(m[i] for m in moments) for i in (0, 1)]
+        for lam in lams:
+            ratios, jits = [], []
+            for g in groups:
+                out = [i for i, p in enumerate(pool) if p.group == g]
+                gram = total[0] - sum(moments[i][0] for i in out)
+                xty = total[1] - sum(moments[i][1] for i in out)
+                _set_linear(w, *_solve(gram, xty, lam))
+                mse, jit = _score(w, [feats[i] for i in out if scored[i] == g])
+                ratios.append(mse / raw_mse[g])
+                jits.append(jit)
+            ratio, jit = float(np.mean(ratios)), float(np.nanmean(jits))
+            score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
+            report({"event": "candidate", "pre": pre, "lam": lam, "val_mse": ratio,
+                    "jitter": jit, "cv": len(groups)})  # fmt: skip
+            config = dict(w.config, lam=lam, val_mse=ratio, val_jitter=jit,
+                          selected="leave one source out: " + ", ".join(groups))  # fmt: skip
+            arrays = {k: v.copy() for k, v in w.arrays.items()}
+            found.append((score, jit, MapWeights(config, arrays)))
+    top = min(f[0] for f in found)
+    return min((f for f in found if f[0] <= top * (1.0 + TIE)), key=lambda f: f[1])[2]
 
 
 def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
