@@ -189,6 +189,9 @@ class Pool:
 
     def terminate(self) -> None:
         """Cancel the work not started and stop every worker now (bounded: ``GRACE`` s)."""
+        # the executor's manager thread, kept: shutdown(wait=False) drops the executor's
+        # reference to it, so a later shutdown(wait=True) would not wait for it
+        manager = getattr(self._executor, "_executor_manager_thread", None)
         self._executor.shutdown(wait=False, cancel_futures=True)
         mine = [p for p in multiprocessing.active_children() if p not in self._before]
         for p in mine:
@@ -205,8 +208,10 @@ class Pool:
                 p.kill()
         # join the executor's manager thread now that its workers are gone: left running,
         # it closes its wake-up pipe while the interpreter's exit hook writes to it
-        # (CPython 3.11: "OSError: Bad file descriptor" printed at exit)
+        # (CPython 3.11: "OSError: Bad file descriptor" and a traceback printed at exit)
         self._executor.shutdown(wait=True)
+        if manager is not None and manager.is_alive():
+            manager.join(GRACE)
 
     def __enter__(self) -> Pool:
         return self
