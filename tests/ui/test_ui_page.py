@@ -272,9 +272,14 @@ def _roughness(frames) -> float:
 
 def test_moving_a_smoothing_slider_changes_what_the_receiver_gets(live):
     tab, receiver, take_frames, *_ = live
-    # 600 frames (10 s) of the light stream first: a shorter window may fall on a still
-    # stretch of the take (a 60-frame window's roughness ranges 3e-5..2e-3 over the take)
-    tab.until("window.faceclean.frames > 600")
+    # 600 received frames (10 s) of the light stream first, counted since the relay's
+    # start: a shorter window may fall on a still stretch of the take (a 60-frame
+    # window's roughness ranges 3e-5..2e-3 over the take)
+    tab.until("window.faceclean.frames > 30")
+    while len(receiver.frames) < 600:
+        receiver.arrived.clear()  # set again by the next frame received
+        if len(receiver.frames) < 600:
+            receiver.arrived.wait(1.0)
     before = len(receiver.frames)
     seq = tab.slide("min_cutoff", 0.0)  # 0.01 Hz: the heaviest smoothing
     tab.until(f"window.faceclean.state.seq >= {seq} || window.faceclean.errors.length")
