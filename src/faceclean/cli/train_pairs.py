@@ -75,7 +75,11 @@ def run(args: argparse.Namespace) -> int:
         w = tracker_map.fit_ridge(train, val)
     else:
         w = tracker_map.fit(train, val, hidden=args.hidden or 0, seed=args.seed, report=report)
-    w.config.update(trained_on=sorted({p.group for p in train}), validated_on=sorted(val_groups))
+    if "selected" in w.config:  # chosen leaving each source out: every source trains
+        w.config.update(trained_on=sorted({p.group for p in train + val}))
+    else:
+        w.config.update(trained_on=sorted({p.group for p in train}),
+                        validated_on=sorted(val_groups))  # fmt: skip
     w.save(args.out)
     print(f"wrote {args.out}: {arch}, {len(w.inputs)} channels, hidden {w.config['hidden']}")
     return 0
