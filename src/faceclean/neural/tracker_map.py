@@ -242,9 +242,10 @@ def _cross_validate(pool, names, prefilters, lams, rest: bool, report: Report) -
                 xty = total[1] - sum(moments[i][1] for i in out)
                 _set_linear(w, *_solve(gram, xty, lam))
                 mse, jit = _score(w, [feats[i] for i in out if scored[i] == g])
-                ratios.append(mse / raw_mse[g])
+                ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
-            ratio, jit = float(np.mean(ratios)), float(np.nanmean(jits))
+            known = np.array(jits)[~np.isnan(jits)]  # NaN: too short to tell
+            ratio, jit = float(np.mean(ratios)), float(known.mean()) if known.size else 0.0
             score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
             report({"event": "candidate", "pre": pre, "lam": lam, "val_mse": ratio,
                     "jitter": jit, "cv": len(groups)})  # fmt: skip
