@@ -238,3 +238,7 @@ def test_progress_path_equals_batch_clean():
     batch = cleaner.clean(anim)
     assert np.array_equal(stepped.values, batch.values, equal_nan=True)
     assert np.isnan(stepped.values[100:110]).all()
+    done = []  # a stream cleaner's own clean reports its progress: every valid frame once
+    again = cleaner.clean(anim, progress=done.append)
+    assert np.array_equal(again.values, batch.values, equal_nan=True)
+    assert sum(done) == n - 10 and len(done) > 1

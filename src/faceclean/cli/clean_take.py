@@ -163,16 +163,23 @@ def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
     """``cleaner.clean(anim)``, with a progress bar on stderr for long stream cleans.
 
     A stream cleaner that keeps the base batch path is stepped here frame by frame, which
-    is the same computation (reset, then step every valid frame).
+    is the same computation (reset, then step every valid frame); one with
+    ``StreamCleaner.clean`` reports its progress itself.
     """
     import numpy as np
     from tqdm import tqdm
 
-    from faceclean.filters.base import Cleaner, check_finite
+    from faceclean.filters.base import Cleaner, StreamCleaner, check_finite
 
     valid = np.flatnonzero(anim.valid)
-    if cleaner.offline or type(cleaner).clean is not Cleaner.clean or len(valid) < PROGRESS_FRAMES:
+    own = type(cleaner).clean
+    stepped = own in (Cleaner.clean, StreamCleaner.clean)
+    if cleaner.offline or not stepped or len(valid) < PROGRESS_FRAMES:
         return cleaner.clean(anim)
+    if own is StreamCleaner.clean:
+        with tqdm(total=len(valid), unit="frame", file=sys.stderr, leave=False,
+                  desc="cleaning") as bar:  # fmt: skip
+            return cleaner.clean(anim, progress=bar.update)
     cleaner.reset()
     out = np.full_like(anim.values, np.nan)
     for i in tqdm(valid, unit="frame", file=sys.stderr, leave=False, desc="cleaning"):

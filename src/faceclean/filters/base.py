@@ -40,6 +40,7 @@ State = tuple[np.ndarray, ...]  # each (S, M)
 MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
 MIN_DT = 1e-12  # s; a step this small or smaller is a duplicate (rule 4)
 MAX_GAP = 0.5  # s; the default max_gap: a longer pause restarts the state (rule 3)
+PROGRESS_EVERY = 1000  # frames between two reports to StreamCleaner.clean's progress
 
 
 def gap_seconds(max_gap: float) -> float:
@@ -174,11 +175,13 @@ class StreamCleaner(Cleaner):
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         """Advance by dt (S, 1) s > 0 with input x (S, M): (new state, output (S, M))."""
 
-    def clean(self, anim: Animation) -> Animation:
+    def clean(self, anim: Animation, progress: Callable[[int], object] | None = None) -> Animation:
         """Reset, then step every valid frame (``Cleaner.clean``). A usual frame (every
         value good, more than MIN_DT and at most max_gap after the last accepted one) goes
         to ``_advance`` at once, as ``step`` sends it, without step's conversions and
-        checks of its arguments: the same numbers, some 15 us a frame less."""
+        checks of its arguments: the same numbers, some 15 us a frame less. ``progress``
+        (a progress bar's ``update``) is told every PROGRESS_EVERY frames how many more
+        are done."""
         if type(self).step is not StreamCleaner.step:  # a subclass's own step decides
             return Cleaner.clean(self, anim)
         self.reset()
@@ -189,6 +192,8 @@ class StreamCleaner(Cleaner):
             good = (np.abs(x) <= MAX_ABS).all(axis=1).tolist()
         times = anim.times[idx].astype(np.float64).tolist()
         for k, i in enumerate(idx.tolist()):
+            if progress is not None and k % PROGRESS_EVERY == 0 and k:
+                progress(PROGRESS_EVERY)
             if good[k] and self._state is not None:
                 dt = times[k] - float(self._t[0])
                 if MIN_DT < dt <= self.max_gap:  # (NaN fails)
@@ -197,6 +202,8 @@ class StreamCleaner(Cleaner):
                     out[i] = y[0]
                     continue
             out[i] = self.step(x[k], times[k])
+        if progress is not None and len(idx):
+            progress(len(idx) - (len(idx) - 1) // PROGRESS_EVERY * PROGRESS_EVERY)
         check_finite(anim.values, out, self.name)
         return anim.with_values(out)
 
