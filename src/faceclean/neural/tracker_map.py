@@ -185,9 +185,10 @@ def fit(
     pool = [*train, *val]
     if cv and not hidden and len({p.group for p in performances(pool)}) >= 3:
         w = _cross_validate(pool, names, prefilters, lams, rest, report)
+        feats = features(w, pool)
         if refit:
-            _set_linear(w, *ridge(*_stack(features(w, pool), rest), w.config["lam"]))
-        w.config.update(frames=int(sum(len(f[0]) for f in features(w, pool))))
+            _set_linear(w, *ridge(*_stack(feats, rest), w.config["lam"]))
+        w.config.update(frames=int(sum(len(f[0]) for f in feats)))
         return w
     best: tuple[float, MapWeights] | None = None
     for pre in prefilters:
