@@ -326,8 +326,6 @@ class BoostedTrees(_DerivativeNet):
             self._groups = group_index(self.channels)
         x = np.concatenate([feats, np.broadcast_to(self._groups[None, :, None], (n, m, 1))], -1)
         x = x.reshape(n * m, -1)
-        if n * m * len(self._order) <= 400_000:  # one stream's step: no chunks
-            return self.predict_features(x).reshape(n, m, self.K)
         out = np.empty((n * m, self.K))
         step = max(1, 400_000 // len(self._order))  # samples per chunk: bounded memory
         for s in range(0, n * m, step):

@@ -26,7 +26,8 @@ from faceclean.learned.tracker_map import MapWeights
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
 # last five hold a face at rest hard (0.5-1 Hz) and open up fast when it moves (beta
-# 5-20, the speed estimate itself at 4 Hz): less still-face jitter and less lag at once.
+# 5-20, the speed estimate itself at 4 Hz); across sources they tie with 4-8 Hz
+# (docs/MODEL.md), so the choice among them is by jitter (TIE).
 PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
     None, (8.0, 1.0, 1.0), (6.0, 0.5, 1.0), (4.0, 1.0, 1.0), (2.0, 0.5, 1.0),
     (1.0, 0.3, 1.0), (1.0, 5.0, 4.0), (0.5, 5.0, 4.0), (1.0, 10.0, 4.0), (0.5, 10.0, 4.0),
@@ -235,14 +236,16 @@ def _cross_validate(pool, names, prefilters, lams, rest: bool, report: Report) -
         feats = features(w, pool)
         moments = [_moments(*_stack([f], rest)) for f in feats]  # per pair
         total = [sum(m[i] for m in moments) for i in (0, 1)]
+        folds = {}  # source -> (x'x, x'y of every other source, its performances' features)
+        for g in groups:
+            out = [i for i, p in enumerate(pool) if p.group == g]
+            folds[g] = (*(total[j] - sum(moments[i][j] for i in out) for j in (0, 1)),
+                        [feats[i] for i in out if scored[i] == g])  # fmt: skip
         for lam in lams:
             ratios, jits = [], []
-            for g in groups:
-                out = [i for i, p in enumerate(pool) if p.group == g]
-                gram = total[0] - sum(moments[i][0] for i in out)
-                xty = total[1] - sum(moments[i][1] for i in out)
+            for g, (gram, xty, held) in folds.items():
                 _set_linear(w, *_solve(gram, xty, lam))
-                mse, jit = _score(w, [feats[i] for i in out if scored[i] == g])
+                mse, jit = _score(w, held)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
             known = np.array(jits)[~np.isnan(jits)]  # NaN: too short to tell
