@@ -163,7 +163,7 @@ def test_playback_changes_the_picture_and_moves_the_playhead(opened):
     opened.until("window.faceclean.time > 1.0")  # playing advances the clock
     page.click("#fc-play")  # pause; on a loaded machine the clip may have looped past its end
     paused = page.evaluate("window.faceclean.time")
-    two_frames = "() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))"
+    two_frames = "() => new Promise((ok) => requestAnimationFrame(() => requestAnimationFrame(ok)))"
     page.evaluate(two_frames)
     assert page.evaluate("window.faceclean.time") == paused  # paused means the clock stands
     moved = opened.view(2.0)  # mid-clip: the jaw is wide open
