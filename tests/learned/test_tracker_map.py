@@ -13,7 +13,7 @@ from faceclean.learned.tracker_map import MapWeights, TrackerMap
 NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
 
 
-def weights(hidden=4, seed=0, prefilter=True, rest=True) -> MapWeights:
+def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0) -> MapWeights:
     rng = np.random.default_rng(seed)
     k = len(NAMES)
     arrays = {
@@ -31,7 +31,8 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True) -> MapWeights:
         "c": np.full(k, -0.05),
     }
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
-              "hidden": hidden, "prefilter": prefilter, "rest": rest}  # fmt: skip
+              "hidden": hidden, "prefilter": prefilter, "rest": rest,
+              "deadband": deadband}  # fmt: skip
     return MapWeights.build(config, arrays)
 
 
@@ -136,8 +137,9 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
+@pytest.mark.parametrize("band", [0.0, 0.05])
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
-def test_the_usual_frame_path_gives_the_general_paths_numbers(names):
+def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band):
     """``_usual`` (every stream present and advancing) against the general path, forced, on
     streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
     three streams together and one alone."""
@@ -149,7 +151,7 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names):
     t[100:, 0] += 1.0  # ... and the one stream stepped alone
     x = rng.uniform(0, 1, (n, 3, len(names)))
     x[40, 0] = np.nan  # a lost frame
-    w = weights(hidden=0)
+    w = weights(hidden=0, deadband=band)
     for streams in (slice(None), 0):
         fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
         general._usual = lambda x, tt: None
@@ -166,3 +168,27 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names):
             np.testing.assert_allclose(got, general.step(x[i, streams], t[i, streams]),
                                        rtol=0, atol=1e-12)  # fmt: skip
         assert sum(taken) > n * 0.8 and not all(taken)  # both paths ran
+
+
+def test_the_deadband_holds_tracker_noise_and_passes_movement():
+    """y = m - clip(m - y_prev, -eps, eps): noise within eps moves nothing; a movement
+    arrives at most eps behind (and a start takes the map's value)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(300) / 30.0
+    still = np.tile([0.3, 0.2, 0.1], (300, 1)) + rng.normal(0, 0.003, (300, 3))
+    plain = weights(hidden=0, prefilter=False, rest=False)
+    banded = weights(hidden=0, prefilter=False, rest=False, deadband=0.02)
+    m = TrackerMap(weights=plain).clean(Animation(t, still, NAMES)).values
+    y = TrackerMap(weights=banded).clean(Animation(t, still, NAMES)).values
+    np.testing.assert_array_equal(y[0], m[0])
+    assert np.abs(np.diff(y, axis=0)).mean() < 0.05 * np.abs(np.diff(m, axis=0)).mean()
+    assert np.abs(y - m).max() <= 0.02 + 1e-12
+    ramp = np.tile(np.linspace(0, 0.7, 300)[:, None], (1, 3))
+    m = TrackerMap(weights=plain).clean(Animation(t, ramp, NAMES)).values
+    y = TrackerMap(weights=banded).clean(Animation(t, ramp, NAMES)).values
+    moving = np.abs(np.diff(m, axis=0)) > 0
+    assert moving.mean() > 0.5 and (np.diff(y, axis=0)[moving] > 0).mean() > 0.9  # it follows
+    assert np.abs(y - m).max() <= 0.02 + 1e-12
+    for bad in (-0.1, 0.5, [0.01, 0.02], "x"):
+        with pytest.raises(FacecleanError, match="deadband"):
+            MapWeights.build({**plain.config, "deadband": bad}, plain.arrays)

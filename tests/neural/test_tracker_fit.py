@@ -125,10 +125,31 @@ def test_the_choice_is_made_leaving_each_source_out():
     score = lambda e: e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1))  # noqa: E731
     top = min(map(score, cands))
     near = [e for e in cands if score(e) <= top * (1 + fit.TIE)]  # equal within noise
-    chosen = min(near, key=lambda e: e["jitter"])  # the smoothest of them
+    calm = [e for e in near if e["jitter"] <= fit.JITTER_BUDGET]
+    # the least lag of those within the jitter budget, else the smoothest
+    chosen = min(calm, key=lambda e: e["lag_ms"]) if calm else min(near, key=lambda e: e["jitter"])
+    assert all(np.isfinite(e["lag_ms"]) for e in cands)
     assert w.config["lam"] == chosen["lam"] and w.config["val_mse"] == chosen["val_mse"]
+    assert w.config["deadband"] == fit.DEADBAND
     # a source's score comes from the others' fit: it differs from the score with it in
     inside = fit._score(w, fit.features(w, pool[:2]))[0]
     alone = fit.fit(pool[2:], [], prefilters=[(2.0, 0.5, 1.0)], lams=(w.config["lam"],), cv=False)
     held_out = fit._score(alone, fit.features(alone, pool[:2]))[0]
     assert inside < held_out
+
+
+def test_training_scores_the_deadband_the_runtime_runs():
+    """fit's frame-by-frame prediction (deadband included) is the cleaner's output."""
+    rng = np.random.default_rng(4)
+    noisy = lambda y: 0.7 * y + 0.05 + rng.normal(0, 0.01, y.shape)  # noqa: E731
+    train = pairs(3, 0, noisy)
+    w = fit.fit(train, [], prefilters=[(4.0, 1.0, 1.0)], lams=(1e-2,), cv=False, deadband=0.02)
+    assert w.config["deadband"] == 0.02
+    test = pairs(1, 30, noisy)[0]
+    t, u, r, _ = fit.features(w, [test])[0]
+    want = TrackerMap(weights=w, names=NAMES).clean(test.tracked).values
+    np.testing.assert_allclose(fit._predict(w, u, r), want, atol=1e-12)
+    plain = fit.blank(NAMES, 0, (4.0, 1.0, 1.0), True)
+    plain.arrays.update({k: w.arrays[k] for k in ("a", "b", "c")})
+    still = np.abs(np.diff(fit._predict(w, u, r), axis=0))
+    assert still.mean() < np.abs(np.diff(fit._predict(plain, u, r), axis=0)).mean()

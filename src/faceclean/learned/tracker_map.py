@@ -9,15 +9,20 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
                                         the map sees the tracker's signal, not its noise
     r  = min(r, u)                      the stream's resting level so far (since reset)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
-    y  = clip(A u + B (u - r) + c + W2 tanh(W1 z + b1) + b2, 0, 1)                (M,)
+    m  = clip(A u + B (u - r) + c + W2 tanh(W1 z + b1) + b2, 0, 1)                (M,)
+    y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output
 
 ``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
 the rest feature takes each face's own resting reading off, which is where identities
 differ most (with B = 0, no hidden layer and no pre-filter it is exactly the per-channel
-ridge baseline). The optional hidden layer (``hidden`` > 0) adds what is not linear; on
-the pairs we have it overfits (docs/MODEL.md), so the shipped map is linear. Why this cannot
-invent motion: y is a function of (u, r) only; on a still face u converges and r is
-constant, so y converges and stays; a missing frame holds u and so y.
+ridge baseline). The deadband (``deadband`` in the config, 0 if absent) lets the output
+stand while the map's value stays within eps of it: a still face's tracker noise, which
+the map gathers from all its inputs, moves nothing, while a movement passes with a lag of
+eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps. The optional hidden
+layer (``hidden`` > 0) adds what is not linear; on the pairs we have it overfits
+(docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
+function of (u, r) only; on a still face u converges and r is constant, so m converges
+and y with it; a missing frame holds u and so y.
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
@@ -51,6 +56,7 @@ from faceclean.learned import formats
 from faceclean.learned.formats import TRACKER_MAP as FORMAT
 
 MAX_WIDTH = 4096
+MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
 
 
 @dataclass(frozen=True)
@@ -114,6 +120,12 @@ class MapWeights:
             raise FacecleanError(f"{label}: scales and cut-offs must be > 0")
         if (out["beta"] < 0).any():
             raise FacecleanError(f"{label}: beta must be >= 0")
+        try:
+            band = np.broadcast_to(np.asarray(config.get("deadband", 0.0), np.float64), (m,))
+        except (TypeError, ValueError):
+            raise FacecleanError(f"{label}: deadband must be a number or one per output") from None
+        if not (np.isfinite(band).all() and (band >= 0).all() and (band <= MAX_DEADBAND).all()):
+            raise FacecleanError(f"{label}: deadband must be within [0, {MAX_DEADBAND}]")
         return cls(dict(config), out)
 
     def save(self, path: str | os.PathLike) -> None:
@@ -167,6 +179,8 @@ class TrackerMap(Cleaner):
         self._mc2pi = 2.0 * np.pi * np.broadcast_to(self.pre.min_cutoff, (len(w.inputs),))
         self._beta2pi = 2.0 * np.pi * np.broadcast_to(self.pre.beta, (len(w.inputs),))
         self._direct = self._in.identity and self._out.identity  # columns = inputs = outputs
+        band = np.asarray(w.config.get("deadband", 0.0), np.float64)
+        self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if band.any() else None
         self.reset()
 
     def reset(self) -> None:
@@ -188,6 +202,7 @@ class TrackerMap(Cleaner):
             self._u = np.full((s, k), np.nan)  # (S, K) pre-filtered input
             self._edx = np.zeros((s, k))  # (S, K) One Euro's slope, weight/s
             self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
+            self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
         bad = ~(np.abs(x) <= MAX_ABS)  # rule 2 for every column, passthrough ones too
         missing = bad.all(axis=1) | ~np.isfinite(tt)  # rule 1
         if bad.any():
@@ -212,6 +227,10 @@ class TrackerMap(Cleaner):
             self._edx = np.where(start[:, None], 0.0, self._edx)
         self._u = u
         y = self._map(u, moved)
+        if self._band is not None:  # the deadband; a (re)start takes the map's value
+            d = np.clip(y - self._m, -self._band, self._band)
+            y = y - np.where(start[:, None] | np.isnan(d), 0.0, d)
+        self._m = y if moved.all() else np.where(moved[:, None], y, self._m)
         out = x.copy()
         out[:, self._out.cols] = y[:, self._out.have]
         if not moved.all():
@@ -244,6 +263,11 @@ class TrackerMap(Cleaner):
         y += self._r @ self._nb
         y += self.weights.arrays["c"]
         np.clip(y, 0.0, 1.0, out=y)
+        if self._band is not None:  # the deadband: y = m - clip(m - y_prev, -eps, eps)
+            d = y - self._m
+            np.clip(d, -self._band, self._band, out=d)
+            y -= d
+        self._m = y
         if self._direct:
             out = y
         else:

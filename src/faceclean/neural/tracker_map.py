@@ -6,7 +6,8 @@ with the runtime's own One Euro (so training sees what the cleaner computes), an
 is fitted frame by frame. The linear part ``A u + B (u - r) + c`` by ridge (closed form);
 an optional hidden layer on top with Adam, early-stopped. The pre-filter and the ridge
 shrinkage are chosen on validation pairs (performances no training pair comes from) by
-MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's.
+MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's. The output deadband
+(``DEADBAND``) is a fixed setting, in place while every candidate is scored.
 """
 
 from __future__ import annotations
@@ -36,6 +37,10 @@ LAMBDAS = (1e-2, 1e-1, 3e-1, 1.0)  # ridge shrinkage, relative to the inputs' me
 LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
 TIE = 0.005  # cross-validated scores this close to the best (relative) count as equal
+# The output deadband, weight units: 1 % of a channel's range, below what shows on a face,
+# and about 3x what MediaPipe's noise on a still face moves the map's output a frame
+# (docs/MODEL.md); it holds a face at rest, so the tie among pre-filters goes to lag.
+DEADBAND = 0.01
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -49,7 +54,7 @@ def channels(pairs: Sequence[Pair]) -> tuple[str, ...]:
 
 
 def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], rest: bool,
-          prefilter: bool = True) -> MapWeights:  # fmt: skip
+          prefilter: bool = True, deadband: float = 0.0) -> MapWeights:  # fmt: skip
     """An identity map (y = u) of the right shapes: the start of every fit."""
     k, h = len(names), hidden
     arrays = {
@@ -68,6 +73,8 @@ def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], re
     }
     config = {"format": TRACKER_MAP, "inputs": list(names), "outputs": list(names),
               "hidden": h, "rest": rest, "prefilter": prefilter}  # fmt: skip
+    if deadband:
+        config["deadband"] = deadband
     return MapWeights(config, arrays)
 
 
@@ -124,17 +131,20 @@ def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray) -> None:
     w.arrays["b"] = coef[:, k:] if coef.shape[1] > k else np.zeros((len(c), k))
 
 
-def _score(w: MapWeights, feats) -> tuple[float, float]:
-    """(MSE, jitter ratio vs the truth) of the map over per-pair features."""
-    from faceclean.evaluation.metrics import jitter_ratio
+def _score(w: MapWeights, feats, lag: bool = False) -> tuple[float, ...]:
+    """(MSE, jitter ratio vs the truth[, lag ms]) of the map over per-pair features."""
+    from faceclean.evaluation.metrics import jitter_ratio, lag_ms
 
-    sq, n, jit = 0.0, 0, []
+    sq, n, jit, lags = 0.0, 0, [], []
     for t, u, r, y in feats:
         pred = _predict(w, u, r)
         sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
         if len(t) > 3:
             jit.append(jitter_ratio(t, pred, y))
-    return sq / max(n, 1), float(np.nanmean(jit)) if jit else float("nan")
+            if lag:
+                lags.append(lag_ms(t, pred, y))
+    mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
+    return (sq / max(n, 1), mean(jit), mean(lags)) if lag else (sq / max(n, 1), mean(jit))
 
 
 def fit_ridge(
@@ -171,6 +181,7 @@ def fit(
     report: Report | None = None,
     refit: bool = True,
     cv: bool = True,
+    deadband: float = DEADBAND,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
@@ -185,7 +196,7 @@ def fit(
     names = channels(train)
     pool = [*train, *val]
     if cv and not hidden and len({p.group for p in performances(pool)}) >= 3:
-        w = _cross_validate(pool, names, prefilters, lams, rest, report)
+        w = _cross_validate(pool, names, prefilters, lams, rest, report, deadband)
         feats = features(w, pool)
         if refit:
             _set_linear(w, *ridge(*_stack(feats, rest), w.config["lam"]))
@@ -193,7 +204,8 @@ def fit(
         return w
     best: tuple[float, MapWeights] | None = None
     for pre in prefilters:
-        w = blank(names, hidden, pre or LIGHT, rest, prefilter=pre is not None)
+        w = blank(names, hidden, pre or LIGHT, rest, prefilter=pre is not None,
+                  deadband=deadband)  # fmt: skip
         feats = features(w, train)
         vfeats = features(w, performances(val)) if performances(val) else feats
         z, y = _stack(feats, rest)
@@ -215,24 +227,27 @@ def fit(
     return w
 
 
-def _cross_validate(pool, names, prefilters, lams, rest: bool, report: Report) -> MapWeights:
+def _cross_validate(
+    pool, names, prefilters, lams, rest: bool, report: Report, deadband: float = 0.0
+) -> MapWeights:
     """The pre-filter and shrinkage that score best leaving one source out: for each
     source, the ridge fitted on every other source's pairs and clips, scored on its own
     performances by MSE as x raw (each source alike, whatever its error's size), the mean
     over sources x (1 + jitter over JITTER_BUDGET x the truth's, when over). Of the
-    candidates within TIE of the best score, the smoothest (least jitter) is taken: a
-    difference that small is noise over a few sources, and a smoother map does less harm
-    to a face at rest. The weights returned hold the choice (their linear part still to
-    be fitted)."""
+    candidates within TIE of the best score (a difference that small is noise over a few
+    sources) whose jitter is within JITTER_BUDGET, the one with the least lag is taken;
+    when none is, the smoothest. (Before the deadband the smoothest was taken, to hold a
+    face at rest: 43 ms of lag; the deadband holds it now.) The weights returned hold the
+    choice (their linear part still to be fitted)."""
     groups = sorted({p.group for p in performances(pool)})
     perf = {id(p) for p in performances(pool)}
     scored = [p.group if id(p) in perf else None for p in pool]  # (P,) source, or None: a clip
     raw = blank(names, 0, LIGHT, rest, prefilter=False)
     raw_mse = {g: _score(raw, [f for f, s in zip(features(raw, pool), scored, strict=True)
                                if s == g])[0] for g in groups}  # fmt: skip
-    found: list[tuple[float, float, MapWeights]] = []  # (score, jitter, weights)
+    found: list[tuple[float, float, float, MapWeights]] = []  # (score, jitter, lag, weights)
     for pre in prefilters:
-        w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None)
+        w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None, deadband=deadband)
         feats = features(w, pool)
         moments = [_moments(*_stack([f], rest)) for f in feats]  # per pair
         total = [sum(m[i] for m in moments) for i in (0, 1)]
@@ -242,26 +257,31 @@ def _cross_validate(pool, names, prefilters, lams, rest: bool, report: Report) -
             folds[g] = (*(total[j] - sum(moments[i][j] for i in out) for j in (0, 1)),
                         [feats[i] for i in out if scored[i] == g])  # fmt: skip
         for lam in lams:
-            ratios, jits = [], []
+            ratios, jits, lags = [], [], []
             for g, (gram, xty, held) in folds.items():
                 _set_linear(w, *_solve(gram, xty, lam))
-                mse, jit = _score(w, held)
+                mse, jit, lag = _score(w, held, lag=True)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
+                lags.append(lag)
             known = np.array(jits)[~np.isnan(jits)]  # NaN: too short to tell
             ratio, jit = float(np.mean(ratios)), float(known.mean()) if known.size else 0.0
+            lag = float(np.nanmean(lags)) if np.isfinite(lags).any() else 0.0
             score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
             report({"event": "candidate", "pre": pre, "lam": lam, "val_mse": ratio,
-                    "jitter": jit, "cv": len(groups)})  # fmt: skip
-            config = dict(w.config, lam=lam, val_mse=ratio, val_jitter=jit,
+                    "jitter": jit, "lag_ms": lag, "cv": len(groups)})  # fmt: skip
+            config = dict(w.config, lam=lam, val_mse=ratio, val_jitter=jit, val_lag_ms=lag,
                           selected="leave one source out: " + ", ".join(groups))  # fmt: skip
             arrays = {k: v.copy() for k, v in w.arrays.items()}
-            found.append((score, jit, MapWeights(config, arrays)))
+            found.append((score, jit, lag, MapWeights(config, arrays)))
     top = min(f[0] for f in found)
-    return min((f for f in found if f[0] <= top * (1.0 + TIE)), key=lambda f: f[1])[2]
+    tied = [f for f in found if f[0] <= top * (1.0 + TIE)]
+    calm = [f for f in tied if f[1] <= JITTER_BUDGET]
+    return (min(calm, key=lambda f: f[2]) if calm else min(tied, key=lambda f: f[1]))[3]
 
 
 def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The runtime's output for one pair's features (F, K), deadband included."""
     a = w.arrays
     lin = u @ a["a"].T + a["c"]
     rest = (u - r) if w.config["rest"] else np.zeros_like(u)
@@ -269,7 +289,14 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
     if w.config["hidden"]:
         z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
-    return np.clip(lin, 0.0, 1.0)
+    m = np.clip(lin, 0.0, 1.0)
+    band = float(w.config.get("deadband", 0.0))
+    if not band or len(m) < 2:
+        return m
+    y = m.copy()  # y[n] = m[n] - clip(m[n] - y[n-1], -eps, eps), frame after frame
+    for i in range(1, len(m)):
+        y[i] -= np.clip(m[i] - y[i - 1], -band, band)
+    return y
 
 
 def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Report) -> None:
