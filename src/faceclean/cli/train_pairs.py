@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         if e.get("event") == "candidate" and e.get("cv"):
             print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}: leaving each of "
                   f"{e['cv']} sources out, MSE {e['val_mse']:.3f}x raw, jitter "
-                  f"{e['jitter']:.2f}x", file=sys.stderr)  # fmt: skip
+                  f"{e['jitter']:.2f}x, lag {e['lag_ms']:.0f} ms", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "candidate":
             print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}: validation MSE "
                   f"{e['val_mse']:.5f}, jitter {e['jitter']:.2f}x", file=sys.stderr)  # fmt: skip
