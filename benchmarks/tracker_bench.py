@@ -5,7 +5,7 @@
 1. The engine on one core: CPU seconds per frame (``time.process_time``, so a shared
    machine's other load does not count) to render a frame and to track it, as frames/s.
 2. The shipped tracker map stepping one stream and 1024 streams, against eager PyTorch
-   computing the same step (One Euro, then the linear map over u and u - r), p50 of
+   computing the same step (One Euro, the linear map over u and u - r, the deadband), p50 of
    repeated steps, as a ratio (the issue-19 bar: <= 0.4x one stream, <= 1.0x at 1024).
 """
 
@@ -66,8 +66,10 @@ def cleaner(steps: int = 300) -> dict:
             t0 = time.perf_counter()
             tm.step(x[i], np.full(s, i / 30))
             ours.append(time.perf_counter() - t0)
-        # eager torch, the same step: One Euro then A u + B (u - r) + c
+        # eager torch, the same step: One Euro, m = A u + B (u - r) + c, the deadband
+        band = torch.tensor(float(tm.weights.config.get("deadband", 0.0)))
         y = torch.tensor(x[0])
+        prev = None
         edx = torch.zeros_like(y)
         r = y.clone()
         ref = []
@@ -82,6 +84,9 @@ def cleaner(steps: int = 300) -> dict:
                 y = y + (1 / (1 + 1 / (2 * np.pi * fc * dt))) * (xi - y)
                 r = torch.minimum(r, y)
                 out = torch.clamp(y @ a["a"].T + (y - r) @ a["b"].T + a["c"], 0, 1)
+                if prev is not None:
+                    out = out - torch.clamp(out - prev, -band, band)
+                prev = out
                 ref.append(time.perf_counter() - t0)
         p_ours, p_ref = float(np.median(ours[10:])), float(np.median(ref[10:]))
         res[s] = {
