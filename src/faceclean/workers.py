@@ -92,6 +92,8 @@ class ParentGone(BaseException):
     task unwinds (temporary outputs removed) and the worker exits."""
 
 
+# blocked across a worker's spawn (SIGHUP: POSIX only)
+_SPAWN_BLOCKED = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
 _busy = False  # a task is running (SIGTERM unwinds it) or not (SIGTERM exits at once)
 _stopping = False
 
@@ -136,10 +138,11 @@ def die_with_parent(parent: int | None = None) -> None:
 
 def _start(parent: int, initializer: Callable[..., Any] | None, initargs: Sequence) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent stops the pool
-    if hasattr(signal, "pthread_sigmask"):  # blocked since the spawn (Pool.submit): a
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # pending one is dropped
     signal.signal(signal.SIGTERM, _on_term)
     signal.signal(signal.SIGHUP, _on_term)
+    if hasattr(signal, "pthread_sigmask"):  # blocked since the spawn (Pool.submit): a
+        # pending Ctrl-C is dropped, a pending SIGTERM or SIGHUP now ends this worker quietly
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _SPAWN_BLOCKED)
     die_with_parent(parent)
     if initializer is not None:
         initializer(*initargs)
@@ -179,9 +182,12 @@ class Pool:
         # during its start-up waits (the child inherits the mask until ``_start`` ignores
         # it) instead of printing a KeyboardInterrupt traceback from its imports; the
         # parent gets its own Ctrl-C as soon as the mask is restored
+        # SIGTERM and SIGHUP too: one landing in the parent between the child's start and
+        # the parent writing its start-up data to it left a child no one stopped, reading
+        # an empty pipe ("EOFError: Ran out of input" and a traceback on stderr)
         if not hasattr(signal, "pthread_sigmask"):
             return self._executor.submit(_call, fn, args, kwargs)
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _SPAWN_BLOCKED)
         try:
             return self._executor.submit(_call, fn, args, kwargs)
         finally:
