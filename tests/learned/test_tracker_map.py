@@ -189,6 +189,11 @@ def test_the_deadband_holds_tracker_noise_and_passes_movement():
     moving = np.abs(np.diff(m, axis=0)) > 0
     assert moving.mean() > 0.5 and (np.diff(y, axis=0)[moving] > 0).mean() > 0.9  # it follows
     assert np.abs(y - m).max() <= 0.02 + 1e-12
+    per = MapWeights.build({**plain.config, "deadband": [0.02, 0.0, 0.02]}, plain.arrays)
+    y = TrackerMap(weights=per).clean(Animation(t, still, NAMES)).values
+    m = TrackerMap(weights=plain).clean(Animation(t, still, NAMES)).values
+    np.testing.assert_array_equal(y[:, 1], m[:, 1])  # a band of 0: that output untouched
+    assert np.abs(np.diff(y[:, 0])).mean() < 0.05 * np.abs(np.diff(m[:, 0])).mean()
     for bad in (-0.1, 0.5, [0.01, 0.02], "x"):
         with pytest.raises(FacecleanError, match="deadband"):
             MapWeights.build({**plain.config, "deadband": bad}, plain.arrays)

@@ -32,7 +32,8 @@ does not know pass through (under the same rules); model inputs the frame lacks 
 for MediaPipe) are not written.
 
 Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "inputs": [K],
-"outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, ...facts}; arrays
+"outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, "deadband": eps (a number
+or M of them, weight units, 0 if absent), ...facts}; arrays
 ``min_cutoff``, ``beta``, ``d_cutoff`` (K,) Hz; ``mu``, ``sd`` (2K,); ``w1`` (H, 2K),
 ``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,).
 """

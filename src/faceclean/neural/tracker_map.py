@@ -295,8 +295,8 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
         z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
     m = np.clip(lin, 0.0, 1.0)
-    band = float(w.config.get("deadband", 0.0))
-    if not band or len(m) < 2:
+    band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), m.shape[1:])
+    if not band.any() or len(m) < 2:
         return m
     y = m.copy()  # y[n] = m[n] - clip(m[n] - y[n-1], -eps, eps), frame after frame
     for i in range(1, len(m)):
