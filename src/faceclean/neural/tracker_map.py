@@ -38,8 +38,9 @@ LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unu
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it
 TIE = 0.005  # cross-validated scores this close to the best (relative) count as equal
 # The output deadband, weight units: 1 % of a channel's range, below what shows on a face,
-# and about 3x what MediaPipe's noise on a still face moves the map's output a frame
-# (docs/MODEL.md); it holds a face at rest, so the tie among pre-filters goes to lag.
+# and over 10x the mean frame-to-frame change MediaPipe's noise on a still face leaves in
+# the map's output (0.0007, docs/MODEL.md); it holds a face at rest, so the tie among
+# pre-filters can go to lag.
 DEADBAND = 0.01
 Report = Callable[[dict[str, Any]], None]
 
@@ -236,19 +237,18 @@ def _cross_validate(
     over sources x (1 + jitter over JITTER_BUDGET x the truth's, when over). Of the
     candidates within TIE of the best score (a difference that small is noise over a few
     sources) whose jitter is within JITTER_BUDGET on every source left out, the one with
-    the least lag is taken; when none is, the smoothest. (Every source, not their mean: a
-    mean within budget let one fold's light pre-filter leave 6x the truth's jitter on a
-    noisier source.) (Before the deadband the smoothest was taken, to hold a
-    face at rest: 43 ms of lag; the deadband holds it now.) The weights returned hold the
-    choice (their linear part still to be fitted)."""
+    the least lag is taken; when none is, the smoothest (every source, not their mean: a
+    mean within budget let a light pre-filter leave 6x the truth's jitter on a noisier
+    source; docs/MODEL.md). The weights returned hold the choice (their linear part still
+    to be fitted)."""
     groups = sorted({p.group for p in performances(pool)})
     perf = {id(p) for p in performances(pool)}
     scored = [p.group if id(p) in perf else None for p in pool]  # (P,) source, or None: a clip
     raw = blank(names, 0, LIGHT, rest, prefilter=False)
     raw_mse = {g: _score(raw, [f for f, s in zip(features(raw, pool), scored, strict=True)
                                if s == g])[0] for g in groups}  # fmt: skip
-    found: list[tuple[float, float, float, float, MapWeights]] = []  # score, jitter, lag,
-    # the worst source's jitter, weights
+    found: list[tuple[float, float, float, float, MapWeights]] = []  # (score, jitter, lag,
+    #                                                                   worst jitter, weights)
     for pre in prefilters:
         w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None, deadband=deadband)
         feats = features(w, pool)
