@@ -13,7 +13,7 @@ from faceclean.learned.tracker_map import MapWeights, TrackerMap
 NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
 
 
-def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0) -> MapWeights:
+def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None) -> MapWeights:
     rng = np.random.default_rng(seed)
     k = len(NAMES)
     arrays = {
@@ -30,6 +30,9 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0) -> MapWei
         "b": np.eye(k) * 0.2 if rest else np.zeros((k, k)),
         "c": np.full(k, -0.05),
     }
+    if lift is not None:  # (gain, knee) on both blinks
+        arrays["lift_gain"] = np.array([lift[0], lift[0], 0.0])
+        arrays["lift_knee"] = np.array([lift[1], lift[1], 0.0])
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
               "hidden": hidden, "prefilter": prefilter, "rest": rest,
               "deadband": deadband}  # fmt: skip
@@ -137,9 +140,9 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("band", [0.0, 0.05])
+@pytest.mark.parametrize("band, lift", [(0.0, None), (0.05, None), (0.05, (2.5, 0.2))])
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
-def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band):
+def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift):
     """``_usual`` (every stream present and advancing) against the general path, forced, on
     streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
     three streams together and one alone."""
@@ -151,7 +154,7 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band):
     t[100:, 0] += 1.0  # ... and the one stream stepped alone
     x = rng.uniform(0, 1, (n, 3, len(names)))
     x[40, 0] = np.nan  # a lost frame
-    w = weights(hidden=0, deadband=band)
+    w = weights(hidden=0, deadband=band, lift=lift)
     for streams in (slice(None), 0):
         fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
         general._usual = lambda x, tt: None
@@ -197,3 +200,31 @@ def test_the_deadband_holds_tracker_noise_and_passes_movement():
     for bad in (-0.1, 0.5, [0.01, 0.02], "x"):
         with pytest.raises(FacecleanError, match="deadband"):
             MapWeights.build({**plain.config, "deadband": bad}, plain.arrays)
+
+
+def test_the_lift_closes_a_blink_and_leaves_a_face_at_rest():
+    """m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1)) on the blinks: an under-read blink
+    reaches its gain's height; below the knee (a face at rest, a half-closed eye) the
+    map's output is untouched; jawOpen is not lifted."""
+    t = np.arange(120) / 30.0
+    x = np.tile([0.1, 0.1, 0.3], (120, 1))
+    x[60:66, :2] = np.array([0.1, 0.25, 0.4, 0.4, 0.25, 0.1])[:, None]  # an under-read blink
+    x[90:96, 2] = 0.9
+    plain = weights(hidden=0, prefilter=False, rest=True)
+    lifted = weights(hidden=0, prefilter=False, rest=True, lift=(4.0, 0.1))
+    m = TrackerMap(weights=plain).clean(Animation(t, x, NAMES)).values
+    y = TrackerMap(weights=lifted).clean(Animation(t, x, NAMES)).values
+    np.testing.assert_allclose(y[:, :2].max(axis=0), 0.8)  # 4 (0.4 - 0.1 - 0.1)
+    np.testing.assert_allclose(m[:, :2].max(), 0.53)  # the map alone: 1.3 0.4 + 0.2 0.3 - 0.05
+    np.testing.assert_array_equal(y[:60], m[:60])  # at rest: nothing lifted
+    np.testing.assert_array_equal(y[:, 2], m[:, 2])  # jawOpen: no lift
+    np.testing.assert_array_equal(y >= m - 1e-15, True)  # a lift only raises
+    bad = dict(lifted.arrays, lift_gain=np.array([-1.0, 0, 0]))
+    with pytest.raises(FacecleanError, match="lift_gain"):
+        MapWeights.build(lifted.config, bad)
+    bad = dict(lifted.arrays, lift_knee=np.array([0.1, 2.0, 0]))
+    with pytest.raises(FacecleanError, match="lift_knee"):
+        MapWeights.build(lifted.config, bad)
+    other = {**lifted.config, "inputs": ["jawOpen", "mouthClose", "eyeBlinkRight"]}
+    with pytest.raises(FacecleanError, match="'eyeBlinkLeft' is lifted but is not an input"):
+        MapWeights.build(other, lifted.arrays)

@@ -117,7 +117,9 @@ def test_the_choice_is_made_leaving_each_source_out():
             pool.append(paired.Pair(p.name + f"s{g}", p.tracked, p.truth, f"src{g}", "studio"))
     seen = []
     pres = (None, (2.0, 0.5, 1.0))
-    w = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=(1e-2, 1.0), report=seen.append)
+    w = fit.fit(
+        pool[:4], pool[4:], prefilters=pres, lams=(1e-2, 1.0), report=seen.append, knees=(None,)
+    )  # the lift: its own test
     cands = [e for e in seen if e.get("event") == "candidate"]
     assert len(cands) == 4 and all(e["cv"] == 3 for e in cands)  # every candidate, 3 sources
     assert w.config["selected"] == "leave one source out: src0, src1, src2"
@@ -153,3 +155,50 @@ def test_training_scores_the_deadband_the_runtime_runs():
     plain.arrays.update({k: w.arrays[k] for k in ("a", "b", "c")})
     still = np.abs(np.diff(fit._predict(w, u, r), axis=0))
     assert still.mean() < np.abs(np.diff(fit._predict(plain, u, r), axis=0)).mean()
+
+
+def test_the_blink_lift_is_chosen_leaving_each_source_out():
+    """Every knee is scored leaving each source out (MSE x jitter's price x closure's
+    price outside CLOSURE_BAND) and the best is taken; the gains fitted on the
+    performances undo the tracker's under-read; training's prediction, lift included, is
+    the cleaner's output."""
+    rng = np.random.default_rng(6)
+
+    def under(y):  # each face's blinks read at their own fraction
+        x = 0.7 * y + 0.05 + rng.normal(0, 0.005, y.shape)
+        x[:, :2] = rng.uniform(0.2, 0.6) * y[:, :2] + 0.05 + rng.normal(0, 0.005, (len(y), 2))
+        return x
+
+    pool = [paired.Pair(p.name + f"s{g}", p.tracked, p.truth, f"src{g}", "studio")
+            for g in range(3) for p in pairs(2, 10 * g, under)]  # fmt: skip
+    seen = []
+    pres, lams = [(8.0, 1.0, 1.0)], (1e-2,)
+    w = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=lams, report=seen.append)
+    lifts = [e for e in seen if e.get("event") == "lift"]
+    assert [e["knee"] for e in lifts] == list(fit.KNEES) and all(e["cv"] == 3 for e in lifts)
+    lo, hi = fit.CLOSURE_BAND
+
+    def score(e):
+        price = max(0.0, lo - e["closure"]) + max(0.0, e["closure"] - hi)
+        return e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1)) * (1 + price)
+
+    assert w.config["lift_knee"] == min(lifts, key=score)["knee"]
+    assert (w.arrays["lift_gain"][2:] == 0).all()  # blinks only
+    none = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=lams, knees=(None,))
+    assert none.config["lift_knee"] is None and not none.arrays["lift_gain"].any()
+    # the gains: truth / (rise - knee) where an eye closes; a tracker at a quarter reads 4
+    quarter = [paired.Pair("q", Animation(p.truth.times, 0.25 * p.truth.values, NAMES), p.truth,
+                           "src0", "studio") for p in pool[:2]]  # fmt: skip
+    gains = fit._lift_gains(none, fit.features(none, quarter), 0.0)
+    np.testing.assert_allclose(gains[:2], 4.0, rtol=0.05)
+    assert (gains[2:] == 0).all()
+    plain = TrackerMap(weights=none, names=NAMES)  # the same linear part, no lift
+    fit._set_lift(none, gains, 0.0)
+    test = pairs(1, 90, lambda y: 0.25 * y)[0]  # a face whose blinks read at a quarter
+    out = TrackerMap(weights=none, names=NAMES).clean(test.tracked).values
+    t, u, r, _ = fit.features(none, [test])[0]
+    np.testing.assert_allclose(fit._predict(none, u, r), out, atol=1e-12)
+    before = plain.clean(test.tracked).values
+    assert (out[:, :2] >= before[:, :2] - 1e-12).all()
+    assert out[:, :2].max() > before[:, :2].max() + 0.1  # a lifted blink
+    np.testing.assert_array_equal(out[:, 2:], before[:, 2:])  # the other channels as they were

@@ -10,6 +10,7 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
     r  = min(r, u)                      the stream's resting level so far (since reset)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
     m  = clip(A u + B (u - r) + c + W2 tanh(W1 z + b1) + b2, 0, 1)                (M,)
+    m_j = max(m_j, clip(g_j (u_j - r_j - k_j), 0, 1))   a lift, where g_j > 0 (blinks)
     y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output
 
 ``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
@@ -18,7 +19,11 @@ differ most (with B = 0, no hidden layer and no pre-filter it is exactly the per
 ridge baseline). The deadband (``deadband`` in the config, 0 if absent) lets the output
 stand while the map's value stays within eps of it: a still face's tracker noise, which
 the map gathers from all its inputs, moves nothing, while a movement passes with a lag of
-eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps. The optional hidden
+eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps. The lift restores what
+a least-squares map cannot: a peak. The tracker under-reads a closing eyelid, and a map
+fitted to every frame pulls each peak toward the mean; where the same channel's own rise
+above rest passes a knee k, its output is at least that rise times a gain g (output j
+reads the input of its own name). At rest u - r < k, so the lift is 0. The optional hidden
 layer (``hidden`` > 0) adds what is not linear; on the pairs we have it overfits
 (docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
 function of (u, r) only; on a still face u converges and r is constant, so m converges
@@ -35,7 +40,9 @@ Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "inputs": [K],
 "outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, "deadband": eps (a number
 or M of them, weight units, 0 if absent), ...facts}; arrays
 ``min_cutoff``, ``beta``, ``d_cutoff`` (K,) Hz; ``mu``, ``sd`` (2K,); ``w1`` (H, 2K),
-``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,).
+``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,); optional
+``lift_gain`` >= 0 and ``lift_knee`` in [0, 1] (M,) (absent: no lift; a gain > 0 needs an
+input of the output's name).
 """
 
 from __future__ import annotations
@@ -58,6 +65,7 @@ from faceclean.learned.formats import TRACKER_MAP as FORMAT
 
 MAX_WIDTH = 4096
 MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
+MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blinks
 
 
 @dataclass(frozen=True)
@@ -121,6 +129,18 @@ class MapWeights:
             raise FacecleanError(f"{label}: scales and cut-offs must be > 0")
         if (out["beta"] < 0).any():
             raise FacecleanError(f"{label}: beta must be >= 0")
+        for key, (lo, hi) in (("lift_gain", (0.0, MAX_LIFT)), ("lift_knee", (0.0, 1.0))):
+            a = arrays.get(key, np.zeros(m))
+            if tuple(np.shape(a)) != (m,) or not np.issubdtype(np.asarray(a).dtype, np.number):
+                raise FacecleanError(f"{label}: array {key!r} not of shape {(m,)}")
+            a = np.asarray(a, np.float64)
+            if not (np.isfinite(a).all() and (a >= lo).all() and (a <= hi).all()):
+                raise FacecleanError(f"{label}: {key} must be within [{lo:g}, {hi:g}]")
+            out[key] = a
+        lifted = [o for o, g in zip(config["outputs"], out["lift_gain"], strict=True) if g > 0]
+        if set(lifted) - set(config["inputs"]):
+            name = sorted(set(lifted) - set(config["inputs"]))[0]
+            raise FacecleanError(f"{label}: output {name!r} is lifted but is not an input")
         try:
             band = np.broadcast_to(np.asarray(config.get("deadband", 0.0), np.float64), (m,))
         except (TypeError, ValueError):
@@ -174,8 +194,16 @@ class TrackerMap(Cleaner):
         # The usual frame's constants (``_usual``): y = u (A + B)' - r B' + c, the One
         # Euro cut-offs as time constants tau = 1 / (2 pi f) s.
         b = a["b"] if self.rest else np.zeros_like(a["b"])
-        self._ab = np.ascontiguousarray((a["a"] + b).T)  # (K, M)
-        self._nb = np.ascontiguousarray(-b.T)  # (K, M)
+        # The lift as L more columns of the same products: g (u_j - r_j) - g k.
+        self._lo = np.flatnonzero(a["lift_gain"] > 0)  # (L,) lifted outputs
+        self._li = np.array([w.inputs.index(w.outputs[j]) for j in self._lo], dtype=np.intp)
+        g, m = a["lift_gain"][self._lo], len(w.outputs)
+        lift = np.zeros((len(w.inputs), len(self._lo)))
+        lift[self._li, np.arange(len(self._lo))] = g
+        self._ab = np.ascontiguousarray(np.concatenate([(a["a"] + b).T, lift], axis=1))  # (K, M+L)
+        self._nb = np.ascontiguousarray(np.concatenate([-b.T, -lift], axis=1))  # (K, M+L)
+        self._c = np.concatenate([a["c"], -g * a["lift_knee"][self._lo]])  # (M+L,)
+        self._m_cols = m
         self._tau_d = 1.0 / (2.0 * np.pi * np.broadcast_to(self.pre.d_cutoff, (len(w.inputs),)))
         self._mc2pi = 2.0 * np.pi * np.broadcast_to(self.pre.min_cutoff, (len(w.inputs),))
         self._beta2pi = 2.0 * np.pi * np.broadcast_to(self.pre.beta, (len(w.inputs),))
@@ -260,10 +288,14 @@ class TrackerMap(Cleaner):
         g = h * (self._mc2pi + self._beta2pi * np.abs(edx))  # 2 pi f h
         u += (g / (1.0 + g)) * e
         np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
-        y = u @ self._ab
+        y = u @ self._ab  # (S, M+L)
         y += self._r @ self._nb
-        y += self.weights.arrays["c"]
+        y += self._c
         np.clip(y, 0.0, 1.0, out=y)
+        if len(self._lo):  # the lift: m_j = max(m_j, its lift column)
+            m = self._m_cols
+            y[:, self._lo] = np.maximum(y[:, self._lo], y[:, m:])
+            y = y[:, :m]
         if self._band is not None:  # the deadband: y = m - clip(m - y_prev, -eps, eps)
             d = y - self._m
             np.clip(d, -self._band, self._band, out=d)
@@ -296,4 +328,9 @@ class TrackerMap(Cleaner):
             rest = np.zeros_like(u) if rest is None else rest
             z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
             lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
-        return np.clip(lin, 0.0, 1.0)
+        m = np.clip(lin, 0.0, 1.0)
+        if len(self._lo):  # the lift
+            j, lo = self._li, self._lo
+            rise = a["lift_gain"][lo] * (u[:, j] - self._r[:, j] - a["lift_knee"][lo])
+            m[:, lo] = np.fmax(m[:, lo], np.clip(rise, 0.0, 1.0))
+        return m

@@ -7,7 +7,9 @@ is fitted frame by frame. The linear part ``A u + B (u - r) + c`` by ridge (clos
 an optional hidden layer on top with Adam, early-stopped. The pre-filter and the ridge
 shrinkage are chosen on validation pairs (performances no training pair comes from) by
 MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's. The output deadband
-(``DEADBAND``) is a fixed setting, in place while every candidate is scored.
+(``DEADBAND``) is a fixed setting, in place while every candidate is scored. Then the
+blink lift (``_choose_lift``): its knee chosen leaving each source out as well, with a
+price on blink closure outside ``CLOSURE_BAND``, its gains fitted on the performances.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from faceclean.channels import ARKIT52
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
-from faceclean.learned.tracker_map import MapWeights
+from faceclean.learned.tracker_map import MAX_LIFT, MapWeights
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
 # last five hold a face at rest hard (0.5-1 Hz) and open up fast when it moves (beta
@@ -42,6 +44,12 @@ TIE = 0.005  # cross-validated scores this close to the best (relative) count as
 # the map's output (0.0007, docs/MODEL.md); it holds a face at rest, so the tie among
 # pre-filters can go to lag.
 DEADBAND = 0.01
+# The blink lift's knees (rise above rest, weight units; None: no lift) and the closure
+# (output peak / true peak) a blink should reach: below 0.9 an eye does not read as
+# closed, above 1.1 it slams; a candidate outside the band pays its distance from it.
+KNEES: tuple[float | None, ...] = (None, 0.1, 0.2, 0.3, 0.4)
+CLOSURE_BAND = (0.9, 1.1)
+LIFT_FROM = 0.5  # the gain is fitted where the truth is over this (an eye closing)
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -71,6 +79,8 @@ def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], re
         "a": np.eye(k),
         "b": np.zeros((k, k)),
         "c": np.zeros(k),
+        "lift_gain": np.zeros(k),
+        "lift_knee": np.zeros(k),
     }
     config = {"format": TRACKER_MAP, "inputs": list(names), "outputs": list(names),
               "hidden": h, "rest": rest, "prefilter": prefilter}  # fmt: skip
@@ -134,7 +144,7 @@ def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray) -> None:
 
 def _score(w: MapWeights, feats, lag: bool = False) -> tuple[float, ...]:
     """(MSE, jitter ratio vs the truth[, lag ms]) of the map over per-pair features."""
-    from faceclean.evaluation.metrics import jitter_ratio, lag_ms
+    from faceclean.evaluation.metrics import jitter_ratio, lag_ms  # numpy only
 
     sq, n, jit, lags = 0.0, 0, [], []
     for t, u, r, y in feats:
@@ -183,6 +193,7 @@ def fit(
     refit: bool = True,
     cv: bool = True,
     deadband: float = DEADBAND,
+    knees: Sequence[float | None] = KNEES,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
@@ -191,7 +202,8 @@ def fit(
 
     ``cv`` (a linear map, three sources or more among ``train`` and ``val``): the choice
     is made leaving one source out in turn instead (``_cross_validate``), not on ``val``
-    alone: one source's faces are too few to tell pre-filters apart."""
+    alone: one source's faces are too few to tell pre-filters apart; and so is the blink
+    lift's knee among ``knees`` (``_choose_lift``; ``(None,)``: no lift)."""
     report = report or (lambda _e: None)
     torch.set_num_threads(1)  # a tiny net: more threads only contend
     names = channels(train)
@@ -201,6 +213,7 @@ def fit(
         feats = features(w, pool)
         if refit:
             _set_linear(w, *ridge(*_stack(feats, rest), w.config["lam"]))
+            _choose_lift(w, pool, rest, knees, report)
         w.config.update(frames=int(sum(len(f[0]) for f in feats)))
         return w
     best: tuple[float, MapWeights] | None = None
@@ -295,6 +308,11 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
         z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
     m = np.clip(lin, 0.0, 1.0)
+    lo = np.flatnonzero(a.get("lift_gain", np.zeros(0)) > 0)
+    if len(lo):  # the lift: m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1))
+        j = [w.inputs.index(w.outputs[i]) for i in lo]
+        rise = a["lift_gain"][lo] * (u[:, j] - r[:, j] - a["lift_knee"][lo])
+        m[:, lo] = np.maximum(m[:, lo], np.clip(rise, 0.0, 1.0))
     band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), m.shape[1:])
     if not band.any() or len(m) < 2:
         return m
@@ -302,6 +320,88 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
     for i in range(1, len(m)):
         y[i] -= np.clip(m[i] - y[i - 1], -band, band)
     return y
+
+
+def _lift_gains(w: MapWeights, feats, knee: float) -> np.ndarray:
+    """(M,) lift gains for ``knee`` (0 where no lift): per blink output, the median over
+    ``feats``' frames whose truth is over LIFT_FROM of truth / (rise - knee), the rise
+    the input of the same name's u - r (frames where it has not passed the knee skipped)."""
+    from faceclean.evaluation.metrics import BLINK_CHANNELS
+
+    gains = np.zeros(len(w.outputs))
+    for i, name in enumerate(w.outputs):
+        if name not in BLINK_CHANNELS or name not in w.inputs:
+            continue
+        j = w.inputs.index(name)
+        over = np.concatenate([u[:, j] - r[:, j] - knee for _, u, r, _ in feats])
+        y = np.concatenate([f[3][:, i] for f in feats])
+        sel = (y > LIFT_FROM) & (over > 0.02)
+        if sel.sum() >= 10:
+            gains[i] = float(np.clip(np.median(y[sel] / over[sel]), 0.0, MAX_LIFT))
+    return gains
+
+
+def _set_lift(w: MapWeights, gains: np.ndarray, knee: float) -> None:
+    w.arrays["lift_gain"] = gains
+    w.arrays["lift_knee"] = np.where(gains > 0, knee, 0.0)
+
+
+def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None:
+    """Sets ``w``'s blink lift: the knee (None: no lift) that scores best leaving one
+    source out, as ``_cross_validate`` scores (the linear part fitted on every other
+    source at ``w``'s pre-filter and shrinkage, the gains on their performances), x
+    (1 + the mean closure's distance outside CLOSURE_BAND); its gains then fitted on
+    every performance in ``pool``. The linear part of ``w`` is kept as it is."""
+    from faceclean.evaluation.metrics import blink_peaks
+
+    _set_lift(w, np.zeros(len(w.outputs)), 0.0)
+    w.config.update(lift_knee=None)
+    groups = sorted({p.group for p in performances(pool)})
+    perf = {id(p) for p in performances(pool)}
+    feats = features(w, pool)
+    performed = [f for i, f in enumerate(feats) if id(pool[i]) in perf]
+    if tuple(knees) == (None,) or len(groups) < 3 or not any(_lift_gains(w, performed, 0.0)):
+        return  # nothing to lift, or too few sources to choose
+    raw = blank(w.inputs, 0, LIGHT, rest, prefilter=False)
+    raw_feats = features(raw, pool)
+    moments = [_moments(*_stack([f], rest)) for f in feats]
+    total = [sum(m[i] for m in moments) for i in (0, 1)]
+    linear = {k: w.arrays[k].copy() for k in ("a", "b", "c")}
+    found = []  # (score, knee, closure)
+    per_fold = {}
+    for g in groups:
+        out = [i for i, p in enumerate(pool) if p.group == g]
+        gram, xty = (total[j] - sum(moments[i][j] for i in out) for j in (0, 1))
+        held = [feats[i] for i in out if id(pool[i]) in perf]
+        train = [f for i, f in enumerate(feats) if pool[i].group != g and id(pool[i]) in perf]
+        raw_mse = _score(raw, [raw_feats[i] for i in out if id(pool[i]) in perf])[0]
+        per_fold[g] = (_solve(gram, xty, w.config["lam"]), held, train, raw_mse)
+    lo, hi = CLOSURE_BAND
+    for knee in knees:
+        ratios, jits, closures = [], [], []
+        for coef, held, train, raw_mse in per_fold.values():
+            _set_linear(w, *coef)
+            _set_lift(w, _lift_gains(w, train, knee) if knee is not None
+                      else np.zeros(len(w.outputs)), knee or 0.0)  # fmt: skip
+            mse, jit = _score(w, held)
+            ratios.append(mse / max(raw_mse, 1e-12))
+            jits.append(jit)
+            peaks = [blink_peaks(t, _predict(w, u, r), y, w.outputs) for t, u, r, y in held]
+            closures.append(float(np.concatenate(peaks).mean()) if peaks else np.nan)
+        ratio = float(np.mean(ratios))
+        jit = float(np.nanmean(jits)) if np.isfinite(jits).any() else 0.0
+        close = float(np.nanmean(closures)) if np.isfinite(closures).any() else 1.0
+        price = max(0.0, lo - close) + max(0.0, close - hi)
+        score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0)) * (1.0 + price)
+        report({"event": "lift", "knee": knee, "val_mse": ratio, "jitter": jit,
+                "closure": close, "cv": len(groups)})  # fmt: skip
+        found.append((score, knee, close))
+    _, knee, close = min(found, key=lambda f: f[0])
+    for k, v in linear.items():
+        w.arrays[k] = v
+    gains = _lift_gains(w, performed, knee) if knee is not None else np.zeros(len(w.outputs))
+    _set_lift(w, gains, knee or 0.0)
+    w.config.update(lift_knee=knee, val_closure=close)
 
 
 def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Report) -> None:
