@@ -52,6 +52,11 @@ class OneEuro(StreamCleaner):
     def _start(self, x: np.ndarray) -> State:
         return x.copy(), np.zeros_like(x)
 
+    def _compiled(self):
+        from faceclean.filters import compiled
+
+        return compiled.one_euro(len(self.names), self.min_cutoff, self.beta, self.d_cutoff)
+
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         y, edx = state  # (S, M) weight, (S, M) weight/s
         dt = np.maximum(dt, DT_MIN)  # (S, 1) s

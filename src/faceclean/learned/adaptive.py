@@ -274,6 +274,14 @@ class Adaptive(StreamCleaner):
             return (x.copy(), np.zeros_like(x)) + ((x.copy(),) if self._transient else ())
         return x.copy(), np.zeros_like(x), np.zeros((s, m * self._H)), x.copy()
 
+    def _compiled(self):
+        if not self.inert or self._transient:
+            return None
+        from faceclean.filters import compiled
+
+        m = len(self.names)
+        return compiled.inert(m, self.min_cutoff, self.beta, self._w_d, self._ea, self._k)
+
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         if self.inert:
             return self._advance_inert(state, x, dt)

@@ -28,13 +28,15 @@ from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.tracker_map import MAX_LIFT, MapWeights
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
-# last five hold a face at rest hard (0.5-1 Hz) and open up fast when it moves (beta
-# 5-20, the speed estimate itself at 4 Hz); across sources they tie with 4-8 Hz
-# (docs/MODEL.md), so the choice among them is by jitter (TIE).
+# (1-0.5 Hz, beta 5-20) ones hold a face at rest hard and open up when it moves (the speed
+# estimate itself at 4 Hz); the last four open up at once (beta 20-50), which leaves
+# MediaPipe's own lag nearly as it is (docs/MODEL.md). Across sources many tie on MSE, so
+# the choice among them is by lag within the jitter budget (TIE).
 PREFILTERS: tuple[tuple[float, float, float] | None, ...] = (
     None, (8.0, 1.0, 1.0), (6.0, 0.5, 1.0), (4.0, 1.0, 1.0), (2.0, 0.5, 1.0),
     (1.0, 0.3, 1.0), (1.0, 5.0, 4.0), (0.5, 5.0, 4.0), (1.0, 10.0, 4.0), (0.5, 10.0, 4.0),
-    (1.0, 20.0, 4.0))  # fmt: skip
+    (1.0, 20.0, 4.0), (4.0, 20.0, 4.0), (8.0, 20.0, 8.0), (2.0, 50.0, 4.0),
+    (4.0, 50.0, 8.0))  # fmt: skip
 LAMBDAS = (1e-2, 1e-1, 3e-1, 1.0)  # ridge shrinkage, relative to the inputs' mean square
 LIGHT = (4.0, 1.0, 1.0)  # the pre-filter settings a map without one stores (unused)
 JITTER_BUDGET = 1.5  # a candidate whose jitter is over this x the truth's pays for it

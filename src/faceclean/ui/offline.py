@@ -5,7 +5,8 @@ the cleaner's ``clean`` over the take's own columns); the page gets the input on
 the cleaned take after every change, both as ARKit-52 float32 arrays in binary messages.
 A change is cleaned twice, in a worker thread, newest change first: the window the page
 shows (from ``WARM`` s before it, the cleaner started there) at once, then the whole
-take, which replaces it; a newer change skips whatever older work is left.
+take, which replaces it; a newer change skips whatever older work is left. One Euro and the
+default clean their runs of usual frames in a compiled loop here (filters/compiled.py).
 
 Binary message: uint32 little-endian header length, the JSON header
 ``{"kind": "input"|"cleaned", "seq", "start", "count", "channels": 52}``, zero padding to
@@ -121,6 +122,9 @@ class Offline(Base):
 
     # -- the worker -----------------------------------------------------------------------
     def _run(self) -> None:
+        from faceclean.filters import compiled
+
+        compiled.enable()  # this process cleans the take on every change (filters/compiled.py)
         while True:
             with self._work:
                 while self._job is None:

@@ -1,0 +1,66 @@
+"""The compiled runs of usual frames (filters/compiled.py) give ``clean``'s numbers bit for
+bit, on takes with every kind of frame the time rules know, and are off until enabled."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceclean.evaluation.performer import perform
+from faceclean.filters import compiled
+from faceclean.filters.one_euro import OneEuro
+from faceclean.resolve import resolve
+
+pytest.importorskip("numba")
+
+
+def hostile(seed: int):
+    """A take with jitter, dropped frames, a NaN value, an absurd one, a duplicate time,
+    a step back, a gap that restarts the filter and irregular steps."""
+    rng = np.random.default_rng(seed)
+    take = perform(6.0, seed, fps=60.0)
+    v = take.values + rng.normal(0, 0.01, take.values.shape)
+    t = take.times + rng.uniform(-0.003, 0.003, len(take.times))
+    v[40] = np.nan  # a missing frame
+    v[50, 3] = np.nan  # one bad value
+    v[60, 7] = 1e9  # a glitch
+    t[70] = t[69]  # a duplicate
+    t[80] = t[79] - 0.01  # backwards
+    t[200:] += 1.0  # a pause past max_gap
+    return take.__class__(t, v, take.names)
+
+
+@pytest.fixture
+def on():
+    assert compiled.enable()
+    yield
+    compiled.disable()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("words", ["one-euro", "default", "one-euro min_cutoff=0.5"])
+def test_a_compiled_run_gives_the_same_bits(on, seed, words):
+    parts = words.split()
+    take = hostile(seed)
+    build = lambda: resolve(parts[0], parts[1:]).build(take.names)  # noqa: E731
+    cleaner = build()
+    assert cleaner._compiled() is not None
+    fast = cleaner.clean(take).values
+    compiled.disable()
+    assert build()._compiled() is None
+    slow = build().clean(take).values
+    compiled.enable()
+    np.testing.assert_array_equal(fast, slow)  # NaN where NaN, every other value equal
+    assert np.isnan(fast[40]).all() and np.isfinite(fast[41:]).all()
+
+
+def test_off_until_enabled_and_stepping_is_untouched(on):
+    take = hostile(2)
+    f = OneEuro(names=take.names, min_cutoff=2.0)
+    whole = f.clean(take).values
+    f.reset()
+    stepped = np.array([f.step(v, t) for t, v in zip(take.times, take.values, strict=True)])
+    keep = take.valid  # clean leaves a missing frame missing; step repeats the last output
+    np.testing.assert_array_equal(whole[keep], stepped[keep])
+    compiled.disable()
+    assert not compiled.enabled() and OneEuro(names=take.names)._compiled() is None
