@@ -58,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
         elif e.get("event") == "candidate":
             print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}: validation MSE "
                   f"{e['val_mse']:.5f}, jitter {e['jitter']:.2f}x", file=sys.stderr)  # fmt: skip
+        elif e.get("event") == "lift":
+            knee = "no blink lift" if e["knee"] is None else f"blink lift from {e['knee']:g}"
+            print(f"{knee}: leaving each of {e['cv']} sources out, MSE {e['val_mse']:.3f}x "
+                  f"raw, jitter {e['jitter']:.2f}x, blink closure {e['closure']:.2f}",
+                  file=sys.stderr)  # fmt: skip
         elif e.get("event") == "epoch" and arch == "lstm":
             print(f"epoch {e['epoch']}: validation MSE {e['val_mse']:.5f}", file=sys.stderr)
 

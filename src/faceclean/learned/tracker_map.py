@@ -294,8 +294,9 @@ class TrackerMap(Cleaner):
         np.clip(y, 0.0, 1.0, out=y)
         if len(self._lo):  # the lift: m_j = max(m_j, its lift column)
             m = self._m_cols
-            y[:, self._lo] = np.maximum(y[:, self._lo], y[:, m:])
-            y = y[:, :m]
+            lifted = np.maximum(y[:, self._lo], y[:, m:])
+            y = y[:, :m].copy()  # contiguous: the steps below run faster on it
+            y[:, self._lo] = lifted
         if self._band is not None:  # the deadband: y = m - clip(m - y_prev, -eps, eps)
             d = y - self._m
             np.clip(d, -self._band, self._band, out=d)

@@ -94,7 +94,10 @@ def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], re
 def features(w: MapWeights, pairs: Sequence[Pair]) -> list[tuple[np.ndarray, ...]]:
     """Per pair (t, u, r, y) over its valid frames: times (F,), the pre-filtered input u,
     the resting level r and the truth y, (F, K) each. u comes from the runtime's own
-    One Euro, stepped as the cleaner steps it."""
+    One Euro, stepped as the cleaner steps it (its compiled run: the same bits)."""
+    from faceclean.filters import compiled
+
+    compiled.enable()  # a fit cleans every pair once per candidate pre-filter
     names, a = w.inputs, w.arrays
     out = []
     for p in pairs:
