@@ -38,7 +38,18 @@ def on():
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("words", ["one-euro", "default", "one-euro min_cutoff=0.5"])
+@pytest.mark.parametrize(
+    "words",
+    [
+        "one-euro",
+        "default",
+        "one-euro min_cutoff=0.5",
+        "ema",
+        "ema tau=0.1",
+        "kalman",
+        "kalman q=50 r=0.05",
+    ],  # fmt: skip
+)
 def test_a_compiled_run_gives_the_same_bits(on, seed, words):
     parts = words.split()
     take = hostile(seed)
@@ -52,6 +63,15 @@ def test_a_compiled_run_gives_the_same_bits(on, seed, words):
     compiled.enable()
     np.testing.assert_array_equal(fast, slow)  # NaN where NaN, every other value equal
     assert np.isnan(fast[40]).all() and np.isfinite(fast[41:]).all()
+
+
+def test_the_per_frame_ema_too(on):
+    from faceclean.filters.ema import Ema
+
+    take = hostile(3)
+    fast = Ema(names=take.names, gamma=0.3).clean(take).values
+    compiled.disable()
+    np.testing.assert_array_equal(fast, Ema(names=take.names, gamma=0.3).clean(take).values)
 
 
 def test_off_until_enabled_and_stepping_is_untouched(on):

@@ -4,9 +4,11 @@
 MIN_DT and at most max_gap after the last one) to the cleaner's ``_advance``: some 30 us
 a frame of numpy calls for One Euro on 52 channels, 24 ms for the tuning page's 12 s
 window at 60 fps. The page cleans a take again on every change (ui/offline.py), so there a
-run of usual frames goes to one compiled loop instead. Each loop does the arithmetic of
-its ``_advance`` in the same order, with no fast-math, so the numbers are the same bit
-for bit (tests/filters/test_compiled.py).
+run of usual frames goes to one compiled loop instead (One Euro, EMA, Kalman and the
+inert shipped default). Each loop does the arithmetic of its ``_advance`` in the same
+order, with no fast-math, and takes what needs a numpy function (EMA's expm1, Kalman's
+powers of dt) from numpy, so the numbers are the same bit for bit
+(tests/filters/test_compiled.py).
 
 Off until a process asks (``enable()``): loading numba costs ~1.8 s, which a one-off
 ``faceclean clean`` would pay to save ~30 ms. Without numba it stays off, and every
@@ -35,11 +37,14 @@ def enable() -> bool:
         return False
     # error_model="numpy": a division by zero gives inf as numpy's does, never an exception
     jit = njit(boundscheck=False, nogil=True, cache=True, error_model="numpy")
-    found = {"one_euro": jit(_one_euro), "inert": jit(_inert)}
+    found = {"one_euro": jit(_one_euro), "inert": jit(_inert), "ema": jit(_ema),
+             "kalman": jit(_kalman)}  # fmt: skip
     one, x = np.ones(1), np.zeros((1, 1))  # compile now, not at the first change
     try:
         found["one_euro"](one.copy(), one.copy(), x, one, one, one, one, x.copy())
         found["inert"](one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy())
+        found["ema"](one.copy(), x, x + 0.5, x.copy())
+        found["kalman"](*(one.copy() for _ in range(5)), x, one, x, x, x, one, x.copy())
     except Exception:  # noqa: BLE001 - e.g. no writable cache folder: numpy steps as before
         return False
     _kernels.update(found)
@@ -90,6 +95,77 @@ def inert(m: int, min_cutoff, beta, w_d, ea, k) -> Run | None:
         return (y[None], edx[None]), out
 
     return run
+
+
+def ema(m: int, gamma, tau) -> Run | None:
+    """Exponential smoothing's run (filters/ema.py): per-frame ``gamma``, or ``tau`` s
+    (M channels' settings, the other None), or None when off. The gains are computed by
+    numpy, as ``_advance`` computes them, for every frame of the run at once."""
+    kernel = _kernels.get("ema")
+    if kernel is None:
+        return None
+    gamma = None if gamma is None else _per_channel(m, (gamma,))[0]
+    tau = None if tau is None else _per_channel(m, (tau,))[0]
+
+    def run(state, x, dt):
+        if gamma is not None:
+            alpha = np.broadcast_to(gamma, x.shape)
+        else:
+            with np.errstate(over="ignore"):
+                alpha = np.broadcast_to(-np.expm1(-dt[:, None] / tau), x.shape)
+        y, out = state[0][0].copy(), np.empty_like(x)
+        kernel(y, x, np.ascontiguousarray(alpha), out)
+        return (y[None],), out
+
+    return run
+
+
+def kalman(m: int, q, r) -> Run | None:
+    """The Kalman filter's run (filters/kalman.py) for M channels' ``q`` and ``r``, or
+    None when off; the process noise of every frame computed by numpy as ``_advance`` does."""
+    kernel = _kernels.get("kalman")
+    if kernel is None:
+        return None
+    q = np.asarray(q, np.float64)
+    r2 = _per_channel(m, (np.asarray(r, np.float64) ** 2,))[0]
+
+    def run(state, x, dt):
+        h = dt[:, None]  # (N, 1) s
+        noise = [np.ascontiguousarray(np.broadcast_to(v, x.shape)) for v in
+                 (q * h**3 / 3.0, q * h**2 / 2.0, q * h)]  # fmt: skip
+        parts = [s[0].copy() for s in state]  # p, v, a, b, c (M,) each
+        out = np.empty_like(x)
+        kernel(*parts, x, dt, *noise, r2, out)
+        return tuple(v[None] for v in parts), out
+
+    return run
+
+
+def _ema(y, x, alpha, out):
+    """In place: y (M,) the state; x, alpha (N, M); out (N, M) gets y after each frame."""
+    for n in range(x.shape[0]):
+        for m in range(x.shape[1]):
+            y[m] = y[m] + alpha[n, m] * (x[n, m] - y[m])
+            out[n, m] = y[m]
+
+
+def _kalman(p, v, a, b, c, x, dt, q3, q2, q1, r2, out):
+    """In place: p, v and P = [[a, b], [b, c]] (M,) the state; x (N, M); dt (N,) s; q3,
+    q2, q1 (N, M) the process noise q dt^3/3, q dt^2/2, q dt; r2 (M,); out (N, M) gets p."""
+    for n in range(x.shape[0]):
+        h = dt[n]
+        for m in range(x.shape[1]):
+            pm = p[m] + h * v[m]  # predict
+            am = a[m] + h * (2.0 * b[m] + h * c[m]) + q3[n, m]
+            bm = b[m] + h * c[m] + q2[n, m]
+            cm = c[m] + q1[n, m]
+            s = am + r2[m]  # update with the measured position
+            k0, k1 = am / s, bm / s
+            innov = x[n, m] - pm
+            p[m] = pm + k0 * innov
+            v[m] = v[m] + k1 * innov
+            a[m], b[m], c[m] = (1.0 - k0) * am, (1.0 - k0) * bm, cm - k1 * bm
+            out[n, m] = p[m]
 
 
 def _one_euro(y, edx, x, dt, mc, beta, dc, out):

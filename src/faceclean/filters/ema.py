@@ -41,6 +41,12 @@ class Ema(StreamCleaner):
     def _start(self, x: np.ndarray) -> State:
         return (x.copy(),)
 
+    def _compiled(self):
+        from faceclean.filters import compiled
+
+        return compiled.ema(len(self.names), self.gamma, None if self.gamma is not None
+                            else self.tau)  # fmt: skip
+
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         (y,) = state  # (S, M)
         if self.gamma is not None:

@@ -48,6 +48,11 @@ class Kalman(StreamCleaner):
         c = np.full_like(x, V0_STD**2)
         return x.copy(), zero, a, zero.copy(), c
 
+    def _compiled(self):
+        from faceclean.filters import compiled
+
+        return compiled.kalman(len(self.names), self.q, self.r)
+
     def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
         p, v, a, b, c = state  # (S, M) each
         q = self.q
