@@ -558,3 +558,27 @@ def test_malformed_presets_are_one_line(tmp_path, capsys, doc, message):
     src.write_bytes(b"time,jawOpen\n0,0.5\n0.1,0.6\n")
     argv = ["clean", str(src), "-o", str(tmp_path / "o.csv"), "--preset", str(p)]
     _refused(capsys, argv, tmp_path, message)
+
+
+@pytest.mark.parametrize("when", ["after the file is created", "while writing"])
+def test_an_interrupt_at_any_point_of_a_write_leaves_no_file(tmp_path, monkeypatch, when):
+    """A Ctrl-C or SIGTERM (the CLI raises on both) handled at the first instant after the
+    temporary file exists leaves nothing behind (tempfile.mkstemp had a window there), and
+    an existing output stays as it was."""
+    from faceclean.io import atomic
+
+    out = tmp_path / "out.csv"
+    out.write_text("before")
+    real_open = atomic.os.open
+
+    def created_then_interrupted(path, flags, mode=0o777):
+        real_open(path, flags, mode)  # the file now exists; the handler runs before return
+        raise KeyboardInterrupt
+
+    if when == "after the file is created":
+        monkeypatch.setattr(atomic.os, "open", created_then_interrupted)
+    with pytest.raises(KeyboardInterrupt), atomic.atomic_open(out, "w") as f:
+        f.write("half")
+        raise KeyboardInterrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
+    assert out.read_text() == "before"

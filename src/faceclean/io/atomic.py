@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import secrets
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
@@ -46,9 +46,20 @@ def check_writable(*outputs: str | os.PathLike | None) -> None:
 def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file for writing; on success it replaces ``path`` atomically."""
     target = writable(path)
-    folder = target.parent
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name[:100]}.", suffix=".tmp", dir=folder)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    tmp: Path | None = None
     try:
+        # Not tempfile.mkstemp: a signal handled between the file's creation and mkstemp's
+        # return (the CLI raises on SIGTERM) left a file the caller had no name for. Here
+        # the name is bound first; a 64-bit random name meets an existing file never.
+        for _ in range(100):
+            tmp = target.parent / f".{target.name[:100]}.{secrets.token_hex(8)}.tmp"
+            with contextlib.suppress(FileExistsError):
+                fd = os.open(tmp, flags, 0o600)
+                break
+        else:
+            tmp = None
+            raise FacecleanError(f"cannot create a temporary file beside {target}")
         kwargs = {"newline": ""} if "b" not in mode else {}
         with os.fdopen(fd, mode, **kwargs) as f:
             yield f
@@ -61,8 +72,9 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         os.replace(tmp, target)
         paths.written(target)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
         raise
 
 
