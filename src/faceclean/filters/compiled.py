@@ -63,38 +63,33 @@ def _per_channel(m: int, values) -> list[np.ndarray]:
     return [np.broadcast_to(np.asarray(v, np.float64), (m,)).copy() for v in values]
 
 
+def _run(kernel: Callable, *consts: np.ndarray) -> Run:
+    """A run of ``kernel(*state rows, x, dt, *consts, out)``, one stream, on a copy of the
+    state (the rows are updated in place)."""
+
+    def run(state, x, dt):
+        rows = [s[0].copy() for s in state]  # (M,) each
+        out = np.empty_like(x)
+        kernel(*rows, x, dt, *consts, out)
+        return tuple(r[None] for r in rows), out
+
+    return run
+
+
 def one_euro(m: int, min_cutoff, beta, d_cutoff) -> Run | None:
     """One Euro's run (filters/one_euro.py) for M channels' settings (scalars or (M,)), or
     None when off."""
     kernel = _kernels.get("one_euro")
-    if kernel is None:
-        return None
-    mc, beta, dc = _per_channel(m, (min_cutoff, beta, d_cutoff))
-
-    def run(state, x, dt):
-        y, edx = state[0][0].copy(), state[1][0].copy()  # (M,) each, one stream
-        out = np.empty_like(x)
-        kernel(y, edx, x, dt, mc, beta, dc, out)
-        return (y[None], edx[None]), out
-
-    return run
+    return None if kernel is None else _run(kernel, *_per_channel(m, (min_cutoff, beta, d_cutoff)))
 
 
 def inert(m: int, min_cutoff, beta, w_d, ea, k) -> Run | None:
     """The inert adaptive default's run (learned/adaptive.py ``_advance_inert``, without a
     transient gain) for M channels' constants, or None when off."""
     kernel = _kernels.get("inert")
-    if kernel is None:
-        return None
-    mc, beta, w_d, ea, k = _per_channel(m, (min_cutoff, beta, w_d, ea, k))
-
-    def run(state, x, dt):
-        y, edx = state[0][0].copy(), state[1][0].copy()
-        out = np.empty_like(x)
-        kernel(y, edx, x, dt, mc, beta, w_d, ea, k, out)
-        return (y[None], edx[None]), out
-
-    return run
+    return (
+        None if kernel is None else _run(kernel, *_per_channel(m, (min_cutoff, beta, w_d, ea, k)))
+    )
 
 
 def ema(m: int, gamma, tau) -> Run | None:
@@ -113,9 +108,7 @@ def ema(m: int, gamma, tau) -> Run | None:
         else:
             with np.errstate(over="ignore"):
                 alpha = np.broadcast_to(-np.expm1(-dt[:, None] / tau), x.shape)
-        y, out = state[0][0].copy(), np.empty_like(x)
-        kernel(y, x, np.ascontiguousarray(alpha), out)
-        return (y[None],), out
+        return _run(kernel)(state, x, np.ascontiguousarray(alpha))  # alpha in dt's place
 
     return run
 
@@ -133,10 +126,7 @@ def kalman(m: int, q, r) -> Run | None:
         h = dt[:, None]  # (N, 1) s
         noise = [np.ascontiguousarray(np.broadcast_to(v, x.shape)) for v in
                  (q * h**3 / 3.0, q * h**2 / 2.0, q * h)]  # fmt: skip
-        parts = [s[0].copy() for s in state]  # p, v, a, b, c (M,) each
-        out = np.empty_like(x)
-        kernel(*parts, x, dt, *noise, r2, out)
-        return tuple(v[None] for v in parts), out
+        return _run(kernel, *noise, r2)(state, x, dt)  # state: p, v, a, b, c
 
     return run
 
