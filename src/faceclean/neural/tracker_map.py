@@ -147,11 +147,12 @@ def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray) -> None:
     w.arrays["b"] = coef[:, k:] if coef.shape[1] > k else np.zeros((len(c), k))
 
 
-def _score(w: MapWeights, feats, lag: bool = False) -> tuple[float, ...]:
-    """(MSE, jitter ratio vs the truth[, lag ms]) of the map over per-pair features."""
-    from faceclean.evaluation.metrics import jitter_ratio, lag_ms  # numpy only
+def _score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tuple[float, ...]:
+    """(MSE, jitter ratio vs the truth[, lag ms][, blink closure]) of the map over per-pair
+    features, from one prediction per pair; closure is the mean over every true blink."""
+    from faceclean.evaluation.metrics import blink_peaks, jitter_ratio, lag_ms  # numpy only
 
-    sq, n, jit, lags = 0.0, 0, [], []
+    sq, n, jit, lags, peaks = 0.0, 0, [], [], []
     for t, u, r, y in feats:
         pred = _predict(w, u, r)
         sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
@@ -159,8 +160,39 @@ def _score(w: MapWeights, feats, lag: bool = False) -> tuple[float, ...]:
             jit.append(jitter_ratio(t, pred, y))
             if lag:
                 lags.append(lag_ms(t, pred, y))
+        if closure:
+            peaks.append(blink_peaks(t, pred, y, w.outputs))
     mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
-    return (sq / max(n, 1), mean(jit), mean(lags)) if lag else (sq / max(n, 1), mean(jit))
+    out = (sq / max(n, 1), mean(jit)) + ((mean(lags),) if lag else ())
+    return out + ((mean(np.concatenate(peaks)) if peaks else float("nan"),) if closure else ())
+
+
+def _sources(pool: Sequence[Pair]) -> tuple[list[str], list[str | None]]:
+    """(the sources scored, sorted; each pair's source, None for a clip: never scored)."""
+    perf = {id(p) for p in performances(pool)}
+    scored = [p.group if id(p) in perf else None for p in pool]
+    return sorted({s for s in scored if s is not None}), scored
+
+
+def _raw_mse(pool, names, rest: bool, scored) -> dict[str, float]:
+    """Raw MSE per source over its performances: what a fold's MSE is a ratio to."""
+    raw = blank(names, 0, LIGHT, rest, prefilter=False)
+    feats = features(raw, pool)
+    return {g: _score(raw, [f for f, s in zip(feats, scored, strict=True) if s == g])[0]
+            for g in sorted({s for s in scored if s is not None})}  # fmt: skip
+
+
+def _folds(pool, feats, rest: bool, scored) -> dict[str, tuple]:
+    """source -> (x'x, x'y of every other source's pairs and clips, its performances'
+    features): from the summed moments, so a fold costs one ridge solve."""
+    moments = [_moments(*_stack([f], rest)) for f in feats]  # per pair
+    total = [sum(m[i] for m in moments) for i in (0, 1)]
+    folds = {}
+    for g in sorted({s for s in scored if s is not None}):
+        out = [i for i, p in enumerate(pool) if p.group == g]
+        folds[g] = (*(total[j] - sum(moments[i][j] for i in out) for j in (0, 1)),
+                    [feats[i] for i in out if scored[i] == g])  # fmt: skip
+    return folds
 
 
 def fit_ridge(
@@ -259,24 +291,13 @@ def _cross_validate(
     mean within budget let a light pre-filter leave 6x the truth's jitter on a noisier
     source; docs/MODEL.md). The weights returned hold the choice (their linear part still
     to be fitted)."""
-    groups = sorted({p.group for p in performances(pool)})
-    perf = {id(p) for p in performances(pool)}
-    scored = [p.group if id(p) in perf else None for p in pool]  # (P,) source, or None: a clip
-    raw = blank(names, 0, LIGHT, rest, prefilter=False)
-    raw_mse = {g: _score(raw, [f for f, s in zip(features(raw, pool), scored, strict=True)
-                               if s == g])[0] for g in groups}  # fmt: skip
+    groups, scored = _sources(pool)
+    raw_mse = _raw_mse(pool, names, rest, scored)
     found: list[tuple[float, float, float, float, MapWeights]] = []  # (score, jitter, lag,
     #                                                                   worst jitter, weights)
     for pre in prefilters:
         w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None, deadband=deadband)
-        feats = features(w, pool)
-        moments = [_moments(*_stack([f], rest)) for f in feats]  # per pair
-        total = [sum(m[i] for m in moments) for i in (0, 1)]
-        folds = {}  # source -> (x'x, x'y of every other source, its performances' features)
-        for g in groups:
-            out = [i for i, p in enumerate(pool) if p.group == g]
-            folds[g] = (*(total[j] - sum(moments[i][j] for i in out) for j in (0, 1)),
-                        [feats[i] for i in out if scored[i] == g])  # fmt: skip
+        folds = _folds(pool, features(w, pool), rest, scored)
         for lam in lams:
             ratios, jits, lags = [], [], []
             for g, (gram, xty, held) in folds.items():
@@ -357,42 +378,32 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None
     source at ``w``'s pre-filter and shrinkage, the gains on their performances), x
     (1 + the mean closure's distance outside CLOSURE_BAND); its gains then fitted on
     every performance in ``pool``. The linear part of ``w`` is kept as it is."""
-    from faceclean.evaluation.metrics import blink_peaks
-
-    _set_lift(w, np.zeros(len(w.outputs)), 0.0)
+    none = np.zeros(len(w.outputs))
+    _set_lift(w, none, 0.0)
     w.config.update(lift_knee=None)
-    groups = sorted({p.group for p in performances(pool)})
-    perf = {id(p) for p in performances(pool)}
+    groups, scored = _sources(pool)
     feats = features(w, pool)
-    performed = [f for i, f in enumerate(feats) if id(pool[i]) in perf]
+    performed = [f for f, s in zip(feats, scored, strict=True) if s is not None]
     if tuple(knees) == (None,) or len(groups) < 3 or not any(_lift_gains(w, performed, 0.0)):
         return  # nothing to lift, or too few sources to choose
-    raw = blank(w.inputs, 0, LIGHT, rest, prefilter=False)
-    raw_feats = features(raw, pool)
-    moments = [_moments(*_stack([f], rest)) for f in feats]
-    total = [sum(m[i] for m in moments) for i in (0, 1)]
+    raw_mse = _raw_mse(pool, w.inputs, rest, scored)
+    folds = _folds(pool, feats, rest, scored)
+    coefs = {g: _solve(gram, xty, w.config["lam"]) for g, (gram, xty, _) in folds.items()}
+    # each fold's training performances, which its gains are fitted on
+    trains = {g: [f for f, s in zip(feats, scored, strict=True) if s not in (None, g)]
+              for g in groups}  # fmt: skip
     linear = {k: w.arrays[k].copy() for k in ("a", "b", "c")}
-    found = []  # (score, knee, closure)
-    per_fold = {}
-    for g in groups:
-        out = [i for i, p in enumerate(pool) if p.group == g]
-        gram, xty = (total[j] - sum(moments[i][j] for i in out) for j in (0, 1))
-        held = [feats[i] for i in out if id(pool[i]) in perf]
-        train = [f for i, f in enumerate(feats) if pool[i].group != g and id(pool[i]) in perf]
-        raw_mse = _score(raw, [raw_feats[i] for i in out if id(pool[i]) in perf])[0]
-        per_fold[g] = (_solve(gram, xty, w.config["lam"]), held, train, raw_mse)
     lo, hi = CLOSURE_BAND
+    found = []  # (score, knee, closure)
     for knee in knees:
         ratios, jits, closures = [], [], []
-        for coef, held, train, raw_mse in per_fold.values():
-            _set_linear(w, *coef)
-            _set_lift(w, _lift_gains(w, train, knee) if knee is not None
-                      else np.zeros(len(w.outputs)), knee or 0.0)  # fmt: skip
-            mse, jit = _score(w, held)
-            ratios.append(mse / max(raw_mse, 1e-12))
+        for g, (_, _, held) in folds.items():
+            _set_linear(w, *coefs[g])
+            _set_lift(w, none if knee is None else _lift_gains(w, trains[g], knee), knee or 0.0)
+            mse, jit, close = _score(w, held, closure=True)
+            ratios.append(mse / max(raw_mse[g], 1e-12))
             jits.append(jit)
-            peaks = [blink_peaks(t, _predict(w, u, r), y, w.outputs) for t, u, r, y in held]
-            closures.append(float(np.concatenate(peaks).mean()) if peaks else np.nan)
+            closures.append(close)
         ratio = float(np.mean(ratios))
         jit = float(np.nanmean(jits)) if np.isfinite(jits).any() else 0.0
         close = float(np.nanmean(closures)) if np.isfinite(closures).any() else 1.0
@@ -404,8 +415,7 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None
     _, knee, close = min(found, key=lambda f: f[0])
     for k, v in linear.items():
         w.arrays[k] = v
-    gains = _lift_gains(w, performed, knee) if knee is not None else np.zeros(len(w.outputs))
-    _set_lift(w, gains, knee or 0.0)
+    _set_lift(w, none if knee is None else _lift_gains(w, performed, knee), knee or 0.0)
     w.config.update(lift_knee=knee, val_closure=close)
 
 
