@@ -74,3 +74,17 @@ def hold_last(values: np.ndarray, hold: np.ndarray) -> np.ndarray:
     (the first rows repeat themselves when they are marked)."""
     idx = np.where(hold, 0, np.arange(len(hold)))
     return values[np.maximum.accumulate(idx)] if len(hold) else values
+
+
+# Hz, the rates cameras, trackers and editors name (NTSC's are n x 1000 / 1001)
+NOMINAL_RATES = (23.976, 24.0, 25.0, 29.97, 30.0, 48.0, 50.0, 59.94, 60.0, 90.0, 100.0, 119.88,
+                 120.0, 240.0)  # fmt: skip
+NOMINAL_TOLERANCE = 0.0025  # relative: a measured rate this close takes the named one
+
+
+def nominal_rate(rate: float) -> float:
+    """The named rate (NOMINAL_RATES) within 0.25 % of a measured ``rate`` Hz, else the rate
+    to 1e-3. Why: a take's median frame interval comes from quantised timestamps (Live
+    Link's sub-frames read 59.88 or 59.90 for a 59.94 Hz take)."""
+    near = min(NOMINAL_RATES, key=lambda r: abs(r - rate))
+    return near if abs(near - rate) <= NOMINAL_TOLERANCE * near else round(rate, 3)

@@ -223,6 +223,60 @@ def test_three_js_loads_the_face_and_its_clip(glb):
     assert clip["duration"] == pytest.approx(want_t[-1], abs=1e-6)
 
 
+def test_the_file_says_its_rate_and_frame_range(glb, capsys):
+    """glTF has no frame rate: the scene's and the animation's extras carry the take's, and
+    the frame range at it (docs/FORMATS.md, Frame rate and length)."""
+    doc = gltf_take.document(facemesh.stylised(), _take())[0]
+    want = {"fps": 30.0, "frame_start": 0, "frame_end": 59}  # 2 s at 30 fps, from 0
+    assert doc["scenes"][0]["extras"] == want
+    assert {k: doc["animations"][0]["extras"][k] for k in want} == want
+    # a 59.94 Hz Live Link take, its timestamps quantised to 1/60000 s (median 59.88 Hz)
+    t = np.round((np.arange(600) / 59.94) * 6e4) / 6e4
+    t[1::2] += 1 / 6e4
+    take = Animation(t, np.full((600, 1), 0.5), ["jawOpen"])
+    extras = gltf_take.document(facemesh.stylised(), take)[0]["scenes"][0]["extras"]
+    assert extras["fps"] == 59.94 and extras["frame_end"] == round(t[-1] * 59.94) == 599
+    # the command says it too
+    assert main(["convert", str(glb.with_name("take.csv")), "-o", str(glb.with_name("a.glb"))]) == 0
+    assert "at 30 fps (frames 0-59" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "rate,named", [(59.88, 59.94), (59.904, 59.94), (29.97, 29.97), (30.02, 30.0), (24.0, 24.0),
+                   (37.5, 37.5), (61.0, 61.0), (119.9, 119.88), (33.3333, 33.333)]
+)  # fmt: skip
+def test_a_measured_rate_takes_the_named_rate_it_is_close_to(rate, named):
+    from faceclean.timing import nominal_rate
+
+    assert nominal_rate(rate) == named
+
+
+@needs_blender
+@pytest.mark.parametrize("fps", [30.0, 59.94])
+def test_the_documented_blender_script_lands_the_keys_on_the_takes_frames(tmp_path, fps):
+    """docs/FORMATS.md's script run in Blender: the scene at the take's rate, its range
+    0 .. frame_end, and every key on a whole frame (Blender alone: 24 fps, 1-250)."""
+    take = Animation(np.arange(int(12 * fps)) / fps, np.full((int(12 * fps), 1), 0.3), ["jawOpen"])
+    take.values[::7] = 0.6
+    path = tmp_path / "take.glb"
+    with path.open("wb") as f:
+        timing = gltf_take.write(take, f, path)
+    out = tmp_path / "recipe.json"
+    script = IMPORTERS / "blender_recipe.py"
+    done = subprocess.run(
+        ["blender", "-b", "--factory-startup", "--python", str(script), "--",
+         str(REPO / "docs" / "FORMATS.md"), str(path), str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0 and out.is_file(), done.stdout[-2000:] + done.stderr[-2000:]
+    got = json.loads(out.read_text())
+    n = take.n_frames
+    assert got["fps"] == pytest.approx(fps, abs=1e-4) and timing["fps"] == fps
+    assert (got["frame_start"], got["frame_end"]) == (0, n - 1) == (0, timing["frame_end"])
+    assert got["custom"]["frame_end"] == n - 1  # the scene's extras as custom properties
+    np.testing.assert_allclose(got["key_frames"], np.arange(n), atol=1e-3)
+
+
 @needs_blender
 def test_blender_imports_shape_keys_and_their_action(glb, tmp_path):
     out = tmp_path / "blender.json"

@@ -19,6 +19,12 @@ Keyframes, the rule chosen for what glTF cannot hold:
   next one before the first); a channel the take lacks, or never gives, stays at 0.
 Weights are written as they are (no clamping); other channels are not animated.
 
+Timing: glTF keys are in seconds and it has no frame rate; Blender places them at its
+scene's rate (24 fps, frames 1-250, unless set before the import). The take's rate and
+frame range go in the scene's and the animation's ``extras`` (``clip_timing``: fps,
+frame_start, frame_end), which Blender imports as the scene's custom properties;
+docs/FORMATS.md gives the steps and a script that sets them.
+
 Head: a take with head angles (``meta["pose"]``: HeadYaw, HeadPitch, HeadRoll) gets a node
 ``head`` above ``face``, at the neck pivot ``PIVOT`` (``face`` carries the opposite
 offset, so the face rests where it was), whose ``rotation`` is animated by a second
@@ -42,6 +48,7 @@ from faceclean.channels import ARKIT52, pose_name
 from faceclean.errors import FacecleanError
 from faceclean.face.mesh import FaceMesh
 from faceclean.io.gltf_container import data_uri, glb
+from faceclean.timing import nominal_rate
 
 _FLOAT, _UINT = 5126, 5125  # glTF componentType
 _ARRAY, _ELEMENTS = 34962, 34963  # bufferView targets
@@ -141,6 +148,19 @@ class _Blob:
         return len(self.accessors) - 1
 
 
+def clip_timing(anim: Animation, times: np.ndarray) -> dict[str, float | int]:
+    """What glTF has no field for: the take's frame rate (fps: its median, as the named rate
+    it is within 0.25 % of, timing.nominal_rate) and
+    the clip's frames at that rate, 0 .. frame_end = round(last key time x fps); {} when
+    the take has no rate (one frame). Importers that count in frames (Blender) read the
+    key times (s) at the scene's rate, so these say which rate and range to set."""
+    rate = anim.rate
+    if not rate > 0:
+        return {}
+    fps = nominal_rate(rate)
+    return {"fps": fps, "frame_start": 0, "frame_end": int(round(float(times[-1]) * fps))}
+
+
 def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
     """(glTF JSON dict, binary buffer bytes, keyframe counts or None) for ``mesh``, animated
     by ``anim`` when given."""
@@ -203,12 +223,15 @@ def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
             doc["nodes"][0]["translation"] = [-v for v in PIVOT]
             doc["nodes"].append({"name": "head", "children": [0], "translation": list(PIVOT)})
             doc["scenes"] = [{"nodes": [1]}]
+        timing = clip_timing(anim, times)
+        counts.update(timing)
+        doc["scenes"][0]["extras"] = timing  # Blender: the scene's custom properties
         doc["animations"] = [
             {
                 "name": name,
                 "samplers": samplers,
                 "channels": channels,
-                "extras": {"droppedTrackingLoss": counts["lost"]},
+                "extras": {"droppedTrackingLoss": counts["lost"], **timing},
             }
         ]
     doc["accessors"], doc["bufferViews"] = blob.accessors, blob.views
@@ -231,9 +254,10 @@ def write(
     path: str | os.PathLike | None = None,
     mesh: FaceMesh | None = None,
     name: str | None = None,
-) -> dict[str, int]:
+) -> dict[str, float]:
     """Write ``anim`` on ``mesh`` (the stylised face by default); GLB unless ``path`` ends
-    in ``.gltf``. Returns the keyframe counts (see :func:`keyframes`)."""
+    in ``.gltf``. Returns the keyframe counts (see :func:`keyframes`) and the clip's
+    timing (:func:`clip_timing`)."""
     if mesh is None:
         from faceclean.face.mesh import stylised
 
