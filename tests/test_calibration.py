@@ -231,6 +231,9 @@ def test_an_iphone_take_is_not_lifted_without_evidence(tmp_path, capsys):
     assert main(["calibrate", str(path), "-o", str(tmp_path / "c.json")]) == 0
     out = capsys.readouterr().out
     assert "0 lifted to their top (tracker arkit)" in out and "jawLeft" not in out
+    # the eyelids' gain is said as what it is (review: "0 lifted" read as no gain at all)
+    assert "2 eyelids scaled to close (their blinks)" in out
+    assert sorted(adj.facts["closed"]) == ["eyeBlinkLeft", "eyeBlinkRight"]
 
 
 def test_a_range_of_motion_or_a_tracker_profile_lifts_with_a_capped_gain(tmp_path, capsys):

@@ -217,7 +217,8 @@ class Adjust:
                 f"calibrated from {src}: {facts.get('frames', '?')} frames, "
                 f"neutral {facts.get('neutral_s', '?')} s; "
                 f"{len(facts.get('moved', []))} channels moved, "
-                f"{len(facts.get('lifted', []))} lifted to their top"
+                f"{len(facts.get('lifted', []))} lifted to their top, "
+                f"{len(facts.get('closed', []))} eyelids scaled to close (their blinks)"
             )
         return lines or ["identity (no level mapping)"]
 

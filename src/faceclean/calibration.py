@@ -100,7 +100,7 @@ def calibrate(
         neutral = np.nanmedian(hold, axis=0)  # (52,)
         noise = 1.4826 * np.nanmedian(np.abs(hold - neutral), axis=0)
         top = np.nanpercentile(x, HIGH, axis=0)
-    rules, chans, moved, lifted = [], {}, [], []
+    rules, chans, moved, lifted, closed = [], {}, [], [], []
     for i, name in enumerate(ARKIT52):
         if not present[i] or not np.isfinite(neutral[i]):
             continue
@@ -117,8 +117,8 @@ def calibrate(
         # tracker's profile, or an earlier calibration's top
         if moves and (name in BLINKS or rom or name in weak or given):
             gain = min(1.0 / (hi - n), MAX_GAIN)  # the observed range onto [0, 1]
-            if hi - n < 1.0 - n - 1e-9 and name not in BLINKS:
-                lifted.append(name)
+            if hi - n < 1.0 - n - 1e-9:
+                (closed if name in BLINKS else lifted).append(name)
         elif n < 0.5:
             gain, hi = 1.0 / (1.0 - n), 1.0  # unmoved: [neutral, 1] onto [0, 1]
         else:
@@ -136,6 +136,7 @@ def calibrate(
         "rom": bool(rom),
         "moved": moved,
         "lifted": lifted,
+        "closed": closed,  # eyelids scaled so the blinks seen close fully
         "channels": chans,
     }
     return Adjust(tuple(rules), facts)

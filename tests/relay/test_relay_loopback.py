@@ -386,6 +386,37 @@ def test_an_idle_relay_says_it_has_no_latency_yet_not_nan():
     assert "nan" not in stopped and "latency - (no frames sent yet)" in stopped
 
 
+def test_an_idle_recording_relay_says_it_wrote_nothing_and_a_wide_listen_is_warned(tmp_path):
+    # issue 19 review: --record with no frame wrote no file and said nothing; a listen on
+    # every interface warned only in the README
+    record = tmp_path / "rec.csv"
+    with raw_receiver() as rx:
+        proc = _start(
+            ["--listen", "vmc://0.0.0.0:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
+            + ["--method", "ema", "--record", str(record)]
+        )
+        with reaped(proc):
+            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+            assert ready, "relay did not start"
+            proc.stdout.readline()  # the banner: it listens
+            out, err = interrupt(proc)
+    assert proc.returncode == 0, err
+    assert "recorded nothing: no frame was sent, so no file was written" in out
+    assert not record.exists() and list(tmp_path.iterdir()) == []
+    [warning] = [ln for ln in err.splitlines() if ln.strip()]
+    assert warning.startswith("faceclean: warning: listening on 0.0.0.0: anyone who can reach")
+
+
+@pytest.mark.parametrize("host,loopback", [("127.0.0.1", True), ("127.0.0.2", True),
+                                           ("localhost", True), ("::1", True), ("0.0.0.0", False),
+                                           ("::", False), ("192.168.1.20", False),
+                                           ("myhost.local", False)])  # fmt: skip
+def test_which_listen_hosts_are_loopback(host, loopback):
+    from faceclean.cli.relay import _loopback
+
+    assert _loopback(host) is loopback
+
+
 def test_relay_command_errors_are_one_line(capsys):
     assert main(["relay", "--listen", "vmc://:0", "--send", "ifacialmocap://:4"]) == 2
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:

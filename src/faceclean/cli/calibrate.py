@@ -75,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.output}: {len(facts['channels'])} channels, neutral from the first "
         f"{facts['neutral_s']:.2f} s; {len(facts['moved'])} moved, {len(facts['lifted'])} "
-        f"lifted to their top ({'range of motion' if args.rom else f'tracker {args.tracker}'})"
+        f"lifted to their top ({'range of motion' if args.rom else f'tracker {args.tracker}'}), "
+        f"{len(facts['closed'])} eyelids scaled to close (their blinks)"
     )
     high = high_gains(adjust)
     if high:

@@ -144,6 +144,15 @@ def _serve(args: argparse.Namespace, relay: Any, send: Any, what: str) -> Any:
         relay.stop()
 
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    listen = relay.listen
+    if not _loopback(listen.host):  # said once it listens (a refused start says only why)
+        print(
+            f"faceclean: warning: listening on {listen.host}: anyone who can reach port "
+            f"{relay.address.port} can send faces to this relay (use 127.0.0.1 when the tracker "
+            "runs on this machine)",
+            file=sys.stderr,
+            flush=True,
+        )
     try:
         print(f"relay {relay.address} -> {send} ({what}); Ctrl-C stops", flush=True)
         stats = relay.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
@@ -153,11 +162,25 @@ def _serve(args: argparse.Namespace, relay: Any, send: Any, what: str) -> Any:
     return stats
 
 
+def _loopback(host: str) -> bool:
+    """Whether ``host`` is a loopback address or name (only this machine can send)."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False  # a name: it may resolve to any interface
+
+
 def _done(stats: Any, send: Any, recorder: Any) -> int:
     print(f"stopped: {stats.line()}", flush=True)
     if recorder is not None and len(recorder):
         take, cleaned = recorder.save()
         print(f"recorded {len(recorder)} frames: {take} (input), {cleaned} (cleaned)", flush=True)
+    elif recorder is not None:
+        print("recorded nothing: no frame was sent, so no file was written", flush=True)
     if stats.send_errors:
         print(f"faceclean: {stats.send_errors} sends refused by {send}", file=sys.stderr)
     return 0
