@@ -145,6 +145,37 @@ def test_offline_page_tunes_calibrates_and_saves_what_clean_reproduces(browser, 
     assert np.array_equal(np.isnan(out[:, present]), np.isnan(page[:, present]))
 
 
+def test_a_new_value_moves_its_slider_and_only_a_new_cleaner_rebuilds_the_panel(browser):
+    """A state that keeps the cleaner's keys moves the sliders in place (no rebuilt panel:
+    on software GL a layout delays the cleaned window, docs/BENCHMARKS.md); a new cleaner
+    or scope builds the controls for its keys."""
+    proc, url = start(["ui", str(first_take("jmtechart")), "--method", "one-euro"])
+    with reaped(proc):
+        tab = Tab(browser, url)
+        tab.settled(0)
+        tab.js("document.querySelector('#fc-min_cutoff').dataset.mark = 'kept'")
+        tab.page.fill("#fc-items", "min_cutoff=2\nbeta=0.5")  # typed, as a user does
+        n = tab.js("window.faceclean.sentSeq")
+        tab.page.click("#fc-apply")
+        tab.settled(n + 1)
+        shown = tab.js("[...document.querySelectorAll('#fc-smoothing .slider span')]"
+                       ".map((e) => e.textContent)")  # fmt: skip
+        assert tab.js("document.querySelector('#fc-min_cutoff').dataset.mark") == "kept"
+        assert shown[:2] == ["2", "0.5"]  # min_cutoff, beta: moved to the state's values
+        assert tab.js("window.faceclean.state.items") == ["min_cutoff=2", "beta=0.5"]
+        tab.page.select_option("#fc-scope", "eyes")  # another scope: its own controls
+        assert tab.js("document.querySelector('#fc-min_cutoff').dataset.mark") is None
+        tab.page.fill("#fc-words", "ema")
+        n = tab.js("window.faceclean.sentSeq")
+        tab.page.dispatch_event("#fc-words", "change")
+        tab.settled(n + 1)
+        assert tab.js("window.faceclean.state.method") == "ema"
+        assert tab.js("document.querySelector('#fc-min_cutoff')") is None  # EMA has no such key
+        assert tab.errors() == []
+        tab.page.close()
+        interrupt(proc)
+
+
 class Receiver:
     """A Live Link UDP receiver on loopback: every frame the relay sends, in order."""
 

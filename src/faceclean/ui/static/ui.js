@@ -242,18 +242,45 @@ function scopeChannels() {
   return [hello.channels.indexOf(s)];
 }
 
+// The controls are built once for a cleaner's keys and scope; a new value only moves its
+// slider. (On software GL every layout of the page costs the CPU the server needs, and a
+// rebuilt panel delayed the cleaned window a slider click asks for by 5-20 ms.)
+let built = null;
+function smoothValue(key, cols) {
+  const own = itemValue(scopeKey(key));
+  return own !== undefined && Number.isFinite(+own) ? +own : state.values[key][cols[0]];
+}
+function levelValue(key) {
+  const own = itemValue(scopeKey(key));
+  return own !== undefined ? +own : LEVELS[key][3];
+}
+function moveSlider(key, value, range) {
+  const input = $(`fc-${key}`);
+  if (!input || document.activeElement === input) return; // the one in the hand shows its own
+  const at = String(toSlider(value, range));
+  if (input.value !== at) input.value = at;
+  const shown = input.nextElementSibling;
+  if (shown.textContent !== fmt(value)) shown.textContent = fmt(value);
+}
 function render() {
   if (!hello || !state) return;
   if (document.activeElement !== $("fc-items")) $("fc-items").value = items.join("\n");
+  const cols = scopeChannels();
+  const shape = JSON.stringify([state.method, state.keys.filter((k) => state.values[k]), $("fc-scope").value]);
+  if (shape === built) {
+    for (const key of state.keys) if (state.values[key]) moveSlider(key, smoothValue(key, cols), RANGES[key] || [1e-3, 1e3, true]);
+    for (const [key, range] of Object.entries(LEVELS)) moveSlider(key, levelValue(key), range);
+    const clamp = $("fc-clamp"), off = $("fc-off");
+    if (document.activeElement !== clamp) clamp.value = itemValue(scopeKey("clamp")) || "";
+    off.checked = itemValue(scopeKey("off")) !== undefined;
+    return;
+  }
+  built = shape;
   const smooth = $("fc-smoothing");
   smooth.replaceChildren();
-  const cols = scopeChannels();
   for (const key of state.keys) {
-    const per = state.values[key];
-    if (!per) continue;
-    const own = itemValue(scopeKey(key));
-    const v = own !== undefined && Number.isFinite(+own) ? +own : per[cols[0]];
-    slider(smooth, key, v, RANGES[key] || [1e-3, 1e3, true], (x) => setItem(key, String(x)));
+    if (!state.values[key]) continue;
+    slider(smooth, key, smoothValue(key, cols), RANGES[key] || [1e-3, 1e3, true], (x) => setItem(key, String(x)));
   }
   if (!state.keys.length) {
     const p = document.createElement("p");
@@ -264,8 +291,7 @@ function render() {
   const levels = $("fc-levels");
   levels.replaceChildren();
   for (const [key, range] of Object.entries(LEVELS)) {
-    const own = itemValue(scopeKey(key));
-    slider(levels, key, own !== undefined ? +own : range[3], range, (x) => setItem(key, String(x)));
+    slider(levels, key, levelValue(key), range, (x) => setItem(key, String(x)));
   }
   const row = document.createElement("div");
   row.className = "row";
