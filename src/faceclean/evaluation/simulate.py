@@ -201,8 +201,57 @@ def apply(
         keep[:] = True
     names = tuple(ARKIT52[i] for i in np.flatnonzero(present))
     cols = present
-    noisy = Animation(t[keep], y[keep][:, cols], names, {"simulator": _describe(params)})
-    return noisy, Animation(t[keep], truth[keep][:, cols], names)
+    kept = {k: clean.meta[k] for k in ("format", "timecode_start") if k in clean.meta}
+    noisy_pose, true_pose = _pose(clean, t, lost | ~seen, rng)  # drawn last: same blendshapes
+    meta = {"simulator": _describe(params), **kept}
+    if noisy_pose is not None:
+        names_p = {"pose_names": tuple(clean.meta["pose_names"])}
+        meta.update(pose=noisy_pose[keep], **names_p)
+        kept = {**kept, "pose": true_pose[keep], **names_p}
+    noisy = Animation(t[keep], y[keep][:, cols], names, meta)
+    return noisy, Animation(t[keep], truth[keep][:, cols], names, kept)
+
+
+# rad, per POSE angle: the raw Live Link stream's frame noise (llv_dao.npz, the angles minus
+# a 9-frame quadratic Savitzky-Golay fit: benchmarks/tune_rotation.py raw_jitter()); with
+# POSE_OUTLIERS of the frames off by POSE_OUTLIER_RAD, as the rotation filter is tuned on
+POSE_JITTER = (0.00193, 0.00384, 0.00191, 0.00384, 0.00747, 0.00034, 0.00379, 0.00745, 0.00040)
+POSE_OUTLIERS = 0.005
+POSE_OUTLIER_RAD = float(np.radians(3.0))
+
+
+def _pose(
+    clean: Animation, t: np.ndarray, lost: np.ndarray, rng: np.random.Generator
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(noisy, true) head/eye angles (N, P) at the stream's times ``t``, or (None, None)
+    when the take has none. The truth is resampled on the unwrapped circle (a turn
+    through +-pi goes the short way); the noisy angles add POSE_JITTER and outliers, and
+    are NaN where the blendshapes lost tracking. Other pose columns pass resampled."""
+    from faceclean.channels import POSE
+    from faceclean.filters.rotation import wrap
+
+    pose, names = clean.meta.get("pose"), tuple(clean.meta.get("pose_names", ()))
+    if pose is None or not names:
+        return None, None
+    p = np.asarray(pose, np.float64)
+    if p.shape != (clean.n_frames, len(names)):
+        return None, None
+    ok = np.isfinite(clean.times)
+    q = p[ok].copy()
+    angle = np.array([n in POSE for n in names])
+    for j in np.flatnonzero(angle):
+        f = np.isfinite(q[:, j])
+        q[f, j] = np.unwrap(q[f, j])
+    truth = resample(clean.times[ok], q, t)
+    sigma = np.array([POSE_JITTER[POSE.index(n)] if n in POSE else 0.0 for n in names])
+    noisy = truth + rng.normal(0.0, 1.0, truth.shape) * sigma
+    hit = rng.random(len(t)) < POSE_OUTLIERS
+    noisy[np.ix_(hit, angle)] += (
+        rng.choice([-1.0, 1.0], (hit.sum(), angle.sum())) * POSE_OUTLIER_RAD
+    )
+    noisy[lost] = np.nan
+    truth[:, angle], noisy[:, angle] = wrap(truth[:, angle]), wrap(noisy[:, angle])
+    return noisy, truth
 
 
 def _describe(params: Params) -> dict[str, float]:
