@@ -116,7 +116,7 @@ def test_every_format_converts(tmp_path, fmt, suffix, capsys):
     assert main(["convert", str(src), "-o", str(out)]) == 0
     said = capsys.readouterr().out
     assert f"({fmt} -> glb)" in said and "52 morph targets" in said and "ARKit channels" in said
-    assert "dropped 1 tracking-loss and 1 out-of-order frames" in said
+    assert "dropped 1 tracking-loss and 1 non-advancing frames" in said
     times, weights, _ = gltf_take.keyframes(read)
     back = load(out)
     np.testing.assert_allclose(back.times, times, atol=1e-6)
@@ -300,3 +300,30 @@ def test_blender_imports_shape_keys_and_their_action(glb, tmp_path):
         frames = keys[:, 0] - keys[0, 0]
         np.testing.assert_allclose(frames / got["fps"], want_t, atol=1e-4)
         np.testing.assert_allclose(keys[:, 1], want_w[:, INDEX[name]], atol=1e-6)
+
+
+@pytest.mark.parametrize("times", [[0.0, 1e39], [-1e300, 0.0], [1e300, 1.0000000000001e300]])
+def test_times_glTF_cannot_hold_are_refused_in_one_line(tmp_path, capsys, times):
+    # red team: float32 key times overflowed to inf and the rate to NaN (internal error)
+    src, out = tmp_path / "t.csv", tmp_path / "t.glb"
+    src.write_text("time,jawOpen\n" + "".join(f"{t!r},0.{k + 1}\n" for k, t in enumerate(times)))
+    assert main(["convert", str(src), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "glTF keyframe times" in err and not out.exists()
+
+
+@pytest.mark.parametrize(
+    "times,kept",
+    [([0.0, 86400.0], 2),  # a day between two frames: 1e-5 Hz
+     ([0.0, 1e-300, 2e-300], 1),  # steps float32 cannot tell apart
+     ([10.0, 9.0, 8.0, 7.0], 1)],  # backwards
+)  # fmt: skip
+def test_a_take_with_no_usable_rate_gets_no_timing_and_a_sane_line(tmp_path, capsys, times, kept):
+    src, out = tmp_path / "t.csv", tmp_path / "t.glb"
+    src.write_text("time,jawOpen\n" + "".join(f"{t!r},0.5\n" for t in times))
+    assert main(["convert", str(src), "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert f"wrote {out}: {kept} keyframes over " in said and " fps" not in said
+    assert "over -" not in said and "nan" not in said and "inf" not in said
+    doc = gltf_take.document(facemesh.stylised(), load(src))[0]
+    assert "extras" not in doc["scenes"][0]

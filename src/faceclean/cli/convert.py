@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         counts = gltf_take.write(anim, f, args.output, mesh, name=Path(args.input).stem)
     kept = anim.n_frames - counts["lost"] - counts["unordered"]
     dropped = [f"{counts['lost']} tracking-loss"] if counts["lost"] else []
-    dropped += [f"{counts['unordered']} out-of-order"] if counts["unordered"] else []
+    dropped += [f"{counts['unordered']} non-advancing"] if counts["unordered"] else []
     rate = (
         f" at {counts['fps']:g} fps (frames 0-{counts['frame_end']}: set this rate in a "
         "frame-based importer such as Blender before importing, docs/FORMATS.md)"
@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         else ""
     )
     print(
-        f"wrote {args.output}: {kept} keyframes over {anim.duration:.2f} s{rate}, "
+        f"wrote {args.output}: {kept} keyframes over {counts['seconds']:.2f} s{rate}, "
         f"{counts['channels']} ARKit channels, on {mesh.name} ({len(mesh.vertices)} vertices, "
         f"52 morph targets)"
         + (f"; dropped {' and '.join(dropped)} frames" if dropped else "")

@@ -54,6 +54,8 @@ _FLOAT, _UINT = 5126, 5125  # glTF componentType
 _ARRAY, _ELEMENTS = 34962, 34963  # bufferView targets
 PIVOT = (0.0, -0.08, -0.03)  # m, the head node's place: the top of the neck, behind the jaw
 HEAD = ("HeadYaw", "HeadPitch", "HeadRoll")
+MAX_SPAN = 1e7  # s (116 days) from the first frame: float32 keeps 1 s steps to 1.7e7 s
+RATES = (1.0, 1000.0)  # Hz, the frame rates the file names (Blender's FPS is a whole 1 or more)
 
 
 def keyframes(anim: Animation) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
@@ -86,6 +88,12 @@ def kept(anim: Animation) -> np.ndarray:
     valid = np.flatnonzero(anim.valid)
     if len(valid) == 0:
         raise FacecleanError("every frame of the take is a tracking loss: no keyframe to write")
+    span = float(np.nanmax(np.abs(anim.times[valid] - anim.times[0])))
+    if not span <= MAX_SPAN:  # NaN too
+        raise FacecleanError(
+            f"the take's times span {span:.3g} s: glTF keyframe times (float32 s) hold at "
+            f"most {MAX_SPAN:.0e} s (are the times in another unit?)"
+        )
     tv = (anim.times - anim.times[0]).astype(np.float32)[valid]
     before = np.maximum.accumulate(np.concatenate([[-np.inf], tv[:-1]]))
     return valid[tv > before]  # strictly later than every earlier tracked frame
@@ -152,10 +160,11 @@ def clip_timing(anim: Animation, times: np.ndarray) -> dict[str, float | int]:
     """What glTF has no field for: the take's frame rate (fps: its median, as the named rate
     it is within 0.25 % of, timing.nominal_rate) and
     the clip's frames at that rate, 0 .. frame_end = round(last key time x fps); {} when
-    the take has no rate (one frame). Importers that count in frames (Blender) read the
-    key times (s) at the scene's rate, so these say which rate and range to set."""
+    the take has no rate in RATES (one frame; a step of hours or of microseconds).
+    Importers that count in frames (Blender) read the key times (s) at the scene's rate,
+    so these say which rate and range to set."""
     rate = anim.rate
-    if not rate > 0:
+    if not RATES[0] <= rate <= RATES[1]:  # NaN, 0 (one frame) and absurd rates too
         return {}
     fps = nominal_rate(rate)
     return {"fps": fps, "frame_start": 0, "frame_end": int(round(float(times[-1]) * fps))}
@@ -224,8 +233,9 @@ def document(mesh: FaceMesh, anim: Animation | None = None, name: str = "take"):
             doc["nodes"].append({"name": "head", "children": [0], "translation": list(PIVOT)})
             doc["scenes"] = [{"nodes": [1]}]
         timing = clip_timing(anim, times)
-        counts.update(timing)
-        doc["scenes"][0]["extras"] = timing  # Blender: the scene's custom properties
+        counts.update(timing, seconds=float(times[-1]))  # the clip's length
+        if timing:
+            doc["scenes"][0]["extras"] = timing  # Blender: the scene's custom properties
         doc["animations"] = [
             {
                 "name": name,
