@@ -7,8 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from faceclean.adjust import MAP_KEYS, Adjust, matches
+from faceclean.adjust import FORMAT, MAP_KEYS, Adjust, matches
 from faceclean.channels import ARKIT52, INDEX
+from faceclean.cli import main
 from faceclean.errors import FacecleanError
 
 
@@ -121,3 +122,36 @@ def test_extreme_levels_and_glitch_values_never_warn(recwarn):
     y = a.apply(x, ("jawOpen", "mouthClose"))
     assert y[0, 0] == 1.0 and np.isnan(y[2, 0]) and list(y[:, 1]) == [0.5] * 3
     assert not recwarn.list
+
+
+@pytest.mark.parametrize(
+    "calibration",
+    [{"take": 5}, {"frames": "x"}, {"moved": 5}, {"lifted": None}, {"closed": {}},
+     {"channels": [1, 2]}, {"channels": {"jawOpen": [1]}}, {"channels": {"jawOpen": {"top": "x"}}},
+     {"neutral_s": float("nan")}, {"hold": [0]}, {"rom": "yes"}, [1, 2]],
+)  # fmt: skip
+def test_a_level_file_with_ill_typed_facts_is_refused_in_one_line(tmp_path, capsys, calibration):
+    # red team: info crashed on such files (internal error); clean and relay took them
+    from faceclean import strict_json
+
+    path = tmp_path / "c.json"
+    doc = {"format": FORMAT, "channels": {"jawOpen": {"gain": 1.5}}, "calibration": calibration}
+    path.write_text(strict_json.dumps(doc).replace("NaN", "1e999"))
+    take = tmp_path / "t.csv"
+    take.write_text("time,jawOpen\n0,0.1\n0.1,0.2\n0.2,0.3\n")
+    for args in (["info", str(path)], ["info", str(take), "--calibration", str(path)]):
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"faceclean: {path}") and "\n" not in err, err
+
+
+@pytest.mark.parametrize("clamp", ["none", None, False, "off"])
+def test_info_shows_an_unclamped_channel(tmp_path, capsys, clamp):
+    from faceclean import strict_json
+
+    path = tmp_path / "c.json"
+    path.write_text(
+        strict_json.dumps({"format": FORMAT, "channels": {"jawOpen": {"clamp": clamp}}})
+    )
+    assert main(["info", str(path)]) == 0
+    assert "jawOpen: no clamp" in capsys.readouterr().out

@@ -119,8 +119,7 @@ class Adjust:
             rules = cls.from_overrides(items).rules
         except FacecleanError as e:
             raise FacecleanError(f"{label}: {e}") from None
-        facts = data.get("calibration", {})
-        return cls(rules, facts if isinstance(facts, dict) else {})
+        return cls(rules, _facts(data.get("calibration", {}), label))
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Adjust:
@@ -321,11 +320,51 @@ def _checked(key: str, value: object, where: str) -> Any:
     return number
 
 
+def _facts(facts: Any, label: str) -> dict[str, Any]:
+    """A level file's calibration facts (what ``calibrate`` measured, shown by ``info``),
+    each of its documented type; FacecleanError naming the first that is not. Other keys
+    are kept as they are (nothing reads them)."""
+    if not isinstance(facts, dict):
+        raise FacecleanError(f"{label}: 'calibration' must be an object of facts")
+
+    def number(v: Any) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+    def names(v: Any) -> bool:
+        return isinstance(v, list) and all(isinstance(n, str) for n in v)
+
+    def channels(v: Any) -> bool:
+        return isinstance(v, dict) and all(
+            isinstance(c, dict) and all(x is None or number(x) for x in c.values())
+            for c in v.values()
+        )
+
+    kinds = {
+        "take": (lambda v: isinstance(v, str), "a file name"),
+        "frames": (lambda v: number(v) and v >= 0, "a frame count"),
+        "neutral_s": (lambda v: number(v) and v >= 0, "seconds"),
+        "tracker": (lambda v: v is None or isinstance(v, str), "a tracker name"),
+        "rom": (lambda v: isinstance(v, bool), "true or false"),
+        "moved": (names, "a list of channel names"),
+        "lifted": (names, "a list of channel names"),
+        "closed": (names, "a list of channel names"),
+        "channels": (channels, "channel -> {neutral, top, noise, gain: numbers}"),
+        "hold": (lambda v: isinstance(v, list) and len(v) == 2 and all(map(number, v)),
+                 "[start, end] seconds"),
+    }  # fmt: skip
+    for key, (ok, what) in kinds.items():
+        if key in facts and not ok(facts[key]):
+            raise FacecleanError(f"{label}: calibration fact {key!r} must be {what}")
+    return facts
+
+
 def _show(key: str, value: Any) -> str:
     if key == "off":
         return "off" if value else "on"
-    if key == "clamp":
-        return "no clamp" if value == NO_CLAMP else f"clamp [{value[0]:g}, {value[1]:g}]"
+    if key == "clamp":  # a rule's (lo, hi), or the file's false for no clamp
+        if value is False or tuple(value) == NO_CLAMP:
+            return "no clamp"
+        return f"clamp [{value[0]:g}, {value[1]:g}]"
     return f"{key} {value:.4g}"
 
 
