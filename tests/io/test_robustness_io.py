@@ -582,3 +582,43 @@ def test_an_interrupt_at_any_point_of_a_write_leaves_no_file(tmp_path, monkeypat
         raise KeyboardInterrupt
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
     assert out.read_text() == "before"
+
+
+def _small_take(path: Path) -> bytes:
+    path.write_text("time,jawOpen\n0,0.1\n0.1,0.2\n0.2,0.3\n")
+    return path.read_bytes()
+
+
+def test_a_read_only_output_is_not_replaced(tmp_path, capsys):
+    # red team: a write is a rename, so a 0444 file was replaced without a word
+    src, out = tmp_path / "in.csv", tmp_path / "keep.csv"
+    _small_take(src)
+    out.write_text("mine\n")
+    out.chmod(0o444)
+    for args in (["convert", str(src), "-o", str(out)],
+                 ["clean", str(src), "-o", str(out), "--method", "ema"]):  # fmt: skip
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == f"faceclean: {out} is read-only: nothing replaces it unasked (make it " \
+                      "writable, or name another file)"  # fmt: skip
+        assert out.read_text() == "mine\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv", "keep.csv"]
+
+
+@pytest.mark.parametrize("where", ["dangling", "proc"])
+def test_an_output_that_cannot_be_written_is_refused_before_the_work(tmp_path, capsys, where):
+    # red team: relay --record through a dangling link, or into /proc, took a whole session
+    # and then lost it at the end with a raw errno message
+    out = tmp_path / "rec.csv"
+    if where == "dangling":
+        out.symlink_to(tmp_path / "gone" / "x.csv")
+    else:
+        out = Path("/proc/self/x.csv")
+    args = ["relay", "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9"]
+    assert main([*args, "--record", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("faceclean: --record: ")
+    assert ("output folder does not exist" in err) if where == "dangling" else (
+        "cannot write in /proc/" in err)  # fmt: skip
+    if where == "dangling":
+        assert not (tmp_path / "gone").exists()

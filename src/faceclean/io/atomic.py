@@ -28,7 +28,15 @@ def writable(path: str | os.PathLike) -> Path:
         raise FacecleanError(f"output folder does not exist: {folder}")
     if given.is_dir():
         raise FacecleanError(f"output path is a folder: {given}")
-    return paths.target(path)
+    target = paths.target(path)
+    if not target.parent.is_dir():  # a symlink into a folder that is not there
+        raise FacecleanError(f"output folder does not exist: {target.parent} ({given} leads there)")
+    if target.exists() and not target.stat().st_mode & 0o222:
+        raise FacecleanError(
+            f"{given} is read-only: nothing replaces it unasked (make it writable, or name "
+            "another file)"
+        )
+    return target
 
 
 def check_writable(*outputs: str | os.PathLike | None) -> None:
@@ -39,14 +47,29 @@ def check_writable(*outputs: str | os.PathLike | None) -> None:
     paths.distinct(*outputs)
     for out in outputs:
         if out is not None:
-            writable(out)
+            _probe(writable(out))
+
+
+def _probe(target: Path) -> None:
+    """Create and remove a file beside ``target``, as the write will: a folder that takes
+    no new file (read-only, /proc) is refused at the start, not after the work."""
+    tmp = target.parent / f".{target.name[:100]}.{secrets.token_hex(8)}.tmp"
+    try:
+        os.close(os.open(tmp, _FLAGS, 0o600))
+    except OSError as e:
+        raise FacecleanError(f"cannot write in {target.parent}: {e.strerror or e}") from None
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
 
 
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file for writing; on success it replaces ``path`` atomically."""
     target = writable(path)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
     tmp: Path | None = None
     try:
         # Not tempfile.mkstemp: a signal handled between the file's creation and mkstemp's
@@ -54,9 +77,16 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         # the name is bound first; a 64-bit random name meets an existing file never.
         for _ in range(100):
             tmp = target.parent / f".{target.name[:100]}.{secrets.token_hex(8)}.tmp"
-            with contextlib.suppress(FileExistsError):
-                fd = os.open(tmp, flags, 0o600)
+            try:
+                fd = os.open(tmp, _FLAGS, 0o600)
                 break
+            except FileExistsError:
+                continue
+            except OSError as e:  # e.g. /proc, a read-only folder: not ours to explain
+                tmp = None
+                raise FacecleanError(
+                    f"cannot write in {target.parent}: {e.strerror or e}"
+                ) from None
         else:
             tmp = None
             raise FacecleanError(f"cannot create a temporary file beside {target}")
