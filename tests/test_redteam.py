@@ -1673,9 +1673,25 @@ def test_output_same_as_input_is_cleaned_in_place(tmp_path, take):
 
 def test_convert_json_onto_itself_keeps_the_data(tmp_path):
     src = write_json(tmp_path / "take.json", _doc())
-    before = json.loads(src.read_text())
-    ok(fc("convert", src, "-o", src))
-    assert json.loads(src.read_text())["values"] == before["values"]
+    before = src.read_bytes()
+    # third red team: a take converted over itself (also through a link) lost its form
+    refused = fc("convert", src, "-o", src)
+    assert refused.returncode == 2 and "never converted over itself" in refused.stderr
+    assert src.read_bytes() == before
+    ok(fc("convert", src, "-o", src, "--in-place"))
+    assert json.loads(src.read_text())["values"] == json.loads(before)["values"]
+
+
+def test_convert_refuses_its_input_through_a_link_without_in_place(tmp_path):
+    src = tmp_path / "take.csv"
+    src.write_text("time,jawOpen\n0,0.1\n0.1,0.2\n")
+    before = src.read_bytes()
+    (tmp_path / "link.csv").symlink_to(src)
+    (tmp_path / "hard.csv").hardlink_to(src)
+    for out in ("link.csv", "hard.csv", "./take.csv"):
+        r = fc("convert", tmp_path / "link.csv", "-o", tmp_path / out, "--format", "json")
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert src.read_bytes() == before
 
 
 @pytest.mark.parametrize(

@@ -22,15 +22,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="for .glb/.gltf output: the face to animate (npz, or GLB/glTF with ARKit-named "
         "morph targets); default the stylised face (faceclean face-mesh)",
     )
+    p.add_argument(
+        "--in-place",
+        action="store_true",
+        help="allow OUT to be IN (replaced atomically, once complete); without it, a take "
+        "is never converted over itself",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean import io
+    from faceclean.cli.clean_take import same_file
     from faceclean.errors import FacecleanError
 
-    io.paths.rewritable(args.input)  # convert IN -o IN rewrites it in place
+    if same_file(args.input, args.output) and not args.in_place:
+        raise FacecleanError(
+            f"-o {args.output} is the input {args.input}: a take is never converted over "
+            "itself; name another file, or add --in-place to replace it"
+        )
+    io.paths.rewritable(args.input)  # convert IN -o IN --in-place rewrites it in place
     anim = io.load(args.input)
     fmt = io.output_format(args.output, anim.meta.get("format"), args.fmt)
     new_gltf = fmt == "gltf" and (args.mesh is not None or "gltf" not in anim.meta)
