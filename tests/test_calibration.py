@@ -315,3 +315,15 @@ def test_a_take_in_percent_is_refused_with_the_fix_then_cleaned_with_scale(tmp_p
     x[10, 3] = 50.0
     io.save(Animation(t, x, ARKIT52, {"format": fmt}), path, fmt=fmt)
     assert main(["clean", str(path), "-o", str(out), *ONE_EURO]) == 0
+
+
+@pytest.mark.parametrize("seconds", ["inf", "1e400", "nan", "0", "-1", "4000"])
+def test_a_neutral_hold_out_of_range_is_refused_in_one_line(tmp_path, capsys, seconds):
+    # third red team: --neutral inf ran, taking the whole take as the neutral, unsaid
+    path = tmp_path / "take.csv"
+    io.save(_iphone_take(), path)
+    out = tmp_path / "c.json"
+    assert main(["calibrate", str(path), "--neutral", seconds, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "the neutral hold must be > 0 and at most 3600 s" in err and "\n" not in err
+    assert not out.exists()

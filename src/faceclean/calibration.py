@@ -59,6 +59,9 @@ BLINK_Q = 25.0  # percentile of the blink peaks taken as full closure
 MIN_FRAMES = 5  # a neutral hold needs this many valid frames
 
 
+MAX_NEUTRAL_S = 3600.0  # s: a longer "hold" (inf, 1e400) is a typing slip, not a neutral
+
+
 def calibrate(
     anim: Animation,
     neutral_s: float = NEUTRAL_S,
@@ -75,8 +78,11 @@ def calibrate(
     (that calibration's evidence: those channels are lifted to the tops given).
     ``rom``: the take holds a range of motion; ``tracker``: a ``channels.TRACKERS`` name.
     """
-    if not neutral_s > 0:
-        raise FacecleanError(f"calibration: the neutral hold must be > 0 s (got {neutral_s})")
+    if not 0 < neutral_s <= MAX_NEUTRAL_S:
+        raise FacecleanError(
+            f"calibration: the neutral hold must be > 0 and at most {MAX_NEUTRAL_S:g} s "
+            f"(got {neutral_s:g})"
+        )
     if tracker not in TRACKERS:
         raise FacecleanError(
             f"calibration: unknown tracker {tracker!r} (known: {', '.join(TRACKERS)})"

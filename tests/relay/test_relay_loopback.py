@@ -407,6 +407,14 @@ def test_an_idle_recording_relay_says_it_wrote_nothing_and_a_wide_listen_is_warn
     assert warning.startswith("faceclean: warning: listening on 0.0.0.0: anyone who can reach")
 
 
+@pytest.mark.parametrize("record", ["", "  "])
+def test_an_empty_record_name_is_refused(capsys, record):
+    # third red team: --record '' ran without recording, unsaid
+    args = ["relay", "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9"]
+    assert main([*args, "--record", record]) == 2
+    assert capsys.readouterr().err.strip() == "faceclean: --record: give a file name (.csv or .npz)"
+
+
 @pytest.mark.parametrize("host,loopback", [("127.0.0.1", True), ("127.0.0.2", True),
                                            ("localhost", True), ("::1", True), ("0.0.0.0", False),
                                            ("::", False), ("192.168.1.20", False),

@@ -121,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(
             f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} seconds (got {args.stats})"
         )
+    if args.record is not None and not args.record.strip():
+        raise FacecleanError("--record: give a file name (.csv or .npz)")
     recorder = Recorder(args.record) if args.record else None
     if args.ui:
         return _with_page(args, listen, send, recorder)
