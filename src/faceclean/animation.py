@@ -64,9 +64,11 @@ class Animation:
 
     @property
     def rate(self) -> float:
-        """Median frame rate in Hz over valid consecutive frames (0 if unknown)."""
+        """Median frame rate in Hz over valid consecutive frames (0 if unknown). Steps of
+        1e-12 s or less are duplicates, as the cleaners' rule 4 says (filters/base.py
+        MIN_DT), not a rate of 1e300 Hz."""
         dt = np.diff(self.times[self.valid])
-        dt = dt[dt > 0]
+        dt = dt[dt > 1e-12]
         return float(1.0 / np.median(dt)) if len(dt) else 0.0
 
     def channel(self, name: str) -> np.ndarray:

@@ -7,8 +7,10 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
+from faceclean.cli import main
 from faceclean.settings import MODELS
 
 
@@ -40,3 +42,15 @@ def test_an_npz_that_is_neither_take_nor_model_is_still_one_line(tmp_path):
     np.savez(p, junk=np.zeros(3))  # no config: read as a take, refused in one line
     r = info(p)
     assert r.returncode != 0 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+
+
+def test_steps_too_small_to_be_frames_give_no_rate(tmp_path, capsys):
+    # third red team: a 5e-324 s step printed "rate inf Hz"; such steps are duplicates
+    from faceclean.animation import Animation
+
+    path = tmp_path / "t.csv"
+    path.write_text("time,jawOpen\n0,0\n5e-324,0.1\n1e-323,0.2\n")
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "inf" not in out and "rate        0.000 Hz" in out
+    assert Animation(np.array([0.0, 1e-300, 2e-300]), np.zeros((3, 1)), ["jawOpen"]).rate == 0.0

@@ -32,7 +32,7 @@ def describe(anim) -> dict[str, Any]:
 
     valid = anim.valid
     dt = np.diff(anim.times)  # s, over every row (tracking loss rows keep their times)
-    positive = dt[dt > 0]
+    positive = dt[dt > 1e-12]  # a smaller step is a duplicate (filters/base.py MIN_DT)
     median = float(np.median(positive)) if len(positive) else 0.0
     gap_at = np.flatnonzero(dt > GAP_FACTOR * median) if median else np.zeros(0, int)
     dropped = int(sum(round(dt[i] / median) - 1 for i in gap_at))
