@@ -138,3 +138,17 @@ def test_one_file_into_a_folder_needs_the_folders_spelling(tmp_path, capsys):
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["take.csv"]
     assert main(["clean", str(take), "-o", f"{tmp_path / 'new'}/", *EMA]) == 0  # made
     assert (tmp_path / "new" / "take.csv").is_file()
+
+
+def test_a_batch_says_it_left_its_earlier_outputs_alone(tmp_path, capsys):
+    # third red team: a second batch into a folder inside the input skipped its files unsaid
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    (takes / "a.csv").write_text("time,jawOpen\n0,0.1\n0.1,0.2\n0.2,0.3\n")
+    args = ["clean", str(takes), "-o", str(takes / "sub"), "--method", "ema"]
+    assert main(args) == 0
+    assert "not cleaned again" not in capsys.readouterr().out  # nothing there yet
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "cleaned 1 of 1 files" in out
+    assert f"(1 file already in {takes / 'sub'}, inside the input folder, not cleaned again)" in out

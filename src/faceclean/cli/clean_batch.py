@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     build_cleaner(choice, ARKIT52)
     build_levels(args, choice, ARKIT52)
     jobs = plan(args.input, args.output)
+    skipped = _earlier(args.input, args.output)
     if not args.in_place:
         from faceclean.cli.clean_take import same_file
 
@@ -64,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
                 for future in as_completed(futures):
                     _done(bar, futures[future], *future.result(), failed)
     print(f"cleaned {len(jobs) - len(failed)} of {len(jobs)} files into {args.output}")
+    if skipped:  # batch.plan does not walk the output folder (earlier outputs)
+        print(f"({skipped} file{'s' * (skipped > 1)} already in {args.output}, inside the "
+              "input folder, not cleaned again)")  # fmt: skip
     if failed:
         print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
         for job, why in failed:
@@ -108,3 +112,20 @@ def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:
         except OSError:
             break
     return False, why
+
+
+def _earlier(inputs: list[str], out: str) -> int:
+    """Animation files already in ``out`` when it lies inside an input folder: the walk
+    skips them (a batch's own earlier outputs), and the summary says so."""
+    import os
+
+    from faceclean.batch import EXTENSIONS
+
+    o = os.path.realpath(out)
+    inside = any(
+        os.path.isdir(i) and o != (r := os.path.realpath(i)) and os.path.commonpath([o, r]) == r
+        for i in inputs
+    )
+    if not inside or not os.path.isdir(o):
+        return 0
+    return sum(Path(f).suffix.lower() in EXTENSIONS for _, _, fs in os.walk(o) for f in fs)
