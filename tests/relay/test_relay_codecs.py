@@ -329,3 +329,15 @@ def test_readme_tells_a_wifi_phone_user_to_listen_on_0000_with_the_warning():
     assert listen.host == "0.0.0.0" and listen.port == 11112
     assert parse_url(command.group(2), "send").host == "127.0.0.1"
     assert "**Warning:**" in section and "anyone" in section and "foreign" in section
+
+
+@pytest.mark.parametrize(
+    "url,role",
+    [("vmc://127.0.0.1:0?names=arkit", "listen"), ("livelink://127.0.0.1:9?names=arkit", "send")],
+)
+def test_names_on_the_wrong_url_says_where_it_belongs(url, role):
+    # third red team: "unknown option 'names'" misled, names being a vmc send option
+    from faceclean.relay.url import parse as parse_url
+
+    with pytest.raises(FacecleanError, match=r"\?names= is for a vmc:// --send URL"):
+        parse_url(url, role)

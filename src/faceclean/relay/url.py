@@ -76,6 +76,10 @@ def parse(url: str, role: str = "listen") -> Endpoint:
         raise FacecleanError(f"bad send URL {url!r}: port 0")
     options = {k: v[-1] for k, v in parse_qs(parts.query, keep_blank_values=True).items()}
     unknown = set(options) - ({"names"} if scheme == "vmc" and role == "send" else set())
+    if unknown == {"names"}:  # a send option given to a listen or a Live Link URL
+        raise FacecleanError(
+            f"bad URL {url!r}: ?names= is for a vmc:// --send URL (the names it sends)"
+        )
     if unknown:
         raise FacecleanError(f"bad URL {url!r}: unknown option {sorted(unknown)[0]!r}")
     if options.get("names", "keep") not in vmc.NAME_STYLES:
