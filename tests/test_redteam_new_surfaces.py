@@ -791,3 +791,18 @@ def test_ws_export_over_the_take(page):
     assert src.read_bytes() == before
     assert _errors(got), got[-3:]
     assert page.alive()
+
+
+def test_a_message_quoting_a_huge_value_stays_a_short_line(tmp_path, capsys):
+    # third red team: a 100,000-character pattern in a level file gave a 200 KB error line
+    import json as _json
+
+    from faceclean.cli import MAX_MESSAGE, main
+
+    path = tmp_path / "big.json"
+    doc = {"format": "faceclean-adjust/1", "channels": {"x" * 100_000 + "[": {"gain": 1.5}}}
+    path.write_text(_json.dumps(doc))
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and len(err) < MAX_MESSAGE + 100
+    assert err.startswith(f"faceclean: {path}: ") and "characters cut]" in err

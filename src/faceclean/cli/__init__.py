@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         with _command():
             return int(args._run(args) or 0)
     except FacecleanError as e:
-        print(f"faceclean: {e}", file=sys.stderr)
+        print(f"faceclean: {_short(str(e))}", file=sys.stderr)
         return 2
     except Terminated:
         print("faceclean: terminated", file=sys.stderr)
@@ -133,3 +133,16 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"faceclean: internal error: {type(e).__name__}: {e}", file=sys.stderr)
         return 1
+
+
+MAX_MESSAGE = 2000  # characters: room for a list of the 52 names; a 100k-character value is cut
+
+
+def _short(message: str) -> str:
+    """``message`` on one line of at most about MAX_MESSAGE characters: a long middle (a
+    quoted value, as a user typed it) is cut, its length said."""
+    message = " ".join(message.splitlines())
+    if len(message) <= MAX_MESSAGE:
+        return message
+    head, tail = message[: MAX_MESSAGE - 400], message[-300:]
+    return f"{head} ... [{len(message) - len(head) - len(tail)} characters cut] ... {tail}"
