@@ -327,3 +327,12 @@ def test_a_neutral_hold_out_of_range_is_refused_in_one_line(tmp_path, capsys, se
     err = capsys.readouterr().err.strip()
     assert "the neutral hold must be > 0 and at most 3600 s" in err and "\n" not in err
     assert not out.exists()
+
+
+def test_a_take_all_lost_says_so(tmp_path, capsys):
+    # third red team: it said "no ARKit blendshape channels", where it has one
+    path = tmp_path / "lost.csv"
+    path.write_text("time,jawOpen\n0,\n0.1,\n0.2,\n")
+    assert main(["calibrate", str(path), "-o", str(tmp_path / "c.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "faceclean: calibration: every frame of the take is a tracking loss"

@@ -90,9 +90,11 @@ def calibrate(
     weak = set(TRACKERS[tracker])
     values, present = anim.arkit()  # (N, 52), NaN rows for missing frames
     valid = anim.valid
-    present &= np.isfinite(values).any(axis=0)  # a column without one value is absent
     if not present.any():
         raise FacecleanError("calibration: the take has no ARKit blendshape channels")
+    if not valid.any():
+        raise FacecleanError("calibration: every frame of the take is a tracking loss")
+    present &= np.isfinite(values).any(axis=0)  # a column without one value is absent
     if valid.sum() < MIN_FRAMES:
         raise FacecleanError(f"calibration: the take has fewer than {MIN_FRAMES} valid frames")
     t, x = anim.times[valid], values[valid]
