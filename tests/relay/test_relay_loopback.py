@@ -369,12 +369,13 @@ def test_relay_process_stops_cleanly_on_signals(sig):
     assert "stopped: in 1 out 1 dropped 0" in out and "Traceback" not in err
 
 
-def test_an_idle_relay_says_it_has_no_latency_yet_not_nan():
-    # issue 19: a relay stopped before any frame printed "latency p50 nan ms"
+def _idle(host: str, *more: str) -> tuple[str, str]:
+    """(stdout, stderr) of a relay listening on ``host`` that hears nothing, stopped by
+    Ctrl-C once it listens; its exit status checked (0)."""
     with raw_receiver() as rx:
         proc = _start(
-            ["--listen", "vmc://127.0.0.1:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
-            + ["--method", "ema"]
+            ["--listen", f"vmc://{host}:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
+            + ["--method", "ema", *more]
         )
         with reaped(proc):
             ready, _, _ = select.select([proc.stdout], [], [], 30.0)
@@ -382,6 +383,12 @@ def test_an_idle_relay_says_it_has_no_latency_yet_not_nan():
             proc.stdout.readline()  # the banner: it listens
             out, err = interrupt(proc)
     assert proc.returncode == 0, err
+    return out, err
+
+
+def test_an_idle_relay_says_it_has_no_latency_yet_not_nan():
+    # issue 19: a relay stopped before any frame printed "latency p50 nan ms"
+    out, _ = _idle("127.0.0.1")
     stopped = next(ln for ln in out.splitlines() if ln.startswith("stopped:"))
     assert "nan" not in stopped and "latency - (no frames sent yet)" in stopped
 
@@ -390,17 +397,7 @@ def test_an_idle_recording_relay_says_it_wrote_nothing_and_a_wide_listen_is_warn
     # issue 19 review: --record with no frame wrote no file and said nothing; a listen on
     # every interface warned only in the README
     record = tmp_path / "rec.csv"
-    with raw_receiver() as rx:
-        proc = _start(
-            ["--listen", "vmc://0.0.0.0:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
-            + ["--method", "ema", "--record", str(record)]
-        )
-        with reaped(proc):
-            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
-            assert ready, "relay did not start"
-            proc.stdout.readline()  # the banner: it listens
-            out, err = interrupt(proc)
-    assert proc.returncode == 0, err
+    out, err = _idle("0.0.0.0", "--record", str(record))
     assert "recorded nothing: no frame was sent, so no file was written" in out
     assert not record.exists() and list(tmp_path.iterdir()) == []
     [warning] = [ln for ln in err.splitlines() if ln.strip()]

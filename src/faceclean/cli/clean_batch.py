@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     jobs = plan(args.input, args.output)
     skipped = _earlier(args.input, args.output)
     if not args.in_place:
-        from faceclean.cli.clean_take import same_file
+        from faceclean.io.paths import same_file
 
         onto = [job for job in jobs if same_file(job.src, job.dst)]
         if onto:

@@ -29,19 +29,13 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
 
     from faceclean import io
     from faceclean.adjust import Adjusted, check_range
-    from faceclean.errors import FacecleanError
     from faceclean.filters import rotation
     from faceclean.io import stream
 
     choice = options.choice(args)
     src = Path(input)
-    if same_file(src, output):
-        if not getattr(args, "in_place", False):
-            raise FacecleanError(
-                f"-o {output} is the input {input}: a raw take is never overwritten; "
-                "name another file, or add --in-place to replace it"
-            )
-        io.paths.rewritable(src)  # --in-place: replaces IN atomically, once complete
+    in_place = getattr(args, "in_place", False)
+    io.paths.onto_input(input, output, in_place, "a raw take is never overwritten")
     fmt_in = io.detect(src) if src.is_file() else None
     fmt_out = io.output_format(output, fmt_in, args.fmt) if fmt_in in stream.FORMATS else None
     if stream.can_stream(fmt_in, fmt_out):
@@ -70,16 +64,6 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     angles = rotation.pose_columns(anim)[1]
     missing = int((~anim.valid).sum())
     return _line(output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)
-
-
-def same_file(a: str | Path, b: str | Path) -> bool:
-    """Whether paths a and b name one existing file (``./``, symlinks, hard links)."""
-    import os
-
-    try:
-        return os.path.samefile(a, b)
-    except (OSError, ValueError):  # either one missing: not the same file
-        return False
 
 
 def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...]):

@@ -34,15 +34,10 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean import io
-    from faceclean.cli.clean_take import same_file
     from faceclean.errors import FacecleanError
 
-    if same_file(args.input, args.output) and not args.in_place:
-        raise FacecleanError(
-            f"-o {args.output} is the input {args.input}: a take is never converted over "
-            "itself; name another file, or add --in-place to replace it"
-        )
-    io.paths.rewritable(args.input)  # convert IN -o IN --in-place rewrites it in place
+    rule = "a take is never converted over itself"
+    io.paths.onto_input(args.input, args.output, args.in_place, rule)
     anim = io.load(args.input)
     fmt = io.output_format(args.output, anim.meta.get("format"), args.fmt)
     new_gltf = fmt == "gltf" and (args.mesh is not None or "gltf" not in anim.meta)

@@ -53,7 +53,7 @@ def check_writable(*outputs: str | os.PathLike | None) -> None:
 def _probe(target: Path) -> None:
     """Create and remove a file beside ``target``, as the write will: a folder that takes
     no new file (read-only, /proc) is refused at the start, not after the work."""
-    tmp = target.parent / f".{target.name[:100]}.{secrets.token_hex(8)}.tmp"
+    tmp = _temporary(target)
     try:
         os.close(os.open(tmp, _FLAGS, 0o600))
     except OSError as e:
@@ -66,6 +66,11 @@ def _probe(target: Path) -> None:
 _FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
 
 
+def _temporary(target: Path) -> Path:
+    """A new hidden name beside ``target`` (64 random bits: it meets no existing file)."""
+    return target.parent / f".{target.name[:100]}.{secrets.token_hex(8)}.tmp"
+
+
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file for writing; on success it replaces ``path`` atomically."""
@@ -76,7 +81,7 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         # return (the CLI raises on SIGTERM) left a file the caller had no name for. Here
         # the name is bound first; a 64-bit random name meets an existing file never.
         for _ in range(100):
-            tmp = target.parent / f".{target.name[:100]}.{secrets.token_hex(8)}.tmp"
+            tmp = _temporary(target)
             try:
                 fd = os.open(tmp, _FLAGS, 0o600)
                 break

@@ -52,6 +52,28 @@ def note_input(st: os.stat_result) -> None:
         _current.read.add((st.st_dev, st.st_ino))
 
 
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """Whether paths a and b name one existing file (``./``, symlinks, hard links)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either one missing: not the same file
+        return False
+
+
+def onto_input(src: str | os.PathLike, out: str | os.PathLike, in_place: bool, rule: str) -> None:
+    """An output that is its command's input (``same_file``): refused, saying ``rule``,
+    unless ``in_place``; with it, declared rewritable. A raw take is never replaced
+    unasked (``clean``, ``convert``)."""
+    if not same_file(src, out):
+        return
+    if not in_place:
+        raise FacecleanError(
+            f"-o {out} is the input {src}: {rule}; name another file, or add --in-place to "
+            "replace it"
+        )
+    rewritable(src)  # replaced atomically, once complete
+
+
 def rewritable(path: str | os.PathLike) -> None:
     """Let the current command replace this input (an in-place clean or convert)."""
     if _current is not None:
