@@ -11,6 +11,8 @@ import numpy as np
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, canonical, channel_key
 
+MIN_DT = 1e-12  # s; a step this small or smaller is a duplicate (the cleaners' rule 4)
+
 
 @dataclass(eq=False)
 class Animation:
@@ -65,10 +67,9 @@ class Animation:
     @property
     def rate(self) -> float:
         """Median frame rate in Hz over valid consecutive frames (0 if unknown). Steps of
-        1e-12 s or less are duplicates, as the cleaners' rule 4 says (filters/base.py
-        MIN_DT), not a rate of 1e300 Hz."""
+        MIN_DT or less are duplicates, not a rate of 1e300 Hz."""
         dt = np.diff(self.times[self.valid])
-        dt = dt[dt > 1e-12]
+        dt = dt[dt > MIN_DT]
         return float(1.0 / np.median(dt)) if len(dt) else 0.0
 
     def channel(self, name: str) -> np.ndarray:

@@ -28,11 +28,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def describe(anim) -> dict[str, Any]:
     """Facts about an Animation (JSON-ready): counts, rate in Hz, seconds, gaps, ranges."""
+    from faceclean.animation import MIN_DT
     from faceclean.channels import ARKIT52, canonical
 
     valid = anim.valid
     dt = np.diff(anim.times)  # s, over every row (tracking loss rows keep their times)
-    positive = dt[dt > 1e-12]  # a smaller step is a duplicate (filters/base.py MIN_DT)
+    positive = dt[dt > MIN_DT]  # a smaller step is a duplicate
     median = float(np.median(positive)) if len(positive) else 0.0
     gap_at = np.flatnonzero(dt > GAP_FACTOR * median) if median else np.zeros(0, int)
     dropped = int(sum(round(dt[i] / median) - 1 for i in gap_at))
