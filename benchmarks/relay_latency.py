@@ -81,13 +81,20 @@ def take_values(n: int) -> np.ndarray:
 
 
 def decode_speed(repeat: int = 3000) -> dict[str, float]:
-    """µs per 52-value VMC frame: our decoder against python-osc's parser."""
+    """µs per 52-value VMC frame: our decoder (a first datagram; a sender's stream) against
+    python-osc's parser."""
     from pythonosc.osc_packet import OscPacket
 
-    data = vmc.Encoder(stamp=True).encode(Frame(ARKIT52, np.full(52, 0.5), 1.0))
+    enc = vmc.Encoder(stamp=True)
+    data = enc.encode(Frame(ARKIT52, np.full(52, 0.5), 1.0))
+    # a stream: one sender's decoder, each frame with new values (its known layout)
+    stream = [enc.encode(Frame(ARKIT52, np.full(52, v), v)) for v in np.linspace(0, 1, 64)]
+    sender = vmc.Decoder()
+    frames = iter(range(10**9))
     out = {}
     for name, fn in (
         ("ours", lambda: vmc.Decoder().feed(data)),
+        ("ours, a stream", lambda: sender.feed(stream[next(frames) % 64])),
         ("python-osc", lambda: OscPacket(data)),
     ):
         fn()

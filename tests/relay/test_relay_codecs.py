@@ -222,6 +222,88 @@ def test_vmc_values_without_apply_are_bounded():
     assert dec.feed(APPLY).names == ()  # the pile was dropped
 
 
+# A sender's usual bundle: stamped, with pose bones and a passthrough message.
+def _stream_bundle(values, t=1.0, yaw=0.1):
+    names = ("eyeBlinkLeft", "jawOpen", "Joy", "jawOpen")  # a repeated name: the last wins
+    pose = np.array([yaw, -0.2, 0.05, 0.1, 0.0, 0.0, np.nan, np.nan, np.nan])
+    f = Frame(names, np.asarray(values, float), t, pose, (ROOT,))
+    return vmc.Encoder(stamp=True).encode(f)
+
+
+def _primed():  # a sender's decoder after two frames: it knows their layout
+    dec = vmc.Decoder()
+    for _ in range(2):
+        dec.feed(_stream_bundle([0.1, 0.2, 0.3, 0.4]))
+    return dec
+
+
+def _seen_faces():  # a decoder that has seen a face (loose messages) but keeps no layout
+    dec = vmc.Decoder()
+    dec.feed(VAL_JAW)
+    dec.feed(APPLY)
+    return dec
+
+
+def _same(a, b):
+    assert (a is None) == (b is None)
+    if a is None:
+        return
+    assert a.names == b.names and a.passthrough == b.passthrough and a.t == b.t
+    np.testing.assert_array_equal(a.values, b.values)  # NaN where NaN
+    assert (a.pose is None) == (b.pose is None)
+    if a.pose is not None:
+        np.testing.assert_array_equal(a.pose, b.pose)
+        assert a.positions == b.positions
+
+
+def test_vmc_known_layout_reads_each_frame_as_a_full_parse():
+    dec = vmc.Decoder()
+    dec.feed(_stream_bundle([0.1, 0.2, 0.3, 0.4]))
+    assert dec._layout is None  # one frame: no layout gathered yet
+    dec = _primed()
+    rng = np.random.default_rng(0)
+    for i in range(50):
+        data = _stream_bundle(rng.uniform(0, 1, 4), t=1.0 + i / 60, yaw=rng.uniform(-1, 1))
+        assert dec._layout.read(data) is not None  # read from its floats alone
+        _same(dec.feed(data), _seen_faces().feed(data))
+    f = dec.feed(_stream_bundle([0.5, 0.6, np.nan, 0.25], t=2.0))
+    assert f.names == ("eyeBlinkLeft", "jawOpen", "Joy")
+    np.testing.assert_array_equal(f.values, [0.5, 0.25, np.nan])
+    assert f.t == 2.0 and ROOT in f.passthrough and abs(f.pose[0] - 0.1) < 1e-6
+
+
+def test_vmc_known_layout_refuses_what_a_full_parse_refuses():
+    dec = _primed()
+    with pytest.raises(Malformed, match="packet time"):
+        dec.feed(_stream_bundle([0.1, 0.2, 0.3, 0.4], t=float("inf")))
+    f = dec.feed(_stream_bundle([np.inf, 0.2, 0.3, 0.4]))  # not finite: NaN, as parsed
+    assert np.isnan(f.values[0])
+    renamed = _stream_bundle([0.1, 0.2, 0.3, 0.4]).replace(b"Joy", b"Jo\xff")
+    with pytest.raises(Malformed, match="UTF-8"):
+        dec.feed(renamed)  # another word: parsed in full
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_vmc_known_layout_gives_a_full_parse_on_any_damage(data):
+    sent = bytearray(_stream_bundle([0.7, 0.6, 0.5, 0.9], t=3.0, yaw=-0.4))
+    for _ in range(data.draw(st.integers(1, 4))):  # bytes changed anywhere
+        sent[data.draw(st.integers(0, len(sent) - 1))] = data.draw(st.integers(0, 255))
+    if data.draw(st.booleans()):
+        sent = sent[: data.draw(st.integers(0, len(sent)))]
+    primed, fresh = _primed(), _seen_faces()
+    results = []
+    for dec in (primed, fresh):
+        try:
+            results.append(dec.feed(bytes(sent)))
+        except Malformed as e:
+            results.append(str(e))
+    if isinstance(results[0], str) or isinstance(results[1], str):
+        assert results[0] == results[1]
+    else:
+        _same(*results)
+
+
 # -- iFacialMocap --------------------------------------------------------------------------
 
 IFM = (

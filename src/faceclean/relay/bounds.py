@@ -114,6 +114,12 @@ def checked(frame: Frame) -> Frame:
     for label, text in (("subject", frame.subject), ("device id", frame.device)):
         if text is not None:
             name(text, label)
+    return numbers(frame)
+
+
+def numbers(frame: Frame) -> Frame:
+    """``frame``'s time bounded and its values and pose beyond float32 made NaN (checked's
+    part that depends on the numbers alone). Raises Malformed."""
     frame.t = time(frame.t)
     frame.values = _finite32(frame.values)
     if frame.pose is not None:

@@ -40,15 +40,24 @@ NAME_STYLES = ("keep", "arkit", "pascal", "lr")
 _APPLY_MSG = osc.message(APPLY.decode())
 _VAL_HEAD = osc.pad(VAL) + osc.pad(b",sf")
 _F32 = struct.Struct(">f")
+_T_HEAD = osc.pad(TIME) + osc.pad(b",f")
 # One Val message with (string, float) arguments: the name, then its float's 4 bytes.
 _VAL_SF = re.compile(re.escape(_VAL_HEAD) + rb"([^\x00]*)\x00{1,4}(.{4})", re.DOTALL)
 
 
 class Decoder:
-    """Datagrams -> frames. Holds the values seen since the last Apply (loose messages)."""
+    """Datagrams -> frames. Holds the values seen since the last Apply (loose messages).
+
+    A sender sends the same bundle every frame but for its floats. A datagram that held a
+    whole frame by itself leaves its ``_Layout``; the next one from that sender whose other
+    32-bit words are the same is read from its floats alone (``_known``: no message is
+    walked, no name checked again), and gives the frame that a full parse would.
+    """
 
     def __init__(self) -> None:
         self._faces = False  # this sender has sent a face frame (an Apply)
+        self._layout: _Layout | None = None
+        self._size = -1  # bytes of the last datagram that came with nothing held
         self._clear()
 
     def _clear(self) -> None:
@@ -58,13 +67,23 @@ class Decoder:
         self._bytes = 0  # of the held names and passthrough messages
         self._bones: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}  # pos, quat
 
+    def _holds(self) -> bool:
+        return bool(self._vals or self._passthrough or self._bones) or self._t is not None
+
     def feed(self, data: bytes) -> Frame | None:
         """A frame when this datagram holds an Apply; a passthrough-only frame when it
         holds no blendshape message at all; else None. Raises Malformed (state kept)."""
+        if self._layout is not None and not self._holds():
+            frame = self._layout.read(data)
+            if frame is not None:
+                return frame
+        # the layout this datagram would leave: gathered from the second whole frame of a
+        # size on (a first datagram, or a sender whose sizes vary, pays nothing for it)
+        plan = _Plan(len(data)) if len(data) == self._size and not self._holds() else None
+        self._size = len(data) if not self._holds() else -1
         vals: list[tuple[str, float]] = []
         other: list[bytes] = []
         bones: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
-        raw_bones: list[bytes] = []
         t: float | None = None
         applied = False
         for address, start, end in osc.messages(data):  # parse all before changing state
@@ -75,6 +94,8 @@ class Decoder:
                     vals.append((m.group(1).decode("utf-8"), _F32.unpack(m.group(2))[0]))
                 except UnicodeDecodeError:
                     raise Malformed("vmc: name is not UTF-8") from None
+                if plan is not None:
+                    plan.value(vals[-1][0], m.start(2))
             elif address == VAL:
                 args = osc.arguments(data, start, end)
                 if len(args) != 2 or not isinstance(args[0], str):
@@ -83,17 +104,23 @@ class Decoder:
                 if isinstance(value, bool) or not isinstance(value, int | float):
                     raise Malformed("vmc: Blend/Val value is not a number")
                 vals.append((bounds.name(args[0], "vmc: name"), float(value)))
+                plan = None  # a value not in the usual form: read in full each time
             elif address == APPLY:
                 applied = True
             elif address == BONE and (bone := _pose_bone(data, start, end)) is not None:
                 bones[bone[0]] = bone[1:]
-                raw_bones.append(data[start:end])
+                if plan is not None:
+                    plan.bone(bone[0], data, start, end)
             else:
                 if address == TIME:
                     args = osc.arguments(data, start, end)
                     if len(args) == 1 and isinstance(args[0], float):
                         t = bounds.time(args[0])  # absurd times: the datagram is malformed
+                        if plan is not None:
+                            plan.time(data, start, end)
                 other.append(data[start:end])
+                if plan is not None:
+                    plan.span(start, end)
         if not vals and not applied:
             if t is not None:
                 self._t = t
@@ -126,7 +153,86 @@ class Decoder:
             frame.pose, frame.positions = _pose_of(self._bones)
         self._clear()
         self._faces = True
-        return bounds.checked(frame)
+        frame = bounds.checked(frame)
+        if plan is not None:
+            self._layout = plan.layout(data, frame.names)
+        return frame
+
+
+class _Plan:
+    """Where the floats of one datagram are, gathered while it is parsed (byte offsets)."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.ok = size % 4 == 0  # OSC packets are whole 32-bit words
+        self.values: dict[str, int] = {}  # name -> its float (the last one sent wins)
+        self.t: int | None = None
+        self.bones: dict[str, int] = {}  # bone -> its 7 floats (position, quaternion)
+        self.spans: list[tuple[int, int]] = []  # the passthrough messages
+        self.floats: list[int] = []  # word index of every Val's float, repeats too
+
+    def value(self, name: str, at: int) -> None:
+        self.ok &= at % 4 == 0
+        self.floats.append(at // 4)
+        self.values[name] = at  # a repeated name: its first place, its last value (a dict)
+
+    def time(self, data: bytes, start: int, end: int) -> None:
+        self.ok &= data[start:end] == _T_HEAD + data[end - 4 : end]  # /VMC/Ext/T ,f
+        self.t = end - 4
+
+    def bone(self, bone: str, data: bytes, start: int, end: int) -> None:
+        head = osc.pad(BONE) + osc.pad(b",sfffffff") + osc.pad(bone.encode())
+        self.ok &= data[start : end - 28] == head
+        self.bones[bone] = end - 28
+
+    def span(self, start: int, end: int) -> None:
+        self.spans.append((start, end))
+
+    def layout(self, data: bytes, names: tuple[str, ...]) -> _Layout | None:
+        if not self.ok or tuple(self.values) != names:
+            return None
+        floats = list(self.floats)
+        if self.t is not None:
+            floats.append(self.t // 4)
+        for at in self.bones.values():
+            floats += range(at // 4, at // 4 + 7)
+        fixed = np.ones(self.size // 4, bool)
+        fixed[floats] = False
+        fixed = np.flatnonzero(fixed)
+        return _Layout(self, names, fixed, np.frombuffer(data, ">u4")[fixed].copy())
+
+
+class _Layout:
+    """A whole-frame datagram's 32-bit words but its floats, and where those floats are."""
+
+    def __init__(self, plan: _Plan, names: tuple, fixed: np.ndarray, words: np.ndarray) -> None:
+        self.size, self.names, self.spans = plan.size, names, tuple(plan.spans)
+        self.fixed, self.words = fixed, words  # (K,) word indices, (K,) their words
+        self.values = np.array([v // 4 for v in plan.values.values()], np.intp)  # (M,)
+        self.t = None if plan.t is None else plan.t // 4
+        self.bones = tuple(plan.bones)
+        self.bone_at = np.array([[a // 4 + k for k in range(7)] for a in plan.bones.values()])
+
+    def read(self, data: bytes) -> Frame | None:
+        """The frame of ``data`` if it has this layout, else None. Raises Malformed."""
+        if len(data) != self.size:
+            return None
+        words = np.frombuffer(data, ">u4")
+        if not np.array_equal(words[self.fixed], self.words):
+            return None
+        floats = words.view(">f4")
+        t = None if self.t is None else float(floats[self.t])
+        frame = Frame(
+            self.names,
+            floats[self.values].astype(np.float64),
+            t,
+            passthrough=tuple(data[a:b] for a, b in self.spans),
+        )
+        if self.bones:
+            b = floats[self.bone_at].astype(np.float64).tolist()  # (B, 7)
+            bones = {n: (tuple(v[:3]), tuple(v[3:])) for n, v in zip(self.bones, b, strict=True)}
+            frame.pose, frame.positions = _pose_of(bones)
+        return bounds.numbers(frame)
 
 
 def _pose_bone(data: bytes, start: int, end: int) -> tuple | None:
