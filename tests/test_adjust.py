@@ -155,3 +155,20 @@ def test_info_shows_an_unclamped_channel(tmp_path, capsys, clamp):
     )
     assert main(["info", str(path)]) == 0
     assert "jawOpen: no clamp" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("keys", "words"),
+    [({"gain": "2"}, 'gain: expected a number, got "2"'), ({"offset": True}, "offset"),
+     ({"curve": [2]}, "curve"), ({"clamp": "0,1"}, "clamp: expected [LO, HI]"),
+     ({"clamp": [0, "1"]}, "clamp"),
+     ({"off": "yes"}, "off: expected true or false")],
+)  # fmt: skip
+def test_a_level_file_takes_json_numbers_not_text(tmp_path, capsys, keys, words):
+    # red team: "gain": "2" was read as 2; --set takes text, a file says what it means
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps({"format": FORMAT, "channels": {"jawOpen": keys}}))
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"jawOpen.{words}" in err and "\n" not in err, err
+    assert Adjust.from_overrides([("jawOpen", "gain", "2")]).rules[0][2] == 2.0  # --set

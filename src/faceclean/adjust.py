@@ -116,6 +116,8 @@ class Adjust:
             raise FacecleanError(f"{label}: 'channels' must map patterns to {{key: value}}")
         items = [(p, k, v) for p, keys in chans.items() for k, v in keys.items()]
         try:
+            for pattern, key, value in items:
+                _json_typed(key, value, f"{pattern}.{key}")
             rules = cls.from_overrides(items).rules
         except FacecleanError as e:
             raise FacecleanError(f"{label}: {e}") from None
@@ -281,6 +283,25 @@ def matches(pattern: str, name: str) -> bool:
     if any(ch in p for ch in "*?["):
         return fnmatchcase(c.lower(), p.lower())
     return channel_key(p).lower() == c.lower()
+
+
+def _json_typed(key: str, value: object, where: str) -> None:
+    """A level file's value is of its JSON type (``--set`` takes text; a file does not:
+    ``"gain": "2"`` is a mistake to name, not a number to guess)."""
+
+    def number(v: object) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if key == "off":
+        ok, want = value is None or isinstance(value, bool), "true or false"
+    elif key == "clamp":
+        pair = isinstance(value, list) and len(value) == 2 and all(number(v) for v in value)
+        none = value is None or value is False or value in ("none", "off")  # as --set spells it
+        ok, want = none or pair, "[LO, HI] or false (no clamp)"
+    else:
+        ok, want = number(value), "a number"
+    if not ok:
+        raise FacecleanError(f"{where}: expected {want}, got {json.dumps(value)[:80]}")
 
 
 def _checked(key: str, value: object, where: str) -> Any:
