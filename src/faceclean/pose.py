@@ -21,6 +21,8 @@ converts every frame (about 3x faster than scipy per call, measured here).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 ORDER = "YXZ"  # intrinsic: yaw about Y, then pitch about X, then roll about Z
@@ -56,6 +58,19 @@ def unity_angles(q: np.ndarray) -> np.ndarray:
     pitch = np.arcsin(np.clip(-2 * (y * z - w * x), -1.0, 1.0))
     roll = np.arctan2(2 * (x * y + w * z), 1 - 2 * (x * x + z * z))
     return np.stack([yaw, pitch, roll], axis=-1)
+
+
+def unity_angles_one(q: tuple[float, float, float, float]) -> tuple[float, float, float]:
+    """``unity_angles`` of one quaternion (x, y, z, w), in Python floats: the relay's
+    per-frame path, where numpy's cost per call on 4 numbers is some 20x the arithmetic."""
+    n = math.sqrt(sum(v * v for v in q)) if all(math.isfinite(v) for v in q) else math.nan
+    if not n > 1e-9:
+        return (math.nan, math.nan, math.nan)
+    x, y, z, w = (v / n for v in q)
+    yaw = math.atan2(2 * (x * z + w * y), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(min(1.0, max(-1.0, -2 * (y * z - w * x))))
+    roll = math.atan2(2 * (x * y + w * z), 1 - 2 * (x * x + z * z))
+    return (yaw, pitch, roll)
 
 
 def gltf_quaternion(ypr: np.ndarray) -> np.ndarray:

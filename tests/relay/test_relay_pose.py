@@ -18,7 +18,7 @@ from test_relay_loopback import WAIT, raw_receiver, vmc_bundle, vmc_peer
 from faceclean import io
 from faceclean.channels import ARKIT52, POSE
 from faceclean.cli import main
-from faceclean.pose import gltf_quaternion, unity_angles, unity_quaternion
+from faceclean.pose import gltf_quaternion, unity_angles, unity_angles_one, unity_quaternion
 from faceclean.relay import Relay, livelink, parse, vmc
 from faceclean.relay.frame import Frame
 from faceclean.relay.recorder import ARRIVAL, Recorder
@@ -78,6 +78,15 @@ def test_yaw_pitch_roll_and_quaternions_agree_with_scipy_and_unity_order():
     g = Rotation.from_quat(gltf_quaternion(np.array([0.3, 0.0, 0.0]))).apply([0, 0, 1])
     assert g[0] < 0 and np.isclose(g[2], forward[2])
     assert np.isnan(unity_angles(np.zeros(4))).all()  # no rotation at all: no angles
+
+
+def test_one_quaternions_angles_are_the_arrays():
+    rng = np.random.default_rng(3)
+    q = np.concatenate([rng.normal(size=(200, 4)), unity_quaternion(rng.uniform(-3, 3, (50, 3)))])
+    odd = [[0, 0, 0, 0], [np.nan, 0, 0, 1], [np.inf, 0, 0, 1], [0, 0, 0, 1e-12], [0, 1, 0, 0]]
+    q = np.concatenate([q, odd])
+    one = np.array([unity_angles_one(tuple(v)) for v in q.tolist()])
+    np.testing.assert_allclose(one, unity_angles(q), atol=1e-12)  # NaN where NaN
 
 
 # -- VMC Bone/Pos --------------------------------------------------------------------------

@@ -129,6 +129,5 @@ def numbers(frame: Frame) -> Frame:
 
 def _finite32(v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, np.float64)
-    with np.errstate(invalid="ignore"):
-        over = np.abs(v) > MAX_VALUE
+    over = np.abs(v) > MAX_VALUE  # NaN compares False, without a warning (numpy >= 1.24)
     return np.where(over, np.nan, v) if over.any() else v

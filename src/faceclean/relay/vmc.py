@@ -19,6 +19,7 @@ tracker's stream is not held back).
 
 from __future__ import annotations
 
+import math
 import re
 import struct
 
@@ -249,13 +250,12 @@ def _pose_bone(data: bytes, start: int, end: int) -> tuple | None:
 
 def _pose_of(bones: dict) -> tuple[np.ndarray, dict[str, tuple[float, float, float]]]:
     """(9,) yaw/pitch/roll of Head, LeftEye, RightEye (NaN: not sent), their positions."""
-    pose = np.full(9, np.nan)
+    pose = [math.nan] * 9
     names = [b for b in POSE_BONES if b in bones]
-    angles = rotations.unity_angles(np.array([bones[b][1] for b in names]))  # (B, 3)
-    for b, a in zip(names, angles, strict=True):
+    for b in names:
         i = 3 * POSE_BONES.index(b)
-        pose[i : i + 3] = a
-    return pose, {b: bones[b][0] for b in names}
+        pose[i : i + 3] = rotations.unity_angles_one(bones[b][1])
+    return np.array(pose), {b: bones[b][0] for b in names}
 
 
 def rename(name: str, style: str) -> str:
