@@ -49,10 +49,13 @@ _VAL_SF = re.compile(re.escape(_VAL_HEAD) + rb"([^\x00]*)\x00{1,4}(.{4})", re.DO
 class Decoder:
     """Datagrams -> frames. Holds the values seen since the last Apply (loose messages).
 
-    A sender sends the same bundle every frame but for its floats. A datagram that held a
-    whole frame by itself leaves its ``_Layout``; the next one from that sender whose other
-    32-bit words are the same is read from its floats alone (``_known``: no message is
-    walked, no name checked again), and gives the frame that a full parse would.
+    A sender sends the same bundle every frame but for its floats. From the second
+    datagram of one size that holds a whole frame by itself (nothing held before it), the
+    decoder keeps its ``_Layout``; a later one from that sender whose other 32-bit words
+    are the same is read from its floats alone (``_Layout.read``: no message is walked, no
+    name checked again; the time and float32 bounds still apply), and gives the frame that
+    a full parse would. A repeated Val, time or bone keeps the earlier one's float among
+    the fixed words, so such a sender is parsed in full each time, as before.
     """
 
     def __init__(self) -> None:
