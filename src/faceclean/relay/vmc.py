@@ -54,8 +54,8 @@ class Decoder:
     decoder keeps its ``_Layout``; a later one from that sender whose other 32-bit words
     are the same is read from its floats alone (``_Layout.read``: no message is walked, no
     name checked again; the time and float32 bounds still apply), and gives the frame that
-    a full parse would. A repeated Val, time or bone keeps the earlier one's float among
-    the fixed words, so such a sender is parsed in full each time, as before.
+    a full parse would (a repeated name too). A repeated time or bone message keeps the
+    earlier one's floats among the fixed words, so such a sender is parsed in full.
     """
 
     def __init__(self) -> None:
