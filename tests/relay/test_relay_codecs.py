@@ -304,6 +304,31 @@ def test_vmc_known_layout_gives_a_full_parse_on_any_damage(data):
         _same(*results)
 
 
+def test_a_message_no_parser_reads_is_left_out_of_the_frames_bundle():
+    # red team: one flipped byte in an address made the relay's whole output bundle
+    # unreadable to python-osc, and the frame's cleaned values with it
+    good = _stream_bundle([0.1, 0.2, 0.3, 0.4])
+    bad = bytearray(good)
+    bad[bad.find(b"/VMC/Ext/Blend/Val") + 9] = 0xFF  # the first Val's address, not UTF-8
+    f = vmc.Decoder().feed(bytes(bad))
+    assert f.names == ("jawOpen", "Joy") and ROOT in f.passthrough
+    out = vmc.Encoder().encode(f)
+    assert [m.address for m in OscBundle(out)][-1] == "/VMC/Ext/Blend/Apply"  # it parses
+
+
+def test_well_formed_takes_every_argument_type_python_osc_writes():
+    m = OscMessageBuilder("/VMC/Ext/Root/Pos")
+    for value, kind in ((1, "i"), (2.5, "f"), (2.5, "d"), ("x", "s"), (b"abcde", "b"),
+                        (2**40, "h"), (True, "T"), (False, "F"), (None, "N"),
+                        ((1, 2, 3, 4), "m"), (0x11223344, "r"), ([1, 2.0], None)):  # fmt: skip
+        m.add_arg(value, kind) if kind else m.add_arg(value)
+    data = m.build().dgram
+    assert osc.well_formed(data, 0, len(data))
+    for cut in range(len(data) - 1, 0, -4):  # a cut one: some argument runs past the end
+        assert not osc.well_formed(data, 0, cut) or cut <= data.find(b",")
+    assert not osc.well_formed(b"/a\x00\x00,q\x00\x00", 0, 8)  # an unknown type
+
+
 # -- iFacialMocap --------------------------------------------------------------------------
 
 IFM = (

@@ -104,6 +104,42 @@ def arguments(data: bytes, start: int, end: int) -> list:
     return args
 
 
+# OSC 1.0 and its common extensions: bytes of each argument type's data (None: a string,
+# -1: a blob, 0: no data)
+_SIZES = {"i": 4, "f": 4, "c": 4, "r": 4, "m": 4, "h": 8, "t": 8, "d": 8, "s": None, "S": None}
+_SIZES |= {"b": -1, "T": 0, "F": 0, "N": 0, "I": 0, "[": 0, "]": 0}
+
+
+def well_formed(data: bytes, start: int, end: int) -> bool:
+    """Whether the message at [start, end) is one an OSC parser reads: its address and
+    type tags UTF-8 strings, every argument of a known type and within the message."""
+    try:
+        _, at = string(data, start, end)
+        if at == end:
+            return True  # no type tags: an old-style message without arguments
+        if data[at] != 0x2C:  # ","
+            return False
+        tags, at = string(data, at, end)
+        for tag in tags[1:]:
+            size = _SIZES.get(tag, -2)
+            if size is None:
+                _, at = string(data, at, end)
+            elif size == -1:
+                if at + 4 > end:
+                    return False
+                (n,) = _I32.unpack_from(data, at)
+                at += 4 + ((n + 3) & ~3) if n >= 0 else end + 1
+            elif size == -2:
+                return False
+            else:
+                at += size
+            if at > end:
+                return False
+        return True
+    except Malformed:
+        return False
+
+
 def message(address: str, *args: str | float | int) -> bytes:
     """One OSC message; str -> s, float -> f, int -> i."""
     tags, body = ",", []

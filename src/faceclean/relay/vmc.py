@@ -4,7 +4,9 @@ A frame is ``/VMC/Ext/Blend/Val (s name, f value)`` messages, then
 ``/VMC/Ext/Blend/Apply``, in one bundle or spread over loose messages and datagrams.
 ``/VMC/Ext/T (f seconds)`` gives the sender's time. Every other address (bones, root,
 ``/VMC/Ext/OK`` ...) passes through untouched: in the output bundle of the frame it came
-with, or, in a datagram without blendshape messages, as that datagram unchanged.
+with, or, in a datagram without blendshape messages, as that datagram unchanged. A message
+in a frame's bundle that is not well-formed OSC (``osc.well_formed``) is left out, since a
+receiver's parser would refuse the whole bundle, and the frame with it.
 Names are the ARKit "perfect sync" ones in any spelling ``channels.canonical`` accepts.
 
 Head pose: ``/VMC/Ext/Bone/Pos (s bone, f px, py, pz, f qx, qy, qz, qw)`` for the bones
@@ -122,6 +124,8 @@ class Decoder:
                         t = bounds.time(args[0])  # absurd times: the datagram is malformed
                         if plan is not None:
                             plan.time(data, start, end)
+                elif not osc.well_formed(data, start, end):
+                    continue  # left out: a receiver's parser would refuse the whole bundle
                 other.append(data[start:end])
                 if plan is not None:
                     plan.span(start, end)
