@@ -285,13 +285,15 @@ def matches(pattern: str, name: str) -> bool:
     return channel_key(p).lower() == c.lower()
 
 
+def _json_number(v: object) -> bool:
+    """A JSON number (true and false are not numbers, though Python says they are)."""
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
 def _json_typed(key: str, value: object, where: str) -> None:
     """A level file's value is of its JSON type (``--set`` takes text; a file does not:
     ``"gain": "2"`` is a mistake to name, not a number to guess)."""
-
-    def number(v: object) -> bool:
-        return isinstance(v, int | float) and not isinstance(v, bool)
-
+    number = _json_number
     if key == "off":
         ok, want = value is None or isinstance(value, bool), "true or false"
     elif key == "clamp":
@@ -349,7 +351,7 @@ def _facts(facts: Any, label: str) -> dict[str, Any]:
         raise FacecleanError(f"{label}: 'calibration' must be an object of facts")
 
     def number(v: Any) -> bool:
-        return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        return _json_number(v) and math.isfinite(v)
 
     def names(v: Any) -> bool:
         return isinstance(v, list) and all(isinstance(n, str) for n in v)
