@@ -79,14 +79,15 @@ class Decoder:
     def feed(self, data: bytes) -> Frame | None:
         """A frame when this datagram holds an Apply; a passthrough-only frame when it
         holds no blendshape message at all; else None. Raises Malformed (state kept)."""
-        if self._layout is not None and not self._holds():
+        clear = not self._holds()  # nothing held from earlier datagrams
+        if clear and self._layout is not None:
             frame = self._layout.read(data)
             if frame is not None:
                 return frame
         # the layout this datagram would leave: gathered from the second whole frame of a
         # size on (a first datagram, or a sender whose sizes vary, pays nothing for it)
-        plan = _Plan(len(data)) if len(data) == self._size and not self._holds() else None
-        self._size = len(data) if not self._holds() else -1
+        plan = _Plan(len(data)) if clear and len(data) == self._size else None
+        self._size = len(data) if clear else -1
         vals: list[tuple[str, float]] = []
         other: list[bytes] = []
         bones: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
