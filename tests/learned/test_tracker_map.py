@@ -13,7 +13,8 @@ from faceclean.learned.tracker_map import MapWeights, TrackerMap
 NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
 
 
-def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None) -> MapWeights:
+def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None,
+            detail=None) -> MapWeights:  # fmt: skip
     rng = np.random.default_rng(seed)
     k = len(NAMES)
     arrays = {
@@ -33,6 +34,8 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None
     if lift is not None:  # (gain, knee) on both blinks
         arrays["lift_gain"] = np.array([lift[0], lift[0], 0.0])
         arrays["lift_knee"] = np.array([lift[1], lift[1], 0.0])
+    if detail is not None:  # on every output
+        arrays["detail"] = np.full(k, float(detail))
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
               "hidden": hidden, "prefilter": prefilter, "rest": rest,
               "deadband": deadband}  # fmt: skip
@@ -140,9 +143,10 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("band, lift", [(0.0, None), (0.05, None), (0.05, (2.5, 0.2))])
+@pytest.mark.parametrize("band, lift, detail", [(0.0, None, None), (0.05, None, None),
+                                                (0.05, (2.5, 0.2), 0.6)])  # fmt: skip
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
-def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift):
+def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail):
     """``_usual`` (every stream present and advancing) against the general path, forced, on
     streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
     three streams together and one alone."""
@@ -154,7 +158,7 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift)
     t[100:, 0] += 1.0  # ... and the one stream stepped alone
     x = rng.uniform(0, 1, (n, 3, len(names)))
     x[40, 0] = np.nan  # a lost frame
-    w = weights(hidden=0, deadband=band, lift=lift)
+    w = weights(hidden=0, deadband=band, lift=lift, detail=detail)
     for streams in (slice(None), 0):
         fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
         general._usual = lambda x, tt: None
@@ -228,3 +232,36 @@ def test_the_lift_closes_a_blink_and_leaves_a_face_at_rest():
     other = {**lifted.config, "inputs": ["jawOpen", "mouthClose", "eyeBlinkRight"]}
     with pytest.raises(FacecleanError, match="'eyeBlinkLeft' is lifted but is not an input"):
         MapWeights.build(other, lifted.arrays)
+
+
+def test_the_detail_takes_the_filters_lag_off_and_leaves_a_still_face_still():
+    """m = A u + ... + d (x - u)_own: with A = I and d = 1 the output is the raw input
+    (the filter's lag all taken off); with d = 0.5 a ramp lags half as far; constant in,
+    constant out; a lost cell adds no detail."""
+    t = np.arange(120) / 30.0
+    ramp = np.tile(np.linspace(0.1, 0.7, 120)[:, None], (1, 3))
+    base = weights(hidden=0, rest=False)
+    base.arrays["a"], base.arrays["c"] = np.eye(3), np.zeros(3)
+    lag = {}
+    for d in (0.0, 0.5, 1.0):
+        w = MapWeights.build(base.config, dict(base.arrays, detail=np.full(3, d)))
+        y = TrackerMap(weights=w).clean(Animation(t, ramp, NAMES)).values
+        lag[d] = np.abs(ramp[60:] - y[60:]).mean()
+        if d == 1.0:
+            np.testing.assert_allclose(y, ramp, atol=1e-12)
+    assert lag[0.0] > 0.01 and abs(lag[0.5] - lag[0.0] / 2) < 0.1 * lag[0.0]
+    w = MapWeights.build(base.config, dict(base.arrays, detail=np.full(3, 0.8)))
+    still = TrackerMap(weights=w).clean(Animation(t, np.tile([0.2, 0.3, 0.1], (120, 1)), NAMES))
+    assert np.ptp(still.values[3:], axis=0).max() < 1e-12
+    tm = TrackerMap(weights=w)
+    for i in range(30):
+        tm.step(ramp[i], t[i])
+    frame = ramp[30].copy()
+    frame[0] = np.inf  # a lost cell: its input holds, and no detail is added to it
+    np.testing.assert_allclose(tm.step(frame, t[30])[0], np.clip(tm._u[0, 0], 0, 1))
+    for bad in (np.full(3, 5.0), np.array([np.nan, 0, 0])):
+        with pytest.raises(FacecleanError, match="detail"):
+            MapWeights.build(base.config, dict(base.arrays, detail=bad))
+    other = {**base.config, "inputs": ["jawOpen", "mouthClose", "eyeBlinkRight"]}
+    with pytest.raises(FacecleanError, match="'eyeBlinkLeft' has a detail but is not an input"):
+        MapWeights.build(other, dict(base.arrays, detail=np.full(3, 0.5)))

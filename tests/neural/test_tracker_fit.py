@@ -117,11 +117,11 @@ def test_the_choice_is_made_leaving_each_source_out():
             pool.append(paired.Pair(p.name + f"s{g}", p.tracked, p.truth, f"src{g}", "studio"))
     seen = []
     pres = (None, (2.0, 0.5, 1.0))
-    w = fit.fit(
-        pool[:4], pool[4:], prefilters=pres, lams=(1e-2, 1.0), report=seen.append, knees=(None,)
-    )  # the lift: its own test
+    w = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=(1e-2, 1.0), report=seen.append,
+                knees=(None,), details=(0.0, 0.5))  # the lift: its own test  # fmt: skip
     cands = [e for e in seen if e.get("event") == "candidate"]
-    assert len(cands) == 4 and all(e["cv"] == 3 for e in cands)  # every candidate, 3 sources
+    assert len(cands) == 6 and all(e["cv"] == 3 for e in cands)  # every candidate, 3 sources
+    assert all(e["detail"] == 0 for e in cands if e["pre"] is None)  # no filter, no detail
     assert w.config["selected"] == "leave one source out: src0, src1, src2"
     assert w.config["prefilter"] and w.arrays["min_cutoff"][0] == 2.0  # the jitter's price
     score = lambda e: e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1))  # noqa: E731
@@ -132,12 +132,36 @@ def test_the_choice_is_made_leaving_each_source_out():
     chosen = min(calm, key=lambda e: e["lag_ms"]) if calm else min(near, key=lambda e: e["jitter"])
     assert all(np.isfinite(e["lag_ms"]) and e["worst_jitter"] >= e["jitter"] for e in cands)
     assert w.config["lam"] == chosen["lam"] and w.config["val_mse"] == chosen["val_mse"]
+    assert w.config["detail_scale"] == chosen["detail"]
     assert w.config["deadband"] == fit.DEADBAND
     # a source's score comes from the others' fit: it differs from the score with it in
     inside = fit._score(w, fit.features(w, pool[:2]))[0]
     alone = fit.fit(pool[2:], [], prefilters=[(2.0, 0.5, 1.0)], lams=(w.config["lam"],), cv=False)
     held_out = fit._score(alone, fit.features(alone, pool[:2]))[0]
     assert inside < held_out
+
+
+def test_the_detail_gives_back_the_timing_the_pre_filter_took():
+    """A tracker that reads 0.7 y + 0.05 without noise, behind a slow pre-filter: the
+    truth is (u + e - 0.05) / 0.7, so the detail's unshrunk gain is the map's own 1 / 0.7,
+    the full detail is chosen, and the output has neither the filter's lag nor its error.
+    Training's prediction, detail included, is the cleaner's output."""
+    scale = lambda y: 0.7 * y + 0.05  # noqa: E731
+    pool = [paired.Pair(p.name + f"s{g}", p.tracked, p.truth, f"src{g}", "studio")
+            for g in range(3) for p in pairs(2, 10 * g, scale)]  # fmt: skip
+    seen = []
+    w = fit.fit(pool[:4], pool[4:], prefilters=[(1.0, 0.0, 1.0)], lams=(1e-3,),
+                knees=(None,), details=(0.0, 1.0), report=seen.append)  # fmt: skip
+    cands = {e["detail"]: e for e in seen if e.get("event") == "candidate"}
+    assert cands[1.0]["val_mse"] < 0.1 * cands[0.0]["val_mse"]
+    assert cands[1.0]["lag_ms"] < 0.3 * cands[0.0]["lag_ms"]
+    assert w.config["detail_scale"] == 1.0
+    np.testing.assert_allclose(w.arrays["detail"], 1 / 0.7, rtol=0.02)
+    test = pairs(1, 70, scale)[0]
+    out = TrackerMap(weights=w, names=NAMES).clean(test.tracked).values
+    assert np.abs(out - test.truth.values).max() < 0.02
+    f = fit.features(w, [test])[0]
+    np.testing.assert_allclose(fit._predict(w, f.u, f.r, f.e), out, atol=1e-12)
 
 
 def test_training_scores_the_deadband_the_runtime_runs():
@@ -148,9 +172,9 @@ def test_training_scores_the_deadband_the_runtime_runs():
     w = fit.fit(train, [], prefilters=[(4.0, 1.0, 1.0)], lams=(1e-2,), cv=False, deadband=0.02)
     assert w.config["deadband"] == 0.02
     test = pairs(1, 30, noisy)[0]
-    t, u, r, _ = fit.features(w, [test])[0]
+    t, u, r, _, e = fit.features(w, [test])[0]
     want = TrackerMap(weights=w, names=NAMES).clean(test.tracked).values
-    np.testing.assert_allclose(fit._predict(w, u, r), want, atol=1e-12)
+    np.testing.assert_allclose(fit._predict(w, u, r, e), want, atol=1e-12)
     plain = fit.blank(NAMES, 0, (4.0, 1.0, 1.0), True)
     plain.arrays.update({k: w.arrays[k] for k in ("a", "b", "c")})
     still = np.abs(np.diff(fit._predict(w, u, r), axis=0))
@@ -196,8 +220,8 @@ def test_the_blink_lift_is_chosen_leaving_each_source_out():
     fit._set_lift(none, gains, 0.0)
     test = pairs(1, 90, lambda y: 0.25 * y)[0]  # a face whose blinks read at a quarter
     out = TrackerMap(weights=none, names=NAMES).clean(test.tracked).values
-    t, u, r, _ = fit.features(none, [test])[0]
-    np.testing.assert_allclose(fit._predict(none, u, r), out, atol=1e-12)
+    t, u, r, _, e = fit.features(none, [test])[0]
+    np.testing.assert_allclose(fit._predict(none, u, r, e), out, atol=1e-12)
     before = plain.clean(test.tracked).values
     assert (out[:, :2] >= before[:, :2] - 1e-12).all()
     assert out[:, :2].max() > before[:, :2].max() + 0.1  # a lifted blink

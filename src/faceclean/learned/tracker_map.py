@@ -9,15 +9,19 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
                                         the map sees the tracker's signal, not its noise
     r  = min(r, u)                      the stream's resting level so far (since reset)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
-    m  = clip(A u + B (u - r) + c + W2 tanh(W1 z + b1) + b2, 0, 1)                (M,)
+    m  = clip(A u + B (u - r) + c + d (x - u)_own + W2 tanh(W1 z + b1) + b2, 0, 1)  (M,)
     m_j = max(m_j, clip(g_j (u_j - r_j - k_j), 0, 1))   a lift, where g_j > 0 (blinks)
     y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output
 
 ``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
 the rest feature takes each face's own resting reading off, which is where identities
 differ most (with B = 0, no hidden layer and no pre-filter it is exactly the per-channel
-ridge baseline). The deadband (``deadband`` in the config, 0 if absent) lets the output
-stand while the map's value stays within eps of it: a still face's tracker noise, which
+ridge baseline). ``d (x - u)_own`` is the detail: output j adds d_j times what the
+pre-filter took off the input of its own name (x_j - u_j, the raw frame minus the
+filtered one). The levels come through the filter from every input; the timing comes
+from the channel's own raw input, so the output need not lag by the filter's time
+constant, and the noise of the 50 other inputs stays filtered (docs/MODEL.md). The
+deadband (``deadband`` in the config, 0 if absent) lets the output stand while the map's value stays within eps of it: a still face's tracker noise, which
 the map gathers from all its inputs, moves nothing, while a movement passes with a lag of
 eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps. The lift restores what
 a least-squares map cannot: a peak. The tracker under-reads a closing eyelid, and a map
@@ -42,7 +46,8 @@ or M of them, weight units, 0 if absent), ...facts}; arrays
 ``min_cutoff``, ``beta``, ``d_cutoff`` (K,) Hz; ``mu``, ``sd`` (2K,); ``w1`` (H, 2K),
 ``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,); optional
 ``lift_gain`` >= 0 and ``lift_knee`` in [0, 1] (M,) (absent: no lift; a gain > 0 needs an
-input of the output's name).
+input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_DETAIL]
+(absent: 0; nonzero needs an input of the output's name, as the lift does).
 """
 
 from __future__ import annotations
@@ -66,6 +71,7 @@ from faceclean.learned.formats import TRACKER_MAP as FORMAT
 MAX_WIDTH = 4096
 MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
 MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blinks
+MAX_DETAIL = 4.0  # the detail's gain: more would pass the raw input's noise amplified
 
 
 @dataclass(frozen=True)
@@ -129,7 +135,9 @@ class MapWeights:
             raise FacecleanError(f"{label}: scales and cut-offs must be > 0")
         if (out["beta"] < 0).any():
             raise FacecleanError(f"{label}: beta must be >= 0")
-        for key, (lo, hi) in (("lift_gain", (0.0, MAX_LIFT)), ("lift_knee", (0.0, 1.0))):
+        limits = (("lift_gain", (0.0, MAX_LIFT)), ("lift_knee", (0.0, 1.0)),
+                  ("detail", (-MAX_DETAIL, MAX_DETAIL)))  # fmt: skip
+        for key, (lo, hi) in limits:
             a = arrays.get(key, np.zeros(m))
             if tuple(np.shape(a)) != (m,) or not np.issubdtype(np.asarray(a).dtype, np.number):
                 raise FacecleanError(f"{label}: array {key!r} not of shape {(m,)}")
@@ -137,10 +145,11 @@ class MapWeights:
             if not (np.isfinite(a).all() and (a >= lo).all() and (a <= hi).all()):
                 raise FacecleanError(f"{label}: {key} must be within [{lo:g}, {hi:g}]")
             out[key] = a
-        lifted = [o for o, g in zip(config["outputs"], out["lift_gain"], strict=True) if g > 0]
-        if set(lifted) - set(config["inputs"]):
-            name = sorted(set(lifted) - set(config["inputs"]))[0]
-            raise FacecleanError(f"{label}: output {name!r} is lifted but is not an input")
+        for key, what in (("lift_gain", "is lifted"), ("detail", "has a detail")):
+            own = [o for o, g in zip(config["outputs"], out[key], strict=True) if g != 0]
+            if set(own) - set(config["inputs"]):
+                name = sorted(set(own) - set(config["inputs"]))[0]
+                raise FacecleanError(f"{label}: output {name!r} {what} but is not an input")
         try:
             band = np.broadcast_to(np.asarray(config.get("deadband", 0.0), np.float64), (m,))
         except (TypeError, ValueError):
@@ -200,7 +209,15 @@ class TrackerMap(Cleaner):
         g, m = a["lift_gain"][self._lo], len(w.outputs)
         lift = np.zeros((len(w.inputs), len(self._lo)))
         lift[self._li, np.arange(len(self._lo))] = g
-        self._ab = np.ascontiguousarray(np.concatenate([(a["a"] + b).T, lift], axis=1))  # (K, M+L)
+        # The detail d_j (x_j - u_j) as a matrix on x and on u: D (K, M), d_j at the input
+        # of output j's name (the general path reads it as ``_di``, ``_do``).
+        self._do = np.flatnonzero(a["detail"])  # (N,) outputs with a detail
+        self._di = np.array([w.inputs.index(w.outputs[j]) for j in self._do], dtype=np.intp)
+        detail = np.zeros((len(w.inputs), m))
+        detail[self._di, self._do] = a["detail"][self._do]
+        self._dx = np.concatenate([detail, np.zeros_like(lift)], axis=1) if len(self._do) else None
+        ab = (a["a"] + b).T - detail
+        self._ab = np.ascontiguousarray(np.concatenate([ab, lift], axis=1))  # (K, M+L)
         self._nb = np.ascontiguousarray(np.concatenate([-b.T, -lift], axis=1))  # (K, M+L)
         self._c = np.concatenate([a["c"], -g * a["lift_knee"][self._lo]])  # (M+L,)
         self._m_cols = m
@@ -255,7 +272,9 @@ class TrackerMap(Cleaner):
             u = np.where(start[:, None], xi, u)
             self._edx = np.where(start[:, None], 0.0, self._edx)
         self._u = u
-        y = self._map(u, moved)
+        if bad.any() and len(self._do):  # a held value has no detail
+            xi = np.where(self._in_matrix(bad.astype(np.float64)) > 0, u, xi)
+        y = self._map(u, moved, xi)
         if self._band is not None:  # the deadband; a (re)start takes the map's value
             d = np.clip(y - self._m, -self._band, self._band)
             y = y - np.where(start[:, None] | np.isnan(d), 0.0, d)
@@ -290,6 +309,8 @@ class TrackerMap(Cleaner):
         np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
         y = u @ self._ab  # (S, M+L)
         y += self._r @ self._nb
+        if self._dx is not None:  # the detail: + d (x - u), the -d u being in _ab
+            y += xi @ self._dx
         y += self._c
         np.clip(y, 0.0, 1.0, out=y)
         if len(self._lo):  # the lift: m_j = max(m_j, its lift column)
@@ -316,8 +337,9 @@ class TrackerMap(Cleaner):
         xi[:, self._in.have] = x[:, self._in.cols]  # absent inputs read 0
         return xi
 
-    def _map(self, u: np.ndarray, moved: np.ndarray) -> np.ndarray:
-        """(S, K) filtered inputs -> (S, M) outputs; rows not started yet stay NaN."""
+    def _map(self, u: np.ndarray, moved: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        """(S, K) filtered inputs u and raw ones xi -> (S, M) outputs; rows not started
+        yet stay NaN."""
         a = self.weights.arrays
         low = np.fmin(self._r, u)  # NaN-aware: the first frame sets it
         self._r = low if moved.all() else np.where(moved[:, None], low, self._r)
@@ -325,6 +347,8 @@ class TrackerMap(Cleaner):
         rest = (u - self._r) if self.rest else None
         if rest is not None:
             lin = lin + rest @ a["b"].T
+        if len(self._do):  # the detail, on each output's own input
+            lin[:, self._do] += a["detail"][self._do] * (xi[:, self._di] - u[:, self._di])
         if self._hidden:
             rest = np.zeros_like(u) if rest is None else rest
             z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]

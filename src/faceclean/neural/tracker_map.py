@@ -6,7 +6,9 @@ with the runtime's own One Euro (so training sees what the cleaner computes), an
 is fitted frame by frame. The linear part ``A u + B (u - r) + c`` by ridge (closed form);
 an optional hidden layer on top with Adam, early-stopped. The pre-filter and the ridge
 shrinkage are chosen on validation pairs (performances no training pair comes from) by
-MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's. The output deadband
+MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's, and with them how
+much of each output's detail (its own input's x - u) it keeps (``DETAILS``: the detail
+gains are fitted unshrunk, then scaled). The output deadband
 (``DEADBAND``) is a fixed setting, in place while every candidate is scored. Then the
 blink lift (``_choose_lift``): its knee chosen leaving each source out as well, with a
 price on blink closure outside ``CLOSURE_BAND``, its gains fitted on the performances.
@@ -15,7 +17,7 @@ price on blink closure outside ``CLOSURE_BAND``, its gains fitted on the perform
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -51,6 +53,11 @@ DEADBAND = 0.01
 # closed, above 1.1 it slams; a candidate outside the band pays its distance from it.
 KNEES: tuple[float | None, ...] = (None, 0.1, 0.2, 0.3, 0.4)
 CLOSURE_BAND = (0.9, 1.1)
+# How much of the least-squares detail gain each candidate keeps (0: none). The gain is
+# fitted unshrunk: the detail is small beside the levels, and a shrinkage scaled to the
+# inputs' mean square took it to 0 (docs/MODEL.md); the scale is how the choice trades
+# lag against jitter.
+DETAILS = (0.0, 0.25, 0.5, 0.75, 1.0)
 LIFT_FROM = 0.5  # the gain is fitted where the truth is over this (an eye closing)
 Report = Callable[[dict[str, Any]], None]
 
@@ -91,10 +98,21 @@ def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], re
     return MapWeights(config, arrays)
 
 
-def features(w: MapWeights, pairs: Sequence[Pair]) -> list[tuple[np.ndarray, ...]]:
-    """Per pair (t, u, r, y) over its valid frames: times (F,), the pre-filtered input u,
-    the resting level r and the truth y, (F, K) each. u comes from the runtime's own
-    One Euro, stepped as the cleaner steps it (its compiled run: the same bits)."""
+class Feature(NamedTuple):
+    """One pair's causal features over its valid frames: times t (F,) s, the pre-filtered
+    input u, the resting level r, the truth y and the detail e = x - u (raw input minus
+    pre-filtered), (F, K) each."""
+
+    t: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    y: np.ndarray
+    e: np.ndarray
+
+
+def features(w: MapWeights, pairs: Sequence[Pair]) -> list[Feature]:
+    """Per pair its Feature. u comes from the runtime's own One Euro, stepped as the
+    cleaner steps it (its compiled run: the same bits)."""
     from faceclean.filters import compiled
 
     compiled.enable()  # a fit cleans every pair once per candidate pre-filter
@@ -111,14 +129,17 @@ def features(w: MapWeights, pairs: Sequence[Pair]) -> list[tuple[np.ndarray, ...
         u = pre.clean(Animation(t, x, names)).values if w.config["prefilter"] and len(t) else x
         r = np.minimum.accumulate(u, axis=0)
         ok = ~np.isnan(y).any(axis=1)
-        out.append((t[ok], u[ok], r[ok], y[ok]))
+        out.append(Feature(t[ok], u[ok], r[ok], y[ok], x[ok] - u[ok]))
     return out
 
 
-def _stack(feats: list[tuple[np.ndarray, ...]], rest: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(inputs (F, K or 2K): u, and u - r when ``rest``; truth (F, K))."""
-    z = [np.concatenate([u, u - r], axis=1) if rest else u for _, u, r, _ in feats]
-    return np.concatenate(z), np.concatenate([y for *_, y in feats])
+def _stack(feats: Sequence[Feature], rest: bool, detail: bool = False) -> tuple[np.ndarray, ...]:
+    """(inputs (F, D): u, and u - r when ``rest``, and the detail e when ``detail``;
+    truth (F, K))."""
+    z = [np.concatenate([f.u, f.u - f.r] if rest else [f.u], axis=1) for f in feats]
+    if detail:
+        z = [np.concatenate([zi, f.e], axis=1) for zi, f in zip(z, feats, strict=True)]
+    return np.concatenate(z), np.concatenate([f.y for f in feats])
 
 
 def ridge(u: np.ndarray, y: np.ndarray, lam: float = 1e-2) -> tuple[np.ndarray, np.ndarray]:
@@ -133,6 +154,37 @@ def _moments(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x.T @ x, x.T @ y
 
 
+def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray,
+                  kappa: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """(A (M, D), c (M,), d (M,)) from the moments of [z, e, 1] (D + K + 1 columns): per
+    output j, ridge over z and its own input's detail e[own[j]] (own -1: none), z shrunk
+    as ``_solve`` shrinks it, the detail not (a tiny floor keeps a zero column solvable);
+    d then scaled by ``kappa``. kappa 0 is ``_solve`` over z alone."""
+    m, k = xty.shape[1], len(own)
+    dim = len(gram) - 1 - k
+    keep = np.r_[0:dim, dim + k]  # z and the offset
+    if kappa == 0.0:
+        coef, c = _solve(gram[np.ix_(keep, keep)], xty[keep], lam)
+        return coef, c, np.zeros(m)
+    shrink = lam * float(np.mean(np.diag(gram)[:dim]))
+    coef, c, d = np.zeros((m, dim)), np.zeros(m), np.zeros(m)
+    for j in range(m):
+        idx = np.r_[0:dim, dim + own[j], dim + k] if own[j] >= 0 else keep
+        reg = np.zeros(len(idx))
+        reg[:dim] = shrink
+        if own[j] >= 0:
+            reg[dim] = 1e-9 * shrink
+        sol = np.linalg.solve(gram[np.ix_(idx, idx)] + np.diag(reg), xty[idx, j])
+        coef[j], c[j] = sol[:dim], sol[-1]
+        d[j] = kappa * sol[dim] if own[j] >= 0 else 0.0
+    return coef, c, d
+
+
+def _own(w: MapWeights) -> np.ndarray:
+    """(M,) each output's input of the same name, -1 for none."""
+    return np.array([w.inputs.index(o) if o in w.inputs else -1 for o in w.outputs])
+
+
 def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
     k = len(gram) - 1
     reg = lam * float(np.mean(np.diag(gram)[:k])) * np.eye(k + 1)
@@ -141,10 +193,12 @@ def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, n
     return sol[:-1].T, sol[-1]
 
 
-def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray) -> None:
+def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray, d: np.ndarray | None = None
+                ) -> None:  # fmt: skip
     k = len(w.inputs)
     w.arrays["a"], w.arrays["c"] = coef[:, :k], c
     w.arrays["b"] = coef[:, k:] if coef.shape[1] > k else np.zeros((len(c), k))
+    w.arrays["detail"] = np.zeros(len(c)) if d is None else d
 
 
 def _score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tuple[float, ...]:
@@ -153,8 +207,8 @@ def _score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tu
     from faceclean.evaluation.metrics import blink_peaks, jitter_ratio, lag_ms  # numpy only
 
     sq, n, jit, lags, peaks = 0.0, 0, [], [], []
-    for t, u, r, y in feats:
-        pred = _predict(w, u, r)
+    for t, u, r, y, e in feats:
+        pred = _predict(w, u, r, e)
         sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
         if len(t) > 3:
             jit.append(jitter_ratio(t, pred, y))
@@ -184,8 +238,9 @@ def _raw_mse(pool, names, rest: bool, scored) -> dict[str, float]:
 
 def _folds(pool, feats, rest: bool, scored) -> dict[str, tuple]:
     """source -> (x'x, x'y of every other source's pairs and clips, its performances'
-    features): from the summed moments, so a fold costs one ridge solve."""
-    moments = [_moments(*_stack([f], rest)) for f in feats]  # per pair
+    features): from the summed moments (of [z, e, 1]: ``_solve_detail``), so a fold costs
+    one ridge solve."""
+    moments = [_moments(*_stack([f], rest, detail=True)) for f in feats]  # per pair
     total = [sum(m[i] for m in moments) for i in (0, 1)]
     folds = {}
     for g in sorted({s for s in scored if s is not None}):
@@ -231,6 +286,7 @@ def fit(
     cv: bool = True,
     deadband: float = DEADBAND,
     knees: Sequence[float | None] = KNEES,
+    details: Sequence[float] = DETAILS,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
@@ -240,16 +296,19 @@ def fit(
     ``cv`` (a linear map, three sources or more among ``train`` and ``val``): the choice
     is made leaving one source out in turn instead (``_cross_validate``), not on ``val``
     alone: one source's faces are too few to tell pre-filters apart; and so is the blink
-    lift's knee among ``knees`` (``_choose_lift``; ``(None,)``: no lift)."""
+    lift's knee among ``knees`` (``_choose_lift``; ``(None,)``: no lift) and the detail's
+    scale among ``details``. Without ``cv`` the map has no detail."""
     report = report or (lambda _e: None)
     torch.set_num_threads(1)  # a tiny net: more threads only contend
     names = channels(train)
     pool = [*train, *val]
     if cv and not hidden and len({p.group for p in performances(pool)}) >= 3:
-        w = _cross_validate(pool, names, prefilters, lams, rest, report, deadband)
+        w = _cross_validate(pool, names, prefilters, lams, rest, report, deadband, details)
         feats = features(w, pool)
         if refit:
-            _set_linear(w, *ridge(*_stack(feats, rest), w.config["lam"]))
+            gram, xty = _moments(*_stack(feats, rest, detail=True))
+            kappa = w.config["detail_scale"]
+            _set_linear(w, *_solve_detail(gram, xty, w.config["lam"], _own(w), kappa))
             _choose_lift(w, pool, rest, knees, report)
         w.config.update(frames=int(sum(len(f[0]) for f in feats)))
         return w
@@ -279,9 +338,11 @@ def fit(
 
 
 def _cross_validate(
-    pool, names, prefilters, lams, rest: bool, report: Report, deadband: float = 0.0
+    pool, names, prefilters, lams, rest: bool, report: Report, deadband: float = 0.0,
+    details: Sequence[float] = DETAILS,
 ) -> MapWeights:
-    """The pre-filter and shrinkage that score best leaving one source out: for each
+    """The pre-filter, shrinkage and detail scale (``details``; a map without a pre-filter
+    has no detail) that score best leaving one source out: for each
     source, the ridge fitted on every other source's pairs and clips, scored on its own
     performances by MSE as x raw (each source alike, whatever its error's size), the mean
     over sources x (1 + jitter over JITTER_BUDGET x the truth's, when over). Of the
@@ -297,11 +358,13 @@ def _cross_validate(
     #                                                                   worst jitter, weights)
     for pre in prefilters:
         w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None, deadband=deadband)
+        own = _own(w)
         folds = _folds(pool, features(w, pool), rest, scored)
-        for lam in lams:
+        for lam, kappa in [(lam, kappa) for lam in lams for kappa in details
+                           if pre is not None or kappa == 0.0]:  # fmt: skip
             ratios, jits, lags = [], [], []
             for g, (gram, xty, held) in folds.items():
-                _set_linear(w, *_solve(gram, xty, lam))
+                _set_linear(w, *_solve_detail(gram, xty, lam, own, kappa))
                 mse, jit, lag = _score(w, held, lag=True)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
@@ -311,10 +374,11 @@ def _cross_validate(
             lag = float(np.nanmean(lags)) if np.isfinite(lags).any() else 0.0
             worst = float(known.max()) if known.size else 0.0
             score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
-            report({"event": "candidate", "pre": pre, "lam": lam, "val_mse": ratio,
-                    "jitter": jit, "worst_jitter": worst, "lag_ms": lag,
+            report({"event": "candidate", "pre": pre, "lam": lam, "detail": kappa,
+                    "val_mse": ratio, "jitter": jit, "worst_jitter": worst, "lag_ms": lag,
                     "cv": len(groups)})  # fmt: skip
-            config = dict(w.config, lam=lam, val_mse=ratio, val_jitter=jit, val_lag_ms=lag,
+            config = dict(w.config, lam=lam, detail_scale=kappa, val_mse=ratio,
+                          val_jitter=jit, val_lag_ms=lag,
                           selected="leave one source out: " + ", ".join(groups))  # fmt: skip
             arrays = {k: v.copy() for k, v in w.arrays.items()}
             found.append((score, jit, lag, worst, MapWeights(config, arrays)))
@@ -324,12 +388,17 @@ def _cross_validate(
     return (min(calm, key=lambda f: f[2]) if calm else min(tied, key=lambda f: f[1]))[4]
 
 
-def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
+def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None
+             ) -> np.ndarray:  # fmt: skip
     """The runtime's output for one pair's features (F, K), deadband included."""
     a = w.arrays
     lin = u @ a["a"].T + a["c"]
     rest = (u - r) if w.config["rest"] else np.zeros_like(u)
     lin = lin + rest @ a["b"].T
+    d = a.get("detail")
+    if e is not None and d is not None and d.any():  # the detail, on each output's own input
+        on = np.flatnonzero(d)
+        lin[:, on] += d[on] * e[:, _own(w)[on]]
     if w.config["hidden"]:
         z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
@@ -359,8 +428,8 @@ def _lift_gains(w: MapWeights, feats, knee: float) -> np.ndarray:
         if name not in BLINK_CHANNELS or name not in w.inputs:
             continue
         j = w.inputs.index(name)
-        over = np.concatenate([u[:, j] - r[:, j] - knee for _, u, r, _ in feats])
-        y = np.concatenate([f[3][:, i] for f in feats])
+        over = np.concatenate([f.u[:, j] - f.r[:, j] - knee for f in feats])
+        y = np.concatenate([f.y[:, i] for f in feats])
         sel = (y > LIFT_FROM) & (over > 0.02)
         if sel.sum() >= 10:
             gains[i] = float(np.clip(np.median(y[sel] / over[sel]), 0.0, MAX_LIFT))
@@ -388,11 +457,13 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None
         return  # nothing to lift, or too few sources to choose
     raw_mse = _raw_mse(pool, w.inputs, rest, scored)
     folds = _folds(pool, feats, rest, scored)
-    coefs = {g: _solve(gram, xty, w.config["lam"]) for g, (gram, xty, _) in folds.items()}
+    own, kappa = _own(w), w.config.get("detail_scale", 0.0)
+    coefs = {g: _solve_detail(gram, xty, w.config["lam"], own, kappa)
+             for g, (gram, xty, _) in folds.items()}  # fmt: skip
     # each fold's training performances, which its gains are fitted on
     trains = {g: [f for f, s in zip(feats, scored, strict=True) if s not in (None, g)]
               for g in groups}  # fmt: skip
-    linear = {k: w.arrays[k].copy() for k in ("a", "b", "c")}
+    linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
     lo, hi = CLOSURE_BAND
     found = []  # (score, knee, closure)
     for knee in knees:
@@ -425,10 +496,10 @@ def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Re
     k, h = len(w.inputs), int(w.config["hidden"])
 
     def tensors(fs):
-        u = np.concatenate([f[1] for f in fs])
-        r = np.concatenate([f[2] for f in fs])
+        u = np.concatenate([f.u for f in fs])
+        r = np.concatenate([f.r for f in fs])
         z = np.concatenate([u, u - r if w.config["rest"] else np.zeros_like(u)], axis=1)
-        return z, torch.tensor(np.concatenate([f[3] for f in fs]), dtype=torch.float32)
+        return z, torch.tensor(np.concatenate([f.y for f in fs]), dtype=torch.float32)
 
     z, yt = tensors(feats)
     vz, vyt = tensors(vfeats)
