@@ -17,21 +17,21 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
 the rest feature takes each face's own resting reading off, which is where identities
 differ most (with B = 0, no hidden layer and no pre-filter it is exactly the per-channel
 ridge baseline). ``d (x - u)_own`` is the detail: output j adds d_j times what the
-pre-filter took off the input of its own name (x_j - u_j, the raw frame minus the
-filtered one). The levels come through the filter from every input; the timing comes
-from the channel's own raw input, so the output need not lag by the filter's time
-constant, and the noise of the 50 other inputs stays filtered (docs/MODEL.md). The
-deadband (``deadband`` in the config, 0 if absent) lets the output stand while the map's value stays within eps of it: a still face's tracker noise, which
-the map gathers from all its inputs, moves nothing, while a movement passes with a lag of
-eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps. The lift restores what
-a least-squares map cannot: a peak. The tracker under-reads a closing eyelid, and a map
-fitted to every frame pulls each peak toward the mean; where the same channel's own rise
-above rest passes a knee k, its output is at least that rise times a gain g (output j
-reads the input of its own name). At rest u - r < k, so the lift is 0. The optional hidden
-layer (``hidden`` > 0) adds what is not linear; on the pairs we have it overfits
-(docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
-function of (u, r) only; on a still face u converges and r is constant, so m converges
-and y with it; a missing frame holds u and so y.
+pre-filter took off the input of its own name (x_j - u_j, the raw frame minus the filtered
+one). The levels come through the filter from every input; the timing comes from the
+channel's own raw input, so the output need not lag by the filter's time constant, and the
+noise of the 50 other inputs stays filtered (docs/MODEL.md). The deadband (``deadband`` in
+the config, 0 if absent) lets the output stand while the map's value stays within eps of
+it: a still face's tracker noise, which the map gathers from all its inputs, moves
+nothing, while a movement passes with a lag of eps / speed (1 ms at a blink's 10 /s) and a
+bias of at most eps. The lift restores what a least-squares map cannot: a peak. The
+tracker under-reads a closing eyelid, and a map fitted to every frame pulls each peak
+toward the mean; where the same channel's own rise above rest passes a knee k, its output
+is at least that rise times a gain g (output j reads the input of its own name). At rest u
+- r < k, so the lift is 0. The optional hidden layer (``hidden`` > 0) adds what is not
+linear; on the pairs we have it overfits (docs/MODEL.md), so the shipped map is linear.
+Why this cannot invent motion: m is a function of (u, r) only; on a still face u converges
+and r is constant, so m converges and y with it; a missing frame holds u and so y.
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
