@@ -340,7 +340,7 @@ def fit(
 def _cross_validate(
     pool, names, prefilters, lams, rest: bool, report: Report, deadband: float = 0.0,
     details: Sequence[float] = DETAILS,
-) -> MapWeights:
+) -> MapWeights:  # fmt: skip
     """The pre-filter, shrinkage and detail scale (``details``; a map without a pre-filter
     has no detail) that score best leaving one source out: for each
     source, the ridge fitted on every other source's pairs and clips, scored on its own
