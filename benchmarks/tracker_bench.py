@@ -67,11 +67,14 @@ def cleaner(steps: int = 300) -> dict:
             t0 = time.perf_counter()
             last = tm.step(x[i], np.full(s, i / 30))
             ours.append(time.perf_counter() - t0)
-        # eager torch, the same step: One Euro, m = A u + B (u - r) + c, the lift, the deadband
+        # eager torch, the same step: One Euro, m = A u + B (u - r) + c + d (x - u)_own, the
+        # lift, the deadband
         band = torch.tensor(float(tm.weights.config.get("deadband", 0.0)))
         lo = torch.tensor(np.flatnonzero(tm.weights.arrays["lift_gain"] > 0))
         li = torch.tensor([tm.weights.inputs.index(tm.weights.outputs[j]) for j in lo.tolist()])
         gain, knee = a["lift_gain"][lo], a["lift_knee"][lo]
+        do = torch.tensor(np.flatnonzero(tm.weights.arrays.get("detail", np.zeros(1))))
+        di = torch.tensor([tm.weights.inputs.index(tm.weights.outputs[j]) for j in do.tolist()])
         y = torch.tensor(x[0])
         prev = torch.clamp(y @ a["a"].T + a["c"], 0, 1)  # the first frame's output (r = u)
         edx = torch.zeros_like(y)
@@ -87,7 +90,10 @@ def cleaner(steps: int = 300) -> dict:
                 fc = a["min_cutoff"] + a["beta"] * edx.abs()
                 y = y + (1 / (1 + 1 / (2 * np.pi * fc * dt))) * (xi - y)
                 r = torch.minimum(r, y)
-                out = torch.clamp(y @ a["a"].T + (y - r) @ a["b"].T + a["c"], 0, 1)
+                out = y @ a["a"].T + (y - r) @ a["b"].T + a["c"]
+                if len(do):
+                    out[:, do] += a["detail"][do] * (xi[:, di] - y[:, di])
+                out = torch.clamp(out, 0, 1)
                 if len(lo):  # m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1))
                     lift = torch.clamp(gain * (y[:, li] - r[:, li] - knee), 0, 1)
                     out[:, lo] = torch.maximum(out[:, lo], lift)

@@ -84,3 +84,18 @@ def test_off_until_enabled_and_stepping_is_untouched(on):
     np.testing.assert_array_equal(whole[keep], stepped[keep])
     compiled.disable()
     assert not compiled.enabled() and OneEuro(names=take.names)._compiled() is None
+
+
+def test_the_deadband_run_is_the_loops_numbers(on):
+    """compiled.deadband is y[n] = m[n] - clip(m[n] - y[n-1], -band, band), bit for bit;
+    None while off."""
+    rng = np.random.default_rng(7)
+    m = np.cumsum(rng.normal(0, 0.01, (500, 6)), axis=0)
+    band = np.array([0.0, 0.005, 0.01, 0.02, 0.05, 0.1])
+    want = m.copy()
+    for i in range(1, len(m)):
+        want[i] -= np.clip(m[i] - want[i - 1], -band, band)
+    np.testing.assert_array_equal(compiled.deadband(m, band), want)
+    assert not np.array_equal(want[:, 3], m[:, 3])  # the band holds
+    compiled.disable()
+    assert compiled.deadband(m, band) is None

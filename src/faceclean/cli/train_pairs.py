@@ -52,9 +52,16 @@ def run(args: argparse.Namespace) -> int:
 
     def report(e: dict) -> None:
         if e.get("event") == "candidate" and e.get("cv"):
-            print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}: leaving each of "
-                  f"{e['cv']} sources out, MSE {e['val_mse']:.3f}x raw, jitter "
-                  f"{e['jitter']:.2f}x, lag {e['lag_ms']:.0f} ms", file=sys.stderr)  # fmt: skip
+            print(
+                f"pre-filter {e['pre']}, shrinkage {e['lam']:g}, detail "
+                f"{e['detail']:g}: leaving each of {e['cv']} sources out, MSE "
+                f"{e['val_mse']:.3f}x raw, jitter {e['jitter']:.2f}x",
+                file=sys.stderr,
+            )
+        elif e.get("event") == "candidate_lag":
+            print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}, detail {e['detail']:g}: "
+                  f"within the best score and the jitter budget, lag {e['lag_ms']:.0f} ms",
+                  file=sys.stderr)  # fmt: skip
         elif e.get("event") == "candidate":
             print(f"pre-filter {e['pre']}, shrinkage {e['lam']:g}: validation MSE "
                   f"{e['val_mse']:.5f}, jitter {e['jitter']:.2f}x", file=sys.stderr)  # fmt: skip

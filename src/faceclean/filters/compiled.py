@@ -38,12 +38,13 @@ def enable() -> bool:
     # error_model="numpy": a division by zero gives inf as numpy's does, never an exception
     jit = njit(boundscheck=False, nogil=True, cache=True, error_model="numpy")
     found = {"one_euro": jit(_one_euro), "inert": jit(_inert), "ema": jit(_ema),
-             "kalman": jit(_kalman)}  # fmt: skip
+             "kalman": jit(_kalman), "deadband": jit(_deadband)}  # fmt: skip
     one, x = np.ones(1), np.zeros((1, 1))  # compile now, not at the first change
     try:
         found["one_euro"](one.copy(), one.copy(), x, one, one, one, one, x.copy())
         found["inert"](one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy())
         found["ema"](one.copy(), x, x + 0.5, x.copy())
+        found["deadband"](x, one, x.copy())
         found["kalman"](*(one.copy() for _ in range(5)), x, one, x, x, x, one, x.copy())
     except Exception:  # noqa: BLE001 - e.g. no writable cache folder: numpy steps as before
         return False
@@ -129,6 +130,27 @@ def kalman(m: int, q, r) -> Run | None:
         return _run(kernel, *noise, r2)(state, x, dt)  # state: p, v, a, b, c
 
     return run
+
+
+def deadband(m: np.ndarray, band: np.ndarray) -> np.ndarray | None:
+    """y[n] = m[n] - clip(m[n] - y[n-1], -band, band), y[0] = m[0], over (N, M) outputs m
+    (a tracker map's deadband, learned/tracker_map.py, as its fit scores it); None when off."""
+    kernel = _kernels.get("deadband")
+    if kernel is None:
+        return None
+    y = np.array(m, dtype=np.float64, order="C")
+    kernel(np.ascontiguousarray(m, dtype=np.float64), np.ascontiguousarray(band, np.float64), y)
+    return y
+
+
+def _deadband(m, band, y):
+    """In place: y (N, M) starts as m; each frame after the first takes what is left of
+    m after its change from the last output, clipped to +-band (M,), is taken off."""
+    for n in range(1, m.shape[0]):
+        for j in range(m.shape[1]):
+            d = m[n, j] - y[n - 1, j]
+            d = min(max(d, -band[j]), band[j])  # np.clip's order: maximum, then minimum
+            y[n, j] = m[n, j] - d
 
 
 def _ema(y, x, alpha, out):
