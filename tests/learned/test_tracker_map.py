@@ -259,6 +259,17 @@ def test_the_detail_takes_the_filters_lag_off_and_leaves_a_still_face_still():
     frame = ramp[30].copy()
     frame[0] = np.inf  # a lost cell: its input holds, and no detail is added to it
     np.testing.assert_allclose(tm.step(frame, t[30])[0], np.clip(tm._u[0, 0], 0, 1))
+    # the user's detail setting scales the model's gains, as its detail_scale does
+    half = MapWeights.build({**base.config, "detail_scale": 0.5}, w.arrays)
+    a = Animation(t, ramp, NAMES)
+    want = TrackerMap(weights=half).clean(a).values
+    np.testing.assert_array_equal(TrackerMap(weights=w, detail=0.5).clean(a).values, want)
+    assert not np.array_equal(want, TrackerMap(weights=w).clean(a).values)
+    for bad in (-0.1, 1.5, True, "x"):
+        with pytest.raises(FacecleanError, match="detail must be a number within"):
+            TrackerMap(weights=w, detail=bad)
+        with pytest.raises(FacecleanError, match="detail_scale must be a number within"):
+            MapWeights.build({**base.config, "detail_scale": bad}, w.arrays)
     for bad in (np.full(3, 5.0), np.array([np.nan, 0, 0])):
         with pytest.raises(FacecleanError, match="detail"):
             MapWeights.build(base.config, dict(base.arrays, detail=bad))

@@ -47,7 +47,9 @@ or M of them, weight units, 0 if absent), ...facts}; arrays
 ``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,); optional
 ``lift_gain`` >= 0 and ``lift_knee`` in [0, 1] (M,) (absent: no lift; a gain > 0 needs an
 input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_DETAIL]
-(absent: 0; nonzero needs an input of the output's name, as the lift does).
+(absent: 0; nonzero needs an input of the output's name, as the lift does), the fitted
+gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
+user's ``detail`` setting.
 """
 
 from __future__ import annotations
@@ -156,6 +158,9 @@ class MapWeights:
             raise FacecleanError(f"{label}: deadband must be a number or one per output") from None
         if not (np.isfinite(band).all() and (band >= 0).all() and (band <= MAX_DEADBAND).all()):
             raise FacecleanError(f"{label}: deadband must be within [0, {MAX_DEADBAND}]")
+        scale = config.get("detail_scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
+            raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")
         return cls(dict(config), out)
 
     def save(self, path: str | os.PathLike) -> None:
@@ -167,7 +172,9 @@ class MapWeights:
 
 class TrackerMap(Cleaner):
     """Tracker map cleaner (module docstring). ``min_cutoff``/``beta``/``d_cutoff`` (Hz)
-    replace the model's pre-filter settings (scalars, or one per model input)."""
+    replace the model's pre-filter settings (scalars, or one per model input); ``detail``
+    in [0, 1] replaces its detail scale: how much of the lag the pre-filter adds the map
+    takes back (0: none, 1: the fitted detail, all of it), trading jitter for lag."""
 
     name = "tracker-map"
     PER_CHANNEL = ()
@@ -180,15 +187,24 @@ class TrackerMap(Cleaner):
         min_cutoff: float | Sequence[float] | None = None,
         beta: float | Sequence[float] | None = None,
         d_cutoff: float | Sequence[float] | None = None,
+        detail: float | None = None,
         names: Sequence[str] | None = None,
     ) -> None:
         if weights is None:
             if model is None:
                 raise FacecleanError("tracker-map needs a model file (--model FILE.npz)")
             weights = MapWeights.load(model)
+        if detail is not None and (
+            isinstance(detail, bool) or not isinstance(detail, (int, float))
+            or not 0 <= detail <= 1
+        ):  # fmt: skip
+            raise FacecleanError(
+                f"tracker-map: detail must be a number within [0, 1], not {detail!r}"
+            )
+        self.detail = float(weights.config.get("detail_scale", 1.0) if detail is None else detail)
         self.weights = w = weights
         self.names = tuple(names) if names is not None else w.inputs
-        a = w.arrays
+        a = dict(w.arrays, detail=w.arrays["detail"] * self.detail)
         self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
         self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
         self.prefilter = bool(w.config.get("prefilter", True))
@@ -211,7 +227,8 @@ class TrackerMap(Cleaner):
         lift[self._li, np.arange(len(self._lo))] = g
         # The detail d_j (x_j - u_j) as a matrix on x and on u: D (K, M), d_j at the input
         # of output j's name (the general path reads it as ``_di``, ``_do``).
-        self._do = np.flatnonzero(a["detail"])  # (N,) outputs with a detail
+        self._d = a["detail"]  # (M,) the gains as scaled
+        self._do = np.flatnonzero(self._d)  # (N,) outputs with a detail
         self._di = np.array([w.inputs.index(w.outputs[j]) for j in self._do], dtype=np.intp)
         detail = np.zeros((len(w.inputs), m))
         detail[self._di, self._do] = a["detail"][self._do]
@@ -348,7 +365,7 @@ class TrackerMap(Cleaner):
         if rest is not None:
             lin = lin + rest @ a["b"].T
         if len(self._do):  # the detail, on each output's own input
-            lin[:, self._do] += a["detail"][self._do] * (xi[:, self._di] - u[:, self._di])
+            lin[:, self._do] += self._d[self._do] * (xi[:, self._di] - u[:, self._di])
         if self._hidden:
             rest = np.zeros_like(u) if rest is None else rest
             z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]

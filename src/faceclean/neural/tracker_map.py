@@ -27,7 +27,7 @@ from faceclean.channels import ARKIT52
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
-from faceclean.learned.tracker_map import MAX_LIFT, MapWeights
+from faceclean.learned.tracker_map import MAX_DETAIL, MAX_LIFT, MapWeights
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
 # (1-0.5 Hz, beta 5-20) ones hold a face at rest hard and open up when it moves (the speed
@@ -53,11 +53,13 @@ DEADBAND = 0.01
 # closed, above 1.1 it slams; a candidate outside the band pays its distance from it.
 KNEES: tuple[float | None, ...] = (None, 0.1, 0.2, 0.3, 0.4)
 CLOSURE_BAND = (0.9, 1.1)
-# How much of the least-squares detail gain each candidate keeps (0: none). The gain is
-# fitted unshrunk: the detail is small beside the levels, and a shrinkage scaled to the
-# inputs' mean square took it to 0 (docs/MODEL.md); the scale is how the choice trades
-# lag against jitter.
+# How much of the least-squares detail gain each candidate keeps (0: none; the model's
+# ``detail_scale``, which a user may change: TrackerMap's ``detail``). The gain is shrunk
+# by its own scale only: the detail is small beside the levels, and a shrinkage scaled to
+# the inputs' mean square took it to 0 (docs/MODEL.md); the scale is how the choice
+# trades lag against jitter.
 DETAILS = (0.0, 0.25, 0.5, 0.75, 1.0)
+DETAIL_SHRINK = 0.01  # the detail gain's ridge, relative to the detail's own mean square
 LIFT_FROM = 0.5  # the gain is fitted where the truth is over this (an eye closing)
 Report = Callable[[dict[str, Any]], None]
 
@@ -154,18 +156,16 @@ def _moments(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x.T @ x, x.T @ y
 
 
-def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray,
-                  kappa: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """(A (M, D), c (M,), d (M,)) from the moments of [z, e, 1] (D + K + 1 columns): per
     output j, ridge over z and its own input's detail e[own[j]] (own -1: none), z shrunk
-    as ``_solve`` shrinks it, the detail not (a tiny floor keeps a zero column solvable);
-    d then scaled by ``kappa``. kappa 0 is ``_solve`` over z alone."""
+    as ``_solve`` shrinks it, the detail by DETAIL_SHRINK of its own mean square only (a
+    zero column, a map without a pre-filter, gets d = 0); d within +-MAX_DETAIL. The
+    runtime scales d by the config's ``detail_scale``."""
     m, k = xty.shape[1], len(own)
     dim = len(gram) - 1 - k
     keep = np.r_[0:dim, dim + k]  # z and the offset
-    if kappa == 0.0:
-        coef, c = _solve(gram[np.ix_(keep, keep)], xty[keep], lam)
-        return coef, c, np.zeros(m)
     shrink = lam * float(np.mean(np.diag(gram)[:dim]))
     coef, c, d = np.zeros((m, dim)), np.zeros(m), np.zeros(m)
     for j in range(m):
@@ -173,10 +173,10 @@ def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray
         reg = np.zeros(len(idx))
         reg[:dim] = shrink
         if own[j] >= 0:
-            reg[dim] = 1e-9 * shrink
+            reg[dim] = DETAIL_SHRINK * gram[dim + own[j], dim + own[j]] + 1e-12 * shrink
         sol = np.linalg.solve(gram[np.ix_(idx, idx)] + np.diag(reg), xty[idx, j])
         coef[j], c[j] = sol[:dim], sol[-1]
-        d[j] = kappa * sol[dim] if own[j] >= 0 else 0.0
+        d[j] = np.clip(sol[dim], -MAX_DETAIL, MAX_DETAIL) if own[j] >= 0 else 0.0
     return coef, c, d
 
 
@@ -307,8 +307,7 @@ def fit(
         feats = features(w, pool)
         if refit:
             gram, xty = _moments(*_stack(feats, rest, detail=True))
-            kappa = w.config["detail_scale"]
-            _set_linear(w, *_solve_detail(gram, xty, w.config["lam"], _own(w), kappa))
+            _set_linear(w, *_solve_detail(gram, xty, w.config["lam"], _own(w)))
             _choose_lift(w, pool, rest, knees, report)
         w.config.update(frames=int(sum(len(f[0]) for f in feats)))
         return w
@@ -363,11 +362,14 @@ def _cross_validate(
     found: list[tuple] = []
     for pre in prefilters:
         w, own, folds = folded(pre)
+        solved = {(g, lam): _solve_detail(gram, xty, lam, own)
+                  for lam in lams for g, (gram, xty, _) in folds.items()}  # fmt: skip
         for lam, kappa in [(lam, kappa) for lam in lams for kappa in details
                            if pre is not None or kappa == 0.0]:  # fmt: skip
+            w.config["detail_scale"] = kappa  # one fit, its detail scaled
             ratios, jits = [], []
-            for g, (gram, xty, held) in folds.items():
-                _set_linear(w, *_solve_detail(gram, xty, lam, own, kappa))
+            for g, (_, _, held) in folds.items():
+                _set_linear(w, *solved[g, lam])
                 mse, jit = _score(w, held)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
@@ -394,8 +396,9 @@ def _cross_validate(
         w, own, folds = folded(pre)
         for _, _, _, _, lam, kappa, config in [f for f in calm if f[3] == pre]:
             lags = []
+            w.config["detail_scale"] = kappa
             for gram, xty, held in folds.values():
-                _set_linear(w, *_solve_detail(gram, xty, lam, own, kappa))
+                _set_linear(w, *_solve_detail(gram, xty, lam, own))
                 lags.append(_score(w, held, lag=True)[2])
             lag = float(np.nanmean(lags)) if np.isfinite(lags).any() else 0.0
             report({"event": "candidate_lag", "pre": pre, "lam": lam, "detail": kappa,
@@ -414,8 +417,8 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None =
     lin = u @ a["a"].T + a["c"]
     rest = (u - r) if w.config["rest"] else np.zeros_like(u)
     lin = lin + rest @ a["b"].T
-    d = a.get("detail")
-    if e is not None and d is not None and d.any():  # the detail, on each output's own input
+    d = a.get("detail", np.zeros(0)) * float(w.config.get("detail_scale", 1.0))
+    if e is not None and d.any():  # the detail, on each output's own input
         on = np.flatnonzero(d)
         lin[:, on] += d[on] * e[:, _own(w)[on]]
     if w.config["hidden"]:
@@ -481,8 +484,8 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None
         return  # nothing to lift, or too few sources to choose
     raw_mse = _raw_mse(pool, w.inputs, rest, scored)
     folds = _folds(pool, feats, rest, scored)
-    own, kappa = _own(w), w.config.get("detail_scale", 0.0)
-    coefs = {g: _solve_detail(gram, xty, w.config["lam"], own, kappa)
+    own = _own(w)
+    coefs = {g: _solve_detail(gram, xty, w.config["lam"], own)
              for g, (gram, xty, _) in folds.items()}  # fmt: skip
     # each fold's training performances, which its gains are fitted on
     trains = {g: [f for f, s in zip(feats, scored, strict=True) if s not in (None, g)]
