@@ -161,8 +161,10 @@ def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray
     """(A (M, D), c (M,), d (M,)) from the moments of [z, e, 1] (D + K + 1 columns): per
     output j, ridge over z and its own input's detail e[own[j]] (own -1: none), z shrunk
     as ``_solve`` shrinks it, the detail by DETAIL_SHRINK of its own mean square only (a
-    zero column, a map without a pre-filter, gets d = 0); d within +-MAX_DETAIL. The
-    runtime scales d by the config's ``detail_scale``."""
+    zero column, a map without a pre-filter, gets d = 0); d within [0, MAX_DETAIL] (a
+    negative gain would turn a channel's own timing round; on MediaPipe's near-silent
+    channels the fit gave some, and clipped they score the same). The runtime scales d by
+    the config's ``detail_scale``."""
     m, k = xty.shape[1], len(own)
     dim = len(gram) - 1 - k
     keep = np.r_[0:dim, dim + k]  # z and the offset
@@ -176,7 +178,7 @@ def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray
             reg[dim] = DETAIL_SHRINK * gram[dim + own[j], dim + own[j]] + 1e-12 * shrink
         sol = np.linalg.solve(gram[np.ix_(idx, idx)] + np.diag(reg), xty[idx, j])
         coef[j], c[j] = sol[:dim], sol[-1]
-        d[j] = np.clip(sol[dim], -MAX_DETAIL, MAX_DETAIL) if own[j] >= 0 else 0.0
+        d[j] = np.clip(sol[dim], 0.0, MAX_DETAIL) if own[j] >= 0 else 0.0
     return coef, c, d
 
 
