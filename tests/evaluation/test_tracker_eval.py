@@ -64,7 +64,8 @@ def test_every_fold_scores_every_row_and_level_rows_beat_the_filters(result):
     assert sorted(result["folds"]) == ["a", "b", engine.SYNTH_GROUP]
     overall = result["overall"]
     assert list(overall) == [
-        "raw", "one-euro", "calibration + one-euro", "ridge map", "tracker map (ours)"
+        "raw", "one-euro", "calibration + one-euro", "ridge map", "tracker map (ours)",
+        "tracker map, detail 0", "tracker map, detail 1",
     ]  # fmt: skip
     raw = overall["raw"]["test"]["mse"]
     assert overall["one-euro"]["test"]["mse"] > 0.8 * raw  # a filter cannot fix levels

@@ -276,3 +276,30 @@ def test_the_detail_takes_the_filters_lag_off_and_leaves_a_still_face_still():
     other = {**base.config, "inputs": ["jawOpen", "mouthClose", "eyeBlinkRight"]}
     with pytest.raises(FacecleanError, match="'eyeBlinkLeft' has a detail but is not an input"):
         MapWeights.build(other, dict(base.arrays, detail=np.full(3, 0.5)))
+
+
+def test_the_detail_setting_is_per_channel_through_the_resolver():
+    """``--set detail=X`` and ``--set PATTERN.detail=X`` reach the shipped MediaPipe map:
+    0 leaves the filter's lag, the model's scale is the default, a channel's own setting
+    changes that channel only; a bad value is one line."""
+    from faceclean.resolve import resolve, tracker_words
+
+    words = tracker_words("mediapipe")
+    shipped = resolve(words).build(NAMES)
+    assert shipped.detail == shipped.weights.config["detail_scale"] > 0
+    t = np.arange(90) / 30.0
+    x = np.tile([0.1, 0.1, 0.1], (90, 1))
+    x[30:, 2] = np.minimum(0.1 + 0.02 * np.arange(60), 0.8)  # the jaw opens
+    a = Animation(t, x, NAMES)
+    out = {s: resolve(words, [s]).build(NAMES).clean(a).values for s in
+           ("detail=0", "detail=1", "jawOpen.detail=1", "eye*.detail=1")}  # fmt: skip
+    base = shipped.clean(a).values
+    assert not np.array_equal(out["detail=1"][:, 2], out["detail=0"][:, 2])
+    np.testing.assert_array_equal(out["jawOpen.detail=1"][:, 2], out["detail=1"][:, 2])
+    np.testing.assert_array_equal(out["jawOpen.detail=1"][:, :2], base[:, :2])
+    np.testing.assert_array_equal(out["eye*.detail=1"][:, 2], base[:, 2])
+    rise = lambda y: np.argmax(y[:, 2] > 0.3)  # noqa: E731 - the frame the jaw passes 0.3
+    assert rise(out["detail=1"]) <= rise(base) <= rise(out["detail=0"])
+    for bad in ("detail=2", "jawOpen.detail=-1", "detail=x"):
+        with pytest.raises(FacecleanError, match="detail"):
+            resolve(words, [bad]).build(NAMES)

@@ -184,6 +184,10 @@ def evaluate(
                                    stride=paired_lstm.T)  # fmt: skip
             rows["paper LSTM on pairs"] = lambda n, path=path: Learned(model=path, names=n)
         rows["tracker map (ours)"] = lambda n, w=mapped: TrackerMap(weights=w, names=n)
+        for d in (0.0, 1.0):  # what the user's ``--set detail=`` trades, on the same map
+            rows[f"tracker map, detail {d:g}"] = lambda n, w=mapped, d=d: TrackerMap(
+                weights=w, names=n, detail=d
+            )
         folds[group] = {
             name: {"test": scores(b, test) if test else None,
                    "held": scores(b, held) if held else None}

@@ -49,7 +49,10 @@ def markdown(result: dict[str, Any], still: dict[str, Any] | None = None,
         "*ridge map* is a per-channel ridge linear map over all raw inputs. *paper LSTM on "
         "pairs* is the paper's derivative LSTM (2 x 128) trained on the fold's pairs on a CPU "
         "budget: 4 epochs of 200-frame chunks without overlap, best epoch by the inner "
-        "validation source. *tracker map (ours)* is learned/tracker_map.py fitted per fold. "
+        "validation source. *tracker map (ours)* is learned/tracker_map.py fitted per fold, "
+        "its detail scale as the fold chose it; *tracker map, detail 0* and *detail 1* are "
+        "the same map with the `detail` setting at 0 (the pre-filter's lag left in) and 1 "
+        "(all of the fitted detail): what `--set detail=` trades. "
         "The three learned rows train on the same data: the fold's training pairs and their "
         "calibration clips (never a test face's clip).",
     ]

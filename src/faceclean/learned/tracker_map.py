@@ -54,6 +54,7 @@ user's ``detail`` setting.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from collections.abc import Sequence
@@ -170,14 +171,28 @@ class MapWeights:
             np.savez(f, config=np.array(json.dumps(self.config)), **self.arrays)
 
 
+def _detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:
+    """The ``detail`` setting checked: a number in [0, 1], or ``width`` of them."""
+    if value is None:
+        return float(default)
+    v = None
+    if isinstance(value, (int, float, list, tuple, np.ndarray)) and not isinstance(value, bool):
+        with contextlib.suppress(TypeError, ValueError):  # (ragged lists, text)
+            v = np.asarray(value, dtype=np.float64)
+    if v is None or v.shape not in ((), (width,)) or not ((v >= 0) & (v <= 1)).all():
+        raise FacecleanError(f"tracker-map: detail must be a number within [0, 1], not {value!r}")
+    return float(v) if v.ndim == 0 else v
+
+
 class TrackerMap(Cleaner):
     """Tracker map cleaner (module docstring). ``min_cutoff``/``beta``/``d_cutoff`` (Hz)
     replace the model's pre-filter settings (scalars, or one per model input); ``detail``
     in [0, 1] replaces its detail scale: how much of the lag the pre-filter adds the map
-    takes back (0: none, 1: the fitted detail, all of it), trading jitter for lag."""
+    takes back (0: none, 1: the fitted detail, all of it), trading jitter for lag; a
+    scalar, or one per column of ``names`` (for the output written there)."""
 
     name = "tracker-map"
-    PER_CHANNEL = ()
+    PER_CHANNEL = ("detail",)
 
     def __init__(
         self,
@@ -187,26 +202,21 @@ class TrackerMap(Cleaner):
         min_cutoff: float | Sequence[float] | None = None,
         beta: float | Sequence[float] | None = None,
         d_cutoff: float | Sequence[float] | None = None,
-        detail: float | None = None,
+        detail: float | Sequence[float] | None = None,
         names: Sequence[str] | None = None,
     ) -> None:
         if weights is None:
             if model is None:
                 raise FacecleanError("tracker-map needs a model file (--model FILE.npz)")
             weights = MapWeights.load(model)
-        if detail is not None and (
-            isinstance(detail, bool) or not isinstance(detail, (int, float))
-            or not 0 <= detail <= 1
-        ):  # fmt: skip
-            raise FacecleanError(
-                f"tracker-map: detail must be a number within [0, 1], not {detail!r}"
-            )
-        self.detail = float(weights.config.get("detail_scale", 1.0) if detail is None else detail)
         self.weights = w = weights
         self.names = tuple(names) if names is not None else w.inputs
-        a = dict(w.arrays, detail=w.arrays["detail"] * self.detail)
         self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
         self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
+        self.detail = _detail_scale(detail, w.config.get("detail_scale", 1.0), len(self.names))
+        scale = np.full(len(w.outputs), float(w.config.get("detail_scale", 1.0)))  # (M,)
+        scale[self._out.have] = np.broadcast_to(self.detail, (len(self.names),))[self._out.cols]
+        a = dict(w.arrays, detail=w.arrays["detail"] * scale)
         self.prefilter = bool(w.config.get("prefilter", True))
         self.rest = bool(w.config.get("rest", True))
         pre = {"min_cutoff": a["min_cutoff"], "beta": a["beta"], "d_cutoff": a["d_cutoff"]}
