@@ -70,3 +70,22 @@ def test_refusals_are_the_resolvers():
     with pytest.raises(FacecleanError, match="offline"):
         Tuning("gaussian").with_choice().build()
     assert Tuning("gaussian").with_choice().clean(_take()).n_frames == 240  # offline mode: fine
+
+
+def test_the_mediapipe_map_offers_its_detail_per_channel():
+    """--tracker mediapipe: the page's one key is the map's detail (the model's scale on
+    every channel); a channel's own value shows on that channel and cleans as the words do."""
+    tuning = Tuning(None, ("jawOpen.detail=1",), tracker="mediapipe").with_choice()
+    state = tuning.describe()
+    assert state["method"] == "tracker-map" and state["keys"] == ["detail"]
+    values = state["values"]["detail"]
+    scale = tuning.choice.build(ARKIT52).weights.config["detail_scale"]
+    assert values[ARKIT52.index("jawOpen")] == 1.0
+    assert values[ARKIT52.index("eyeBlinkLeft")] == scale
+    take = _take()
+    a = tuning.clean(take).values
+    b = Tuning(None, (), tracker="mediapipe").with_choice().clean(take).values
+    jaw = ARKIT52.index("jawOpen")
+    assert not np.allclose(a[:, jaw], b[:, jaw]) and np.allclose(
+        np.delete(a, jaw, axis=1), np.delete(b, jaw, axis=1), equal_nan=True
+    )

@@ -21,6 +21,7 @@ const RANGES = {
   min_cutoff: [0.01, 50, true], beta: [0.001, 100, true], d_cutoff: [0.1, 30, true],
   tau: [0.001, 2, true], gamma: [0.01, 1, false], q: [0.01, 1000, true], r: [1e-4, 1, true],
   sigma: [0.001, 0.5, true], sigma_frames: [0.1, 50, true],
+  detail: [0, 1, false], // the tracker map's: the share of its fitted detail (lag taken back)
 };
 const LEVELS = { gain: [0, 4, false, 1], offset: [-0.5, 0.5, false, 0], curve: [0.2, 5, true, 1] };
 
