@@ -107,6 +107,9 @@ def _pairs(args: argparse.Namespace, progress) -> int:
             "tracker map (ours, shipped)": TrackerMap(
                 model=settings.MODELS / "mediapipe.npz", names=take.names
             ).clean(take),
+            "tracker map (shipped), detail 1": TrackerMap(
+                model=settings.MODELS / "mediapipe.npz", names=take.names, detail=1.0
+            ).clean(take),
         }
         still_rows = {k: still.measures(v) for k, v in rows.items()}
         for v in still_rows.values():

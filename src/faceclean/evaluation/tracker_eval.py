@@ -142,7 +142,8 @@ def evaluate(
     report: Report | None = None,
 ) -> dict[str, Any]:
     """Every fold of the pairs in ``folder``: {"folds": {group: {row: {split: scores}}},
-    "overall": {row: {split: scores}}, "pairs": counts}."""
+    "overall": {row: {split: scores}}, "pairs": counts, "chosen": {group: the fold's tracker
+    map choices (pre-filter, shrinkage, detail scale, blink knee)}}."""
     from faceclean.filters.one_euro import OneEuro
     from faceclean.learned.cleaner import Learned
     from faceclean.learned.tracker_map import TrackerMap
@@ -154,6 +155,7 @@ def evaluate(
     work = Path(work) if work else Path(folder) / ".eval"
     work.mkdir(parents=True, exist_ok=True)
     folds: dict[str, Any] = {}
+    chosen: dict[str, Any] = {}  # group -> the fold map's choices (what each fold picked)
     for group in paired.groups(pairs):
         train, test, held = paired.split(pairs, group, held_out)
         if not train or not (test or held):
@@ -166,6 +168,12 @@ def evaluate(
         inner_train, inner_val = paired.with_clips(inner_train), paired.with_clips(inner_val)
         ridge = fit.fit_ridge(inner_train, inner_val)
         mapped = fit.fit(inner_train, inner_val)
+        pre = mapped.arrays
+        chosen[group] = {
+            "pre_filter": [float(pre[k][0]) for k in ("min_cutoff", "beta", "d_cutoff")]
+            if mapped.config["prefilter"] else None,
+            **{k: mapped.config.get(k) for k in ("lam", "detail_scale", "lift_knee")},
+        }  # fmt: skip
         rows: dict[str, Build] = {
             "raw": lambda n: None,
             f"one-euro (tuned {mc:g} Hz, beta {beta:g})": lambda n, mc=mc, beta=beta: OneEuro(
@@ -198,7 +206,7 @@ def evaluate(
 
     real = {g: f for g, f in folds.items() if g != SYNTH_GROUP}
     return {"folds": folds, "overall": _overall(folds), "real": _overall(real) if real else None,
-            "pairs": paired.summary_json(pairs)}  # fmt: skip
+            "pairs": paired.summary_json(pairs), "chosen": chosen}  # fmt: skip
 
 
 def calibrated_one_euro(pair: Pair, min_cutoff: float, beta: float) -> Cleaner:

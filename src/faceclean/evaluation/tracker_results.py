@@ -56,6 +56,21 @@ def markdown(result: dict[str, Any], still: dict[str, Any] | None = None,
         "The three learned rows train on the same data: the fold's training pairs and their "
         "calibration clips (never a test face's clip).",
     ]
+    if result.get("chosen"):
+        g_ = lambda v: "none" if v is None else f"{v:g}"  # noqa: E731
+        picks = "; ".join(
+            f"{g}: pre-filter "
+            + (
+                "none, "
+                if c["pre_filter"] is None
+                else "{:g} Hz, beta {:g}, speed {:g} Hz, ".format(*c["pre_filter"])
+            )
+            + f"shrinkage {g_(c['lam'])}, detail {g_(c['detail_scale'])}, "
+            f"blink knee {g_(c['lift_knee'])}"
+            for g, c in result["chosen"].items()
+        )
+        lines += ["", "What each fold's tracker map chose (leaving each of its sources out): "
+                  + picks + "."]  # fmt: skip
     lines += ["", "MSE per channel group (test split):", ""]
     lines += ["| cleaner | " + " | ".join(GROUPS) + " |", "|---|" + "---|" * len(GROUPS)]
     for name, splits in rows.items():
