@@ -73,6 +73,8 @@ def cleaner(steps: int = 300) -> dict:
         lo = torch.tensor(np.flatnonzero(tm.weights.arrays["lift_gain"] > 0))
         li = torch.tensor([tm.weights.inputs.index(tm.weights.outputs[j]) for j in lo.tolist()])
         gain, knee = a["lift_gain"][lo], a["lift_knee"][lo]
+        scale = float(tm.weights.config.get("detail_scale", 1.0))
+        gain_d = a["detail"] * scale if "detail" in a else None  # the gains as they run
         do = torch.tensor(np.flatnonzero(tm.weights.arrays.get("detail", np.zeros(1))))
         di = torch.tensor([tm.weights.inputs.index(tm.weights.outputs[j]) for j in do.tolist()])
         y = torch.tensor(x[0])
@@ -92,7 +94,7 @@ def cleaner(steps: int = 300) -> dict:
                 r = torch.minimum(r, y)
                 out = y @ a["a"].T + (y - r) @ a["b"].T + a["c"]
                 if len(do):
-                    out[:, do] += a["detail"][do] * (xi[:, di] - y[:, di])
+                    out[:, do] += gain_d[do] * (xi[:, di] - y[:, di])
                 out = torch.clamp(out, 0, 1)
                 if len(lo):  # m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1))
                     lift = torch.clamp(gain * (y[:, li] - r[:, li] - knee), 0, 1)
