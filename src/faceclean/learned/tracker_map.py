@@ -27,11 +27,12 @@ nothing, while a movement passes with a lag of eps / speed (1 ms at a blink's 10
 bias of at most eps. The lift restores what a least-squares map cannot: a peak. The
 tracker under-reads a closing eyelid, and a map fitted to every frame pulls each peak
 toward the mean; where the same channel's own rise above rest passes a knee k, its output
-is at least that rise times a gain g (output j reads the input of its own name). At rest u
-- r < k, so the lift is 0. The optional hidden layer (``hidden`` > 0) adds what is not
-linear; on the pairs we have it overfits (docs/MODEL.md), so the shipped map is linear.
-Why this cannot invent motion: m is a function of (u, r) only; on a still face u converges
-and r is constant, so m converges and y with it; a missing frame holds u and so y.
+is at least that rise times a gain g (output j reads the input of its own name). At rest
+the rise u - r is below k, so the lift is 0. The optional hidden layer (``hidden`` > 0)
+adds what is not linear; on the pairs we have it overfits (docs/MODEL.md), so the shipped
+map is linear. Why this cannot invent motion: m is a function of (u, r, x - u) only; on a
+still face u converges to x, so the detail goes to 0, r is constant, and m converges and y
+with it; a missing frame holds u and so y.
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
