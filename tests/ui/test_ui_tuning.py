@@ -65,6 +65,9 @@ def test_refusals_are_the_resolvers():
         Tuning("one-euro", ("min_cutof=1",)).with_choice()
     with pytest.raises(FacecleanError, match="a preset holds a classical"):
         preset_doc("lstm", [])
+    mapped = Tuning(None, ("detail=0.5",), tracker="mediapipe").with_choice()  # not the default
+    with pytest.raises(FacecleanError, match="tracker-map: .* give --tracker mediapipe and its"):
+        mapped.save_preset("unused.json")
     with pytest.raises(FacecleanError, match="at most 256"):
         Tuning("one-euro", ("beta=1",) * 257).with_choice()
     with pytest.raises(FacecleanError, match="offline"):

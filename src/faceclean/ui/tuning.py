@@ -149,13 +149,20 @@ class Tuning:
         """The cleaner and its smoothing items as a ``--preset`` file; returns the items a
         preset cannot hold (per-channel smoothing, levels), as ``--set`` words."""
         _json_path(path, "preset")
-        doc, rest = preset_doc(self.words, self.items)
+        if self.words is None and self.tracker:  # the tracker's own cleaner
+            doc, rest = preset_doc(tracker_words(self.tracker), self.items,
+                                   f"--tracker {self.tracker}")  # fmt: skip
+        else:
+            doc, rest = preset_doc(self.words, self.items)
         presets.save(path, doc["method"], doc["params"], doc["groups"], doc.get("about"))
         return rest
 
 
-def preset_doc(words: str | None, items: Sequence[str]) -> tuple[dict[str, Any], list[str]]:
-    """(the preset document ``words`` + ``items`` name, the items it cannot hold).
+def preset_doc(
+    words: str | None, items: Sequence[str], named: str | None = None
+) -> tuple[dict[str, Any], list[str]]:
+    """(the preset document ``words`` + ``items`` name, the items it cannot hold);
+    ``named``: how a refusal names the cleaner to the user (default ``--method WORDS``).
 
     The resolver's reading: a global ``KEY=VALUE`` replaces that key on every channel
     (its per-group values are dropped); ``GROUP.KEY=VALUE`` is the group's value;
@@ -168,7 +175,7 @@ def preset_doc(words: str | None, items: Sequence[str]) -> tuple[dict[str, Any],
         classical = ", ".join(m for m in filters.METHODS if m not in _LEARNED)
         raise FacecleanError(
             f"{method}: a preset holds a classical cleaner's settings ({classical}); "
-            f"give --method {words or 'default'} instead"
+            f"give {named or '--method ' + (words or 'default')} and its --set items instead"
         )
     text = words or ""
     if text in presets.shipped() or text.lower().endswith(".json"):
@@ -203,7 +210,10 @@ def preset_doc(words: str | None, items: Sequence[str]) -> tuple[dict[str, Any],
     return doc, rest
 
 
-_LEARNED = ("adaptive", "lstm", "fc", "gbt")
+# the learned cleaners (models, not presets): every method implemented in faceclean.learned
+_LEARNED = tuple(
+    m for m, where in filters.METHODS.items() if where.startswith("faceclean.learned.")
+)
 
 
 def _defaults(cls: type) -> dict[str, Any]:
