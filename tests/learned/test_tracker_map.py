@@ -14,7 +14,7 @@ NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
 
 
 def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None,
-            detail=None) -> MapWeights:  # fmt: skip
+            detail=None, top=False) -> MapWeights:  # fmt: skip
     rng = np.random.default_rng(seed)
     k = len(NAMES)
     arrays = {
@@ -38,7 +38,7 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None
         arrays["detail"] = np.full(k, float(detail))
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
               "hidden": hidden, "prefilter": prefilter, "rest": rest,
-              "deadband": deadband}  # fmt: skip
+              "deadband": deadband, "lift_top": top}  # fmt: skip
     return MapWeights.build(config, arrays)
 
 
@@ -143,10 +143,11 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("band, lift, detail", [(0.0, None, None), (0.05, None, None),
-                                                (0.05, (2.5, 0.2), 0.6)])  # fmt: skip
+@pytest.mark.parametrize("band, lift, detail, top", [
+    (0.0, None, None, False), (0.05, None, None, False), (0.05, (2.5, 0.2), 0.6, False),
+    (0.02, (6.0, 0.1), 0.3, True)])  # fmt: skip
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
-def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail):
+def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top):
     """``_usual`` (every stream present and advancing) against the general path, forced, on
     streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
     three streams together and one alone."""
@@ -158,7 +159,7 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift,
     t[100:, 0] += 1.0  # ... and the one stream stepped alone
     x = rng.uniform(0, 1, (n, 3, len(names)))
     x[40, 0] = np.nan  # a lost frame
-    w = weights(hidden=0, deadband=band, lift=lift, detail=detail)
+    w = weights(hidden=0, deadband=band, lift=lift, detail=detail, top=top)
     for streams in (slice(None), 0):
         fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
         general._usual = lambda x, tt: None
@@ -303,3 +304,33 @@ def test_the_detail_setting_is_per_channel_through_the_resolver():
     for bad in ("detail=2", "jawOpen.detail=-1", "detail=x"):
         with pytest.raises(FacecleanError, match="detail"):
             resolve(words, [bad]).build(NAMES)
+
+
+def test_the_lifts_top_follows_the_streams_largest_lift():
+    """lift_top: l / max(1, the largest l so far): an eye that reads higher than the
+    training faces' closes to 1 at its fullest blink and its smaller ones scale down with
+    it; before any lift past 1 nothing changes; the gain only falls; a face at rest and
+    jawOpen are untouched; reset() forgets the top."""
+    t = np.arange(150) / 30.0
+    x = np.tile([0.1, 0.1, 0.3], (150, 1))
+    x[40:46, :2] = np.array([0.1, 0.2, 0.3, 0.3, 0.2, 0.1])[:, None]  # l = 4 (0.2 - 0.1) = 0.4
+    x[70:76, :2] = np.array([0.1, 0.3, 0.7, 0.7, 0.3, 0.1])[:, None]  # l = 4 (0.6 - 0.1) = 2.0
+    x[100:106, :2] = np.array([0.1, 0.3, 0.5, 0.5, 0.3, 0.1])[:, None]  # l = 1.2
+    a = Animation(t, x, NAMES)
+    fixed = TrackerMap(weights=weights(hidden=0, prefilter=False, lift=(4.0, 0.1))).clean(a)
+    topped = TrackerMap(weights=weights(hidden=0, prefilter=False, lift=(4.0, 0.1), top=True))
+    y, f = topped.clean(a).values, fixed.values
+    np.testing.assert_array_equal(y[:70], f[:70])  # no lift past 1 yet: the same
+    np.testing.assert_allclose(y[70:76, 0].max(), 1.0)  # the fullest blink: closed, no more
+    # a smaller one scaled with it: max(the map, l / 2), the map alone m, r the rest level
+    m = TrackerMap(weights=weights(hidden=0, prefilter=False)).clean(a).values
+    lift = 4.0 * (x[:, :2] - np.minimum.accumulate(x[:, :2]) - 0.1)
+    want = np.maximum(m[:, :2], np.clip(lift / np.maximum(np.maximum.accumulate(lift), 1), 0, 1))
+    np.testing.assert_allclose(y[:, :2], want, atol=1e-12)
+    assert y[100:106, 0].max() < 0.7 and f[100:106, 0].max() == 1.0  # the fixed gain: clipped
+    np.testing.assert_array_equal(y <= f + 1e-15, True)  # the gain only falls
+    np.testing.assert_array_equal(y[:, 2], f[:, 2])  # jawOpen: no lift
+    topped.reset()
+    np.testing.assert_array_equal(topped.clean(a).values, y)  # reset: the top forgotten
+    with pytest.raises(FacecleanError, match="lift_top must be true or false"):
+        MapWeights.build({**topped.weights.config, "lift_top": "yes"}, topped.weights.arrays)

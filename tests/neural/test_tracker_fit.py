@@ -206,14 +206,16 @@ def test_the_blink_lift_is_chosen_leaving_each_source_out():
     pres, lams = [(8.0, 1.0, 1.0)], (1e-2,)
     w = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=lams, report=seen.append)
     lifts = [e for e in seen if e.get("event") == "lift"]
-    assert [e["knee"] for e in lifts] == list(fit.KNEES) and all(e["cv"] == 3 for e in lifts)
+    want = [(k, t) for k in fit.KNEES for t in fit.TOPS if k is not None or not t]
+    assert [(e["knee"], e["top"]) for e in lifts] == want and all(e["cv"] == 3 for e in lifts)
     lo, hi = fit.CLOSURE_BAND
 
     def score(e):
         price = max(0.0, lo - e["closure"]) + max(0.0, e["closure"] - hi)
         return e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1)) * (1 + price)
 
-    assert w.config["lift_knee"] == min(lifts, key=score)["knee"]
+    best = min(lifts, key=score)
+    assert (w.config["lift_knee"], w.config["lift_top"]) == (best["knee"], best["top"])
     assert (w.arrays["lift_gain"][2:] == 0).all()  # blinks only
     none = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=lams, knees=(None,))
     assert none.config["lift_knee"] is None and not none.arrays["lift_gain"].any()

@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{e['val_mse']:.5f}, jitter {e['jitter']:.2f}x", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "lift":
             knee = "no blink lift" if e["knee"] is None else f"blink lift from {e['knee']:g}"
+            knee += ", its top following the stream" if e.get("top") else ""
             print(f"{knee}: leaving each of {e['cv']} sources out, MSE {e['val_mse']:.3f}x "
                   f"raw, jitter {e['jitter']:.2f}x, blink closure {e['closure']:.2f}",
                   file=sys.stderr)  # fmt: skip

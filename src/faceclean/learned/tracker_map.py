@@ -10,7 +10,9 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
     r  = min(r, u)                      the stream's resting level so far (since reset)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
     m  = clip(A u + B (u - r) + c + d (x - u)_own + W2 tanh(W1 z + b1) + b2, 0, 1)  (M,)
-    m_j = max(m_j, clip(g_j (u_j - r_j - k_j), 0, 1))   a lift, where g_j > 0 (blinks)
+    m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))  a lift, where g_j > 0 (blinks):
+                                        l_j = g_j (u_j - r_j - k_j), T_j its largest value
+                                        so far (with ``lift_top``; else T_j = 1)
     y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output
 
 ``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
@@ -28,7 +30,10 @@ bias of at most eps. The lift restores what a least-squares map cannot: a peak. 
 tracker under-reads a closing eyelid, and a map fitted to every frame pulls each peak
 toward the mean; where the same channel's own rise above rest passes a knee k, its output
 is at least that rise times a gain g (output j reads the input of its own name). At rest
-the rise u - r is below k, so the lift is 0. The optional hidden layer (``hidden`` > 0)
+the rise u - r is below k, so the lift is 0. With ``lift_top`` the lift's top follows the
+stream: once a face's own rise has lifted past 1 (an eye that reads higher than the
+training faces'), every lift is scaled so that the largest so far reaches 1, not more; the
+gain only ever falls. The optional hidden layer (``hidden`` > 0)
 adds what is not linear; on the pairs we have it overfits (docs/MODEL.md), so the shipped
 map is linear. Why this cannot invent motion: m is a function of (u, r, x - u) only; on a
 still face u converges to x, so the detail goes to 0, r is constant, and m converges and y
@@ -50,7 +55,7 @@ or M of them, weight units, 0 if absent), ...facts}; arrays
 input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_DETAIL]
 (absent: 0; nonzero needs an input of the output's name, as the lift does), the fitted
 gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
-user's ``detail`` setting.
+user's ``detail`` setting; config ``lift_top`` true or false (absent: false).
 """
 
 from __future__ import annotations
@@ -160,6 +165,8 @@ class MapWeights:
             raise FacecleanError(f"{label}: deadband must be a number or one per output") from None
         if not (np.isfinite(band).all() and (band >= 0).all() and (band <= MAX_DEADBAND).all()):
             raise FacecleanError(f"{label}: deadband must be within [0, {MAX_DEADBAND}]")
+        if not isinstance(config.get("lift_top", False), bool):
+            raise FacecleanError(f"{label}: lift_top must be true or false")
         scale = config.get("detail_scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
             raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")
@@ -255,6 +262,7 @@ class TrackerMap(Cleaner):
         self._direct = self._in.identity and self._out.identity  # columns = inputs = outputs
         band = np.asarray(w.config.get("deadband", 0.0), np.float64)
         self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if band.any() else None
+        self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
         self.reset()
 
     def reset(self) -> None:
@@ -277,6 +285,7 @@ class TrackerMap(Cleaner):
             self._edx = np.zeros((s, k))  # (S, K) One Euro's slope, weight/s
             self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
             self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
+            self._top = np.full((s, len(self._lo)), -np.inf)  # (S, L) largest lift so far
         bad = ~(np.abs(x) <= MAX_ABS)  # rule 2 for every column, passthrough ones too
         missing = bad.all(axis=1) | ~np.isfinite(tt)  # rule 1
         if bad.any():
@@ -340,6 +349,10 @@ class TrackerMap(Cleaner):
         if self._dx is not None:  # the detail: + d (x - u), the -d u being in _ab
             y += xi @ self._dx
         y += self._c
+        if self._lift_top:  # the lift's top: l / max(1, the largest l so far)
+            lift = y[:, self._m_cols :]
+            np.maximum(self._top, lift, out=self._top)
+            lift /= np.maximum(self._top, 1.0)
         np.clip(y, 0.0, 1.0, out=y)
         if len(self._lo):  # the lift: m_j = max(m_j, its lift column)
             m = self._m_cols
@@ -385,5 +398,9 @@ class TrackerMap(Cleaner):
         if len(self._lo):  # the lift
             j, lo = self._li, self._lo
             rise = a["lift_gain"][lo] * (u[:, j] - self._r[:, j] - a["lift_knee"][lo])
+            if self._lift_top:  # the top kept through a restart: the same face came back
+                top = np.fmax(self._top, rise)
+                self._top = top if moved.all() else np.where(moved[:, None], top, self._top)
+                rise = rise / np.maximum(self._top, 1.0)
             m[:, lo] = np.fmax(m[:, lo], np.clip(rise, 0.0, 1.0))
         return m

@@ -52,6 +52,9 @@ DEADBAND = 0.01
 # (output peak / true peak) a blink should reach: below 0.9 an eye does not read as
 # closed, above 1.1 it slams; a candidate outside the band pays its distance from it.
 KNEES: tuple[float | None, ...] = (None, 0.1, 0.2, 0.3, 0.4)
+# The lift's top: fixed (a gain of g), or following the stream's largest lift so far
+# (``lift_top``: the gain falls for an eye that reads higher than the training faces').
+TOPS = (False, True)
 CLOSURE_BAND = (0.9, 1.1)
 # How much of the least-squares detail gain each candidate keeps (0: none; the model's
 # ``detail_scale``, which a user may change: TrackerMap's ``detail``). The gain is shrunk
@@ -428,9 +431,11 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None =
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
     m = np.clip(lin, 0.0, 1.0)
     lo = np.flatnonzero(a.get("lift_gain", np.zeros(0)) > 0)
-    if len(lo):  # the lift: m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1))
+    if len(lo):  # the lift: m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (u_j - r_j - k)
         j = [w.inputs.index(w.outputs[i]) for i in lo]
         rise = a["lift_gain"][lo] * (u[:, j] - r[:, j] - a["lift_knee"][lo])
+        if w.config.get("lift_top"):  # the largest lift so far, from the pair's first frame
+            rise = rise / np.maximum(np.maximum.accumulate(rise, axis=0), 1.0)
         m[:, lo] = np.maximum(m[:, lo], np.clip(rise, 0.0, 1.0))
     band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), m.shape[1:])
     if not band.any() or len(m) < 2:
@@ -470,15 +475,16 @@ def _set_lift(w: MapWeights, gains: np.ndarray, knee: float) -> None:
     w.arrays["lift_knee"] = np.where(gains > 0, knee, 0.0)
 
 
-def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None:
-    """Sets ``w``'s blink lift: the knee (None: no lift) that scores best leaving one
+def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report, tops=TOPS) -> None:
+    """Sets ``w``'s blink lift: the knee (None: no lift) and top (``tops``) that score
+    best leaving one
     source out, as ``_cross_validate`` scores (the linear part fitted on every other
     source at ``w``'s pre-filter and shrinkage, the gains on their performances), x
     (1 + the mean closure's distance outside CLOSURE_BAND); its gains then fitted on
     every performance in ``pool``. The linear part of ``w`` is kept as it is."""
     none = np.zeros(len(w.outputs))
     _set_lift(w, none, 0.0)
-    w.config.update(lift_knee=None)
+    w.config.update(lift_knee=None, lift_top=False)
     groups, scored = _sources(pool)
     feats = features(w, pool)
     performed = [f for f, s in zip(feats, scored, strict=True) if s is not None]
@@ -494,8 +500,9 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None
               for g in groups}  # fmt: skip
     linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
     lo, hi = CLOSURE_BAND
-    found = []  # (score, knee, closure)
-    for knee in knees:
+    found = []  # (score, knee, top, closure)
+    for knee, top in [(k, t) for k in knees for t in tops if k is not None or not t]:
+        w.config["lift_top"] = top
         ratios, jits, closures = [], [], []
         for g, (_, _, held) in folds.items():
             _set_linear(w, *coefs[g])
@@ -509,14 +516,14 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report) -> None
         close = float(np.nanmean(closures)) if np.isfinite(closures).any() else 1.0
         price = max(0.0, lo - close) + max(0.0, close - hi)
         score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0)) * (1.0 + price)
-        report({"event": "lift", "knee": knee, "val_mse": ratio, "jitter": jit,
+        report({"event": "lift", "knee": knee, "top": top, "val_mse": ratio, "jitter": jit,
                 "closure": close, "cv": len(groups)})  # fmt: skip
-        found.append((score, knee, close))
-    _, knee, close = min(found, key=lambda f: f[0])
+        found.append((score, knee, top, close))
+    _, knee, top, close = min(found, key=lambda f: f[0])
     for k, v in linear.items():
         w.arrays[k] = v
     _set_lift(w, none if knee is None else _lift_gains(w, performed, knee), knee or 0.0)
-    w.config.update(lift_knee=knee, val_closure=close)
+    w.config.update(lift_knee=knee, lift_top=top, val_closure=close)
 
 
 def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Report) -> None:
