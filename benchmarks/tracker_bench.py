@@ -81,6 +81,8 @@ def cleaner(steps: int = 300) -> dict:
         prev = torch.clamp(y @ a["a"].T + a["c"], 0, 1)  # the first frame's output (r = u)
         edx = torch.zeros_like(y)
         r = y.clone()
+        topped = bool(tm.weights.config.get("lift_top", False))
+        top = torch.full((s, len(lo)), -np.inf, dtype=torch.float64)  # the largest lift so far
         ref = []
         with torch.no_grad():
             for i in range(1, steps):
@@ -96,8 +98,12 @@ def cleaner(steps: int = 300) -> dict:
                 if len(do):
                     out[:, do] += gain_d[do] * (xi[:, di] - y[:, di])
                 out = torch.clamp(out, 0, 1)
-                if len(lo):  # m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1))
-                    lift = torch.clamp(gain * (y[:, li] - r[:, li] - knee), 0, 1)
+                if len(lo):  # m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (u_j - r_j - k)
+                    lift = gain * (y[:, li] - r[:, li] - knee)
+                    if topped:
+                        top = torch.maximum(top, lift)
+                        lift = lift / torch.clamp(top, min=1.0)
+                    lift = torch.clamp(lift, 0, 1)
                     out[:, lo] = torch.maximum(out[:, lo], lift)
                 out = out - torch.clamp(out - prev, -band, band)
                 prev = out

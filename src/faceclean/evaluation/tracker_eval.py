@@ -172,7 +172,7 @@ def evaluate(
         chosen[group] = {
             "pre_filter": [float(pre[k][0]) for k in ("min_cutoff", "beta", "d_cutoff")]
             if mapped.config["prefilter"] else None,
-            **{k: mapped.config.get(k) for k in ("lam", "detail_scale", "lift_knee")},
+            **{k: mapped.config.get(k) for k in ("lam", "detail_scale", "lift_knee", "lift_top")},
         }  # fmt: skip
         rows: dict[str, Build] = {
             "raw": lambda n: None,

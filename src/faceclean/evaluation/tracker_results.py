@@ -67,6 +67,7 @@ def markdown(result: dict[str, Any], still: dict[str, Any] | None = None,
             )
             + f"shrinkage {g_(c['lam'])}, detail {g_(c['detail_scale'])}, "
             f"blink knee {g_(c['lift_knee'])}"
+            + (", its top following the stream" if c.get("lift_top") else "")
             for g, c in result["chosen"].items()
         )
         lines += ["", "What each fold's tracker map chose (leaving each of its sources out): "
