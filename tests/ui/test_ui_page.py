@@ -4,10 +4,12 @@ a real receiver. Needs Debian's chromium and playwright (tests/headless.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -225,6 +227,7 @@ def live(browser, tmp_path_factory):
     relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}",
                         "--send", f"livelink://127.0.0.1:{receiver.port}", "--method", "one-euro",
                         "--set", "min_cutoff=30", "--set", "beta=0", "--ui",
+                        "--ui-nice", "0",  # this module's browser keeps its weight
                         "--record", str(folder / "session.csv")],
                        stderr=subprocess.DEVNULL)  # fmt: skip
     replay = subprocess.Popen(
@@ -374,3 +377,47 @@ def test_a_request_without_the_token_is_refused(live, browser):
     assert "no valid token" in page.inner_text("body")
     assert page.goto(bare + "ui.js").status == 403
     page.close()
+
+
+def test_a_page_drawn_on_the_cpu_lets_its_browser_yield_to_the_relay():
+    """relay --ui: the page (SwiftShader here) says it draws on the CPU, and the relay sets
+    its browser's sessions to the autogroup nice --ui-nice asks (ui/priority.py), never its
+    own. A browser of its own: the module's one keeps its weight."""
+    from helpers import free_port
+    from playwright.sync_api import sync_playwright
+
+    from faceclean.ui import priority
+
+    ports = free_port(), free_port()
+    relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{ports[0]}", "--send",
+                        f"livelink://127.0.0.1:{ports[1]}", "--ui", "--ui-nice", "7"])  # fmt: skip
+    own = priority._autogroup(relay.pid)
+    with reaped(relay), sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
+        try:
+            tab = Tab(b, url)
+            tab.until("window.faceclean.softwareGL === true")
+
+            def niced() -> set[str]:
+                groups = set()
+                for pid in priority._pids():
+                    exe = priority._exe(pid) or ""
+                    text = ""
+                    with contextlib.suppress(OSError):
+                        text = (priority.PROC / str(pid) / "autogroup").read_text()
+                    if "chromium" in os.path.basename(exe) and text.endswith("nice 7\n"):
+                        groups.add(text.split()[0])
+                return groups
+
+            deadline = time.monotonic() + 20
+            while not niced() and time.monotonic() < deadline:
+                tab.page.wait_for_timeout(50)  # the relay reads /proc in a thread of its own
+            assert niced() and own not in niced()
+            assert (priority.PROC / str(relay.pid) / "autogroup").read_text().endswith("nice 0\n")
+        finally:
+            b.close()
+        out, err = interrupt(relay)
+    assert "its browser's sessions" in out and "yield to the relay (autogroup nice 7" in out, err
+    r = main(["relay", "--listen", "vmc://127.0.0.1:9", "--send", "livelink://127.0.0.1:9",
+              "--ui", "--ui-nice", "20"])  # fmt: skip
+    assert r == 2

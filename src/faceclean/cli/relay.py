@@ -74,6 +74,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--ui", action="store_true", help="serve the tuning page on the relay")
     ui.add_page_arguments(p, "ui-")
+    p.add_argument(
+        "--ui-nice",
+        type=int,
+        default=10,
+        metavar="N",
+        help="when the page draws on the CPU (no GPU), its browser's sessions yield to the "
+        "relay at this autogroup nice, 1-19 (Linux; default 10; 0: leave them)",
+    )
 
 
 def build_cleaner(choice: Choice) -> tuple[Any, str]:
@@ -123,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.record is not None and not args.record.strip():
         raise FacecleanError("--record: give a file name (.csv or .npz)")
+    from faceclean.ui.priority import MAX_NICE
+
+    if not 0 <= args.ui_nice <= MAX_NICE:
+        raise FacecleanError(f"--ui-nice must be in 0..{MAX_NICE} (got {args.ui_nice})")
     recorder = Recorder(args.record) if args.record else None
     if args.ui:
         return _with_page(args, listen, send, recorder)
@@ -200,7 +212,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) 
     pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
     with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:
         what = f"{relay.address} -> {send}"
-        session = Live(tuning, relay, tap, what)
+        session = Live(tuning, relay, tap, what, nice=args.ui_nice)
         session.mesh()  # the face built before the page asks
         session.start()
         server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser)

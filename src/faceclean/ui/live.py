@@ -92,11 +92,13 @@ class Live(Base):
     """The page on ``relay`` (bound already), its cleaner from ``tuning``."""
 
     mode = "live"
-    MESSAGES = (*Base.MESSAGES, "channels", "calibrate", "record")
+    MESSAGES = (*Base.MESSAGES, "channels", "calibrate", "record", "gl")
 
-    def __init__(self, tuning: Tuning, relay: Any, tap: Tap, describe: str) -> None:
+    def __init__(self, tuning: Tuning, relay: Any, tap: Tap, describe: str, nice: int = 0) -> None:
         super().__init__(tuning)
         self.relay, self.tap, self.what = relay, tap, describe
+        self.nice = nice  # a software-drawn page's browser yields at this autogroup nice
+        self._yielded = False
         self.channels = [ARKIT52.index(c) for c in ("jawOpen", "eyeBlinkLeft")]
         self.calibrating: tuple[float, float | None] | None = None  # (seconds, t0)
         self.page_recorder: Any = None
@@ -137,6 +139,25 @@ class Live(Base):
         if unknown:
             raise FacecleanError(f"names: {unknown[0]!r} is not an ARKit channel")
         self.channels = [ARKIT52.index(n) for n in names]
+
+    def on_gl(self, client: Client, m: dict[str, Any]) -> None:
+        """The page says how it draws; on the CPU (software GL), its browser yields to the
+        relay (ui/priority.py), once a run, in a thread of its own (it reads /proc)."""
+        software = m.get("software")
+        if not isinstance(software, bool):
+            raise FacecleanError("software: expected true or false")
+        if not software or not self.nice or self._yielded or client is None:
+            return
+        self._yielded = True
+        server = client.connection.local_address[1]
+        page = client.connection.remote_address[1]
+
+        def lower() -> None:
+            from faceclean.ui import priority
+
+            print(priority.lower_page(server, page, self.nice), flush=True)
+
+        threading.Thread(target=lower, name="faceclean-ui-nice", daemon=True).start()
 
     def on_calibrate(self, client: Client, m: dict[str, Any]) -> None:
         seconds = number(m, "seconds", 0.05, MAX_NEUTRAL, 1.0)

@@ -150,6 +150,8 @@ function start(m) {
   }
   meshLoaded.then((mesh) => {
     api.softwareGL = softwareGL();
+    // live, on the CPU: the relay may let its browser yield (faceclean/ui/priority.py)
+    if (m.mode === "live") send({ type: "gl", software: api.softwareGL });
     face = faceView($("fc-canvas"), mesh, undefined, { light: api.softwareGL });
     new ResizeObserver(() => { face.fit(); redraw(); }).observe($("fc-canvas"));
     face.fit();

@@ -1,0 +1,136 @@
+"""The page's browser yields the CPU to the relay when the page draws on the CPU.
+
+Why (docs/BENCHMARKS.md, issue 20): on a machine without a GPU the page's WebGL runs in
+SwiftShader, on the CPUs the relay needs, and the relay's slow frames are frames where it
+was runnable and not run, behind the browser's threads. A process's own nice does not
+weigh between sessions: Linux groups each session's processes (sched(7), "autogroup") and
+shares the CPU between the groups by each group's nice. A browser runs in sessions of its
+own. Raising a group's nice needs no privilege for one's own processes, and it only
+lowers the group's share where the CPU is contended.
+
+The browser is found from the page's live channel: the loopback TCP socket whose local
+port is the page's end and whose remote port is the server's (/proc/net/tcp, tcp6), the
+process holding that socket (/proc/PID/fd), then the whole browser: up the parents while
+the program is the same, and every descendant of the topmost. Linux only; elsewhere, or
+without /proc, nothing is changed and the reason is said.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+PROC = Path("/proc")
+MAX_NICE = 19  # the lowest weight a group can be given
+
+
+def lower_page(server_port: int, page_port: int, nice: int) -> str:
+    """Set every autogroup of the browser holding the page's end of the connection
+    (127.0.0.1:page_port -> :server_port) to ``nice`` (our own group is never touched);
+    a line saying what was done."""
+    own = _autogroup(os.getpid())
+    if own is None:
+        return "the page's browser keeps its priority (no autogroups on this system)"
+    pids = _holders(_sockets(page_port, server_port))
+    if not pids:
+        return "the page's browser keeps its priority (its process was not found)"
+    done = yield_cpu(_browser(min(pids)), nice, own)
+    if not done:
+        return "the page's browser keeps its priority (not allowed to change it)"
+    return (f"the page draws on the CPU: its browser's sessions ({len(done)}) yield to the "
+            f"relay (autogroup nice {nice}; --ui-nice 0 leaves them)")  # fmt: skip
+
+
+def yield_cpu(pids: set[int], nice: int, own: str | None = None) -> list[str]:
+    """The autogroups of ``pids`` but ``own`` set to ``nice``; the groups set."""
+    done: list[str] = []
+    for pid in sorted(pids):
+        group = _autogroup(pid)
+        if group is None or group == own or group in done:
+            continue
+        with contextlib.suppress(OSError):  # gone, or not ours
+            (PROC / str(pid) / "autogroup").write_text(str(nice))
+            done.append(group)
+    return done
+
+
+def _autogroup(pid: int) -> str | None:
+    """'/autogroup-N' of ``pid`` (None: none, or no such process)."""
+    try:
+        return (PROC / str(pid) / "autogroup").read_text().split()[0]
+    except (OSError, IndexError):
+        return None
+
+
+def _sockets(local_port: int, remote_port: int) -> set[str]:
+    """Inodes of the loopback TCP sockets from ``local_port`` to ``remote_port``."""
+    found = set()
+    for table in ("tcp", "tcp6"):
+        with contextlib.suppress(OSError):
+            for line in (PROC / "net" / table).read_text().splitlines()[1:]:
+                f = line.split()  # sl local rem st tx:rx tr:when retrnsmt uid timeout inode
+                if len(f) > 9 and _port(f[1]) == local_port and _port(f[2]) == remote_port:
+                    found.add(f[9])
+    return found - {"0"}
+
+
+def _port(address: str) -> int:
+    return int(address.rsplit(":", 1)[1], 16)
+
+
+def _holders(inodes: set[str]) -> set[int]:
+    """The processes holding any of the sockets ``inodes`` (those we may look into)."""
+    links = {f"socket:[{i}]" for i in inodes}
+    pids = set()
+    for proc in _pids():
+        with contextlib.suppress(OSError):
+            for fd in (PROC / str(proc) / "fd").iterdir():
+                with contextlib.suppress(OSError):
+                    if os.readlink(fd) in links:
+                        pids.add(proc)
+                        break
+    return pids
+
+
+def _browser(pid: int) -> set[int]:
+    """``pid``'s program as a whole: up the parents while the executable is the same, then
+    the topmost one and every descendant."""
+    exe = _exe(pid)
+    top = pid
+    while True:
+        parent = _parent(top)
+        if parent is None or parent <= 1 or _exe(parent) != exe:
+            break
+        top = parent
+    children: dict[int, list[int]] = {}
+    for p in _pids():
+        parent = _parent(p)
+        if parent is not None:
+            children.setdefault(parent, []).append(p)
+    out, todo = set(), [top]
+    while todo:
+        p = todo.pop()
+        if p not in out:
+            out.add(p)
+            todo += children.get(p, [])
+    return out
+
+
+def _pids() -> list[int]:
+    return [int(p.name) for p in PROC.iterdir() if p.name.isdigit()]
+
+
+def _exe(pid: int) -> str | None:
+    try:
+        return os.readlink(PROC / str(pid) / "exe")
+    except OSError:
+        return None
+
+
+def _parent(pid: int) -> int | None:
+    try:
+        stat = (PROC / str(pid) / "stat").read_text()
+    except OSError:
+        return None
+    return int(stat.rsplit(")", 1)[1].split()[1])  # after "pid (comm) state": ppid
