@@ -103,13 +103,13 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def one_run(take: Path, seconds: float, browser, env: dict, pin: bool) -> dict:
+def one_run(take: Path, seconds: float, browser, env: dict, pin: bool, nice: int = 10) -> dict:
     out, stop = sink()
     port = free_port()
     page = browser is not None
     args = [sys.executable, "-m", "faceclean", "relay", "--listen", f"vmc://127.0.0.1:{port}",
             "--send", f"livelink://127.0.0.1:{out.getsockname()[1]}"]  # fmt: skip
-    args += ["--ui", "--no-browser"] if page else []
+    args += ["--ui", "--no-browser", "--ui-nice", str(nice)] if page else []
     relay = subprocess.Popen(
         args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
     )
@@ -227,8 +227,18 @@ def main() -> None:
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--pin", action="store_true", help="the relay on CPU 0, the rest on CPU 1")
     p.add_argument("--viewer", choices=("chromium", "socket"), default="chromium")
-    p.add_argument("--browser-nice", type=int, default=0,
-                   help="the autogroup nice of the browser's sessions (0-19: lower priority)")
+    p.add_argument(
+        "--browser-nice",
+        type=int,
+        default=0,
+        help="the autogroup nice of the browser's sessions (0-19: lower priority)",
+    )
+    p.add_argument(
+        "--ui-nice",
+        type=int,
+        default=10,
+        help="relay --ui-nice: the nice the relay gives a CPU-drawn page's browser",
+    )
     p.add_argument("--json")
     a = p.parse_args()
     if a.pin:
@@ -242,7 +252,7 @@ def main() -> None:
             browser_nice(a.browser_nice)
         for i in range(2 * a.runs):
             viewer = browser if a.viewer == "chromium" else "socket"
-            r = one_run(take, a.seconds, viewer if i % 2 else None, env, a.pin)
+            r = one_run(take, a.seconds, viewer if i % 2 else None, env, a.pin, a.ui_nice)
             runs.append(r)
             print(json.dumps(r), flush=True)
         sight = first_sight(take, browser, env, a.runs) if a.viewer == "chromium" else {}

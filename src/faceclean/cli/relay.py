@@ -48,6 +48,8 @@ the tuning page:
   --ui                           serve it (127.0.0.1, a free port, a per-start token; the
                                  URL is printed and opened): sliders, Calibrate, live
                                  faces and curves, settings saved as --preset/--calibration
+  --ui-nice 0                    leave the browser's priority as it is (by default a page
+                                 that draws on the CPU lets its browser yield to the relay)
 """
 )
 
