@@ -379,12 +379,11 @@ def test_a_request_without_the_token_is_refused(live, browser):
     page.close()
 
 
-def test_a_page_drawn_on_the_cpu_lets_its_browser_yield_to_the_relay():
+def test_a_page_drawn_on_the_cpu_lets_its_browser_yield_to_the_relay(browser):
     """relay --ui: the page (SwiftShader here) says it draws on the CPU, and the relay sets
     its browser's sessions to the autogroup nice --ui-nice asks (ui/priority.py), never its
     own. A browser of its own: the module's one keeps its weight."""
     from helpers import free_port
-    from playwright.sync_api import sync_playwright
 
     from faceclean.ui import priority
 
@@ -392,8 +391,8 @@ def test_a_page_drawn_on_the_cpu_lets_its_browser_yield_to_the_relay():
     relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{ports[0]}", "--send",
                         f"livelink://127.0.0.1:{ports[1]}", "--ui", "--ui-nice", "7"])  # fmt: skip
     own = priority._autogroup(relay.pid)
-    with reaped(relay), sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
+    with reaped(relay):
+        b = browser.browser_type.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
         try:
             tab = Tab(b, url)
             tab.until("window.faceclean.softwareGL === true")
