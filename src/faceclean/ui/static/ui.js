@@ -148,10 +148,11 @@ function start(m) {
   } else {
     api.ready = true;
   }
+  api.softwareGL = softwareGL();
+  // live, on the CPU: the relay may let its browser yield (faceclean/ui/priority.py); said
+  // at once, not after the mesh has loaded
+  if (m.mode === "live") send({ type: "gl", software: api.softwareGL });
   meshLoaded.then((mesh) => {
-    api.softwareGL = softwareGL();
-    // live, on the CPU: the relay may let its browser yield (faceclean/ui/priority.py)
-    if (m.mode === "live") send({ type: "gl", software: api.softwareGL });
     face = faceView($("fc-canvas"), mesh, undefined, { light: api.softwareGL });
     new ResizeObserver(() => { face.fit(); redraw(); }).observe($("fc-canvas"));
     face.fit();
