@@ -197,23 +197,14 @@ def first_sight(take: Path, browser, env: dict, runs: int) -> dict:
 
 
 def browser_nice(nice: int) -> list[str]:
-    """Sets the autogroup nice of every session the browser's processes run in, but this
-    script's own (so not the relay's): the scheduler's weight between sessions, which a
-    process's own nice does not change (sched(7), "autogroup"). Raising it needs no
-    privilege. Returns the groups set."""
-    own = Path("/proc/self/autogroup").read_text().split()[0]
-    found = subprocess.run(["pgrep", "-f", str(CHROMIUM_NAME)], capture_output=True, text=True)
-    done = []
-    for pid in found.stdout.split():
-        with contextlib.suppress(OSError):
-            group = Path(f"/proc/{pid}/autogroup").read_text().split()[0]
-            if group != own and group not in done:
-                Path(f"/proc/{pid}/autogroup").write_text(str(nice))
-                done.append(group)
-    return done
+    """Sets the autogroup nice of every session a Chromium process runs in, but this
+    script's own (so not the relay's), as the relay's own --ui-nice does for the page's
+    browser (faceclean/ui/priority.py). Returns the groups set."""
+    from faceclean.ui import priority
 
-
-CHROMIUM_NAME = "chromium"
+    found = subprocess.run(["pgrep", "-f", "chromium"], capture_output=True, text=True)
+    pids = {int(p) for p in found.stdout.split()}
+    return priority.yield_cpu(pids, nice, priority._autogroup(os.getpid()))
 
 
 def main() -> None:

@@ -432,7 +432,7 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None =
     m = np.clip(lin, 0.0, 1.0)
     lo = np.flatnonzero(a.get("lift_gain", np.zeros(0)) > 0)
     if len(lo):  # the lift: m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (u_j - r_j - k)
-        j = [w.inputs.index(w.outputs[i]) for i in lo]
+        j = _own(w)[lo]  # each lifted output's own input
         rise = a["lift_gain"][lo] * (u[:, j] - r[:, j] - a["lift_knee"][lo])
         if w.config.get("lift_top"):  # the largest lift so far, from the pair's first frame
             rise = rise / np.maximum(np.maximum.accumulate(rise, axis=0), 1.0)
