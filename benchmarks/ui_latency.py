@@ -196,15 +196,14 @@ def first_sight(take: Path, browser, env: dict, runs: int) -> dict:
             "first_runs": runs}  # fmt: skip
 
 
-def browser_nice(nice: int) -> list[str]:
-    """Sets the autogroup nice of every session a Chromium process runs in, but this
-    script's own (so not the relay's), as the relay's own --ui-nice does for the page's
-    browser (faceclean/ui/priority.py). Returns the groups set."""
+def browser_nice(nice: int) -> str:
+    """Every Chromium process yields at ``nice`` (its sessions where sessions weigh, else
+    its threads), as the relay's own --ui-nice does for the page's browser
+    (faceclean/ui/priority.py); this script and the relay are never lowered. What was set."""
     from faceclean.ui import priority
 
     found = subprocess.run(["pgrep", "-f", "chromium"], capture_output=True, text=True)
-    pids = {int(p) for p in found.stdout.split()}
-    return priority.yield_cpu(pids, nice, priority._autogroup(os.getpid()))
+    return priority.yield_cpu({int(p) for p in found.stdout.split()}, nice)
 
 
 def main() -> None:
@@ -222,7 +221,7 @@ def main() -> None:
         "--browser-nice",
         type=int,
         default=0,
-        help="the autogroup nice of the browser's sessions (0-19: lower priority)",
+        help="the nice of the browser (0-19: lower priority; see ui/priority.py)",
     )
     p.add_argument(
         "--ui-nice",

@@ -1,49 +1,84 @@
 """ui/priority.py on a real loopback connection: the process at the connection's far end,
-in a session of its own, gets the autogroup nice asked; ours never does."""
+in a session of its own, yields at the nice asked (its autogroup where sessions weigh, each
+of its threads where they do not); ours never does."""
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 
 from faceclean.ui import priority
 
-pytestmark = pytest.mark.skipif(
-    not Path("/proc/self/autogroup").exists(), reason="no autogroups on this system"
-)
+pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="no /proc")
 
 PEER = """
-import socket, sys
+import socket, sys, threading
 s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+threads = [threading.Thread(target=sys.stdin.read, daemon=True) for _ in range(2)]
+for t in threads:
+    t.start()
 print(s.getsockname()[1], flush=True)
-sys.stdin.read()  # hold the connection until told to go
+threads[0].join()  # hold the connection until told to go
 """
 
 
-def test_the_page_end_of_a_connection_yields_and_we_do_not():
+@contextmanager
+def peer():
+    """(server port, page port, the peer's pid): a process in a session of its own holding
+    the far end of a loopback connection, with three threads."""
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(1)
     port = server.getsockname()[1]
-    peer = subprocess.Popen([sys.executable, "-c", PEER, str(port)], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-c", PEER, str(port)], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
     try:
         conn, _ = server.accept()
-        page_port = int(peer.stdout.readline())
-        ours = Path("/proc/self/autogroup").read_text()
-        line = priority.lower_page(port, page_port, 5)
-        assert "yield to the relay (autogroup nice 5" in line, line
-        assert Path(f"/proc/{peer.pid}/autogroup").read_text().endswith("nice 5\n")
-        assert Path("/proc/self/autogroup").read_text() == ours  # our own group: untouched
-        assert priority.yield_cpu({peer.pid}, 6, priority._autogroup(peer.pid)) == []  # own kept
-        # a port nobody holds: nothing found, nothing changed, said so
-        assert "not found" in priority.lower_page(port, 1, 5)
+        yield port, int(proc.stdout.readline()), proc.pid
         conn.close()
     finally:
-        peer.stdin.close()
-        peer.wait(10)
+        proc.stdin.close()
+        proc.wait(10)
         server.close()
+
+
+def nices(pid: int) -> list[int]:
+    tasks = Path(f"/proc/{pid}/task").iterdir()
+    return [os.getpriority(os.PRIO_PROCESS, int(t.name)) for t in tasks]
+
+
+def test_the_page_end_of_a_connection_yields_and_we_do_not():
+    ours, base = nices(os.getpid()), os.getpriority(os.PRIO_PROCESS, 0)
+    own = priority._autogroup(os.getpid())
+    group_nice = Path("/proc/self/autogroup").read_text() if own is not None else ""
+
+    def at(n: int) -> list[int]:  # a runner may have started us niced already
+        return [max(base, n)] * 3
+
+    with peer() as (port, page_port, pid):
+        group = priority._autogroup(pid)  # None where this system gives none
+        sessions = "sessions (1) and " if group is not None and group != own else ""
+        # found through the connection: its session (where it has one) and its threads
+        line = priority.lower_page(port, page_port, 5)
+        said = f"its browser's {sessions}threads (3) yield to the relay (nice 5)"
+        assert line.startswith("the page draws on the CPU: ") and said in line, line
+        assert nices(pid) == at(5)
+        if sessions:
+            assert Path(f"/proc/{pid}/autogroup").read_text().endswith("nice 5\n")
+        assert priority.yield_cpu({pid}, 3).endswith("threads (3) yield to the relay (nice 3)")
+        assert nices(pid) == at(5)  # a nicer thread is left as it is
+        # ourselves, our parents and our session are never lowered, whatever is asked
+        assert priority.yield_cpu({os.getpid(), os.getppid()}, 9) == ""
+        assert nices(os.getpid()) == ours and priority._autogroup(os.getpid()) == own
+        if own is not None:
+            assert Path("/proc/self/autogroup").read_text() == group_nice
+            assert priority.yield_groups({pid}, 6, group) == []  # the group named is kept
+        # a port nobody holds: nothing found, nothing changed, said so
+        assert "not found" in priority.lower_page(port, 1, 9)
+        assert nices(pid) == at(5)

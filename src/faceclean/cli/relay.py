@@ -81,8 +81,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=int,
         default=10,
         metavar="N",
-        help="when the page draws on the CPU (no GPU), its browser's sessions yield to the "
-        "relay at this autogroup nice, 1-19 (Linux; default 10; 0: leave them)",
+        help="when the page draws on the CPU (no GPU), its browser yields to the relay at this "
+        "nice, 1-19 (Linux: its sessions' autogroups, else each of its threads; default 10; "
+        "0: leave it)",
     )
 
 

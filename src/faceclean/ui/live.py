@@ -97,7 +97,7 @@ class Live(Base):
     def __init__(self, tuning: Tuning, relay: Any, tap: Tap, describe: str, nice: int = 0) -> None:
         super().__init__(tuning)
         self.relay, self.tap, self.what = relay, tap, describe
-        self.nice = nice  # a software-drawn page's browser yields at this autogroup nice
+        self.nice = nice  # a software-drawn page's browser yields at this nice (ui/priority.py)
         self._yielded = False
         self.channels = [ARKIT52.index(c) for c in ("jawOpen", "eyeBlinkLeft")]
         self.calibrating: tuple[float, float | None] | None = None  # (seconds, t0)
