@@ -2,9 +2,18 @@
 
 from __future__ import annotations
 
+import signal
+
 import pytest
 
 from faceclean.settings import MODELS, takes_dir
+
+# The Ctrl-C tests send SIGINT to commands they start. A shell starts a background job with
+# SIGINT ignored, and an ignored signal stays ignored across exec, so under `make test &`
+# those commands would rightly ignore it. The tests play a foreground terminal: a handled
+# SIGINT here is reset to the default in every child.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session")
