@@ -82,3 +82,25 @@ def test_the_page_end_of_a_connection_yields_and_we_do_not():
         # a port nobody holds: nothing found, nothing changed, said so
         assert "not found" in priority.lower_page(port, 1, 9)
         assert nices(pid) == at(5)
+
+
+def test_a_session_the_browser_does_not_lead_keeps_its_group():
+    # a shell leads a session of its own and starts the peer in it: the peer shares the
+    # session (as an app launched by a desktop shares the desktop's), so its group is left
+    # unless the leader is part of what yields
+    shell = subprocess.Popen(["sh", "-c", "sleep 30 & echo $!; wait"], stdout=subprocess.PIPE,
+                             text=True, start_new_session=True)  # fmt: skip
+    try:
+        child = int(shell.stdout.readline())
+        group = priority._autogroup(child)
+        if group is None or group == priority._autogroup(os.getpid()):
+            pytest.skip("no autogroups weigh on this system")
+        before = Path(f"/proc/{child}/autogroup").read_text()
+        assert os.getsid(child) == shell.pid != child
+        assert priority.yield_groups({child}, 8) == []
+        assert Path(f"/proc/{child}/autogroup").read_text() == before
+        assert priority.yield_groups({shell.pid, child}, 8) == [group]
+        assert Path(f"/proc/{child}/autogroup").read_text().endswith("nice 8\n")
+    finally:
+        os.killpg(shell.pid, 9)  # the shell and its sleep: the session's one group
+        shell.wait(10)

@@ -7,7 +7,8 @@ for one's own processes, and it only lowers a share where the CPU is contended. 
 weighs depends on how the scheduler groups tasks (sched(7)), so both are set:
 - a session's autogroup nice: with autogroups (a desktop's default) each session's threads
   are one group, the CPU is shared between groups by each group's nice, and a thread's own
-  nice does not weigh across them. A browser runs in sessions of its own.
+  nice does not weigh across them. A browser started by the relay or a driver runs in
+  sessions of its own; only sessions the browser leads are set, never one it shares.
 - each thread's own nice: without autogroups (turned off, or a process in a container's CPU
   cgroup, where /proc/PID/autogroup reads empty), or with the browser in the relay's own
   session, threads share by their own nice. Nice is per thread in Linux; threads started
@@ -58,11 +59,13 @@ def yield_cpu(pids: set[int], nice: int) -> str:
 
 
 def yield_groups(pids: set[int], nice: int, own: str | None = None) -> list[str]:
-    """The autogroups of ``pids`` but ``own`` set to ``nice``; the groups set."""
+    """The autogroups of the sessions ``pids`` lead, but ``own``, set to ``nice``; the
+    groups set. A session led by another program (a desktop's, whose apps share it) is
+    left: its group nice would lower every app in it."""
     done: list[str] = []
     for pid in sorted(pids):
         group = _autogroup(pid)
-        if group is None or group == own or group in done:
+        if group is None or group == own or group in done or _session(pid) not in pids:
             continue
         with contextlib.suppress(OSError):  # gone, or not ours
             (PROC / str(pid) / "autogroup").write_text(str(nice))
@@ -92,6 +95,14 @@ def _ours() -> set[int]:
         out.add(pid)
         pid = _parent(pid) or 0
     return out
+
+
+def _session(pid: int) -> int | None:
+    """The session id of ``pid`` (None: no such process)."""
+    try:
+        return os.getsid(pid)
+    except OSError:
+        return None
 
 
 def _autogroup(pid: int) -> str | None:
