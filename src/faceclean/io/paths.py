@@ -121,6 +121,24 @@ def distinct(*paths: str | os.PathLike | None) -> None:
         seen[real] = str(p)
 
 
+KERNEL = ("/proc", "/sys")  # pseudo-filesystems: "regular" files that are the kernel's
+
+
+def kernel(path: str | os.PathLike, st: os.stat_result) -> bool:
+    """Whether a "regular" file is one of the kernel's (``/proc/self/mem``, a ``/sys``
+    attribute): on the filesystem of /proc or /sys, or under them once links are
+    resolved. Such a file is no take: it may block, fail mid-read or never end."""
+    for root in KERNEL:
+        with contextlib.suppress(OSError, ValueError):
+            if os.stat(root).st_dev == st.st_dev:
+                return True
+    try:
+        real = os.path.realpath(path)
+    except (OSError, ValueError):
+        return False
+    return any(real == root or real.startswith(root + "/") for root in KERNEL)
+
+
 def kind(mode: int) -> str:
     """What a non-regular file is, in words."""
     for test, name in (

@@ -75,6 +75,8 @@ def regular(path: str | os.PathLike, what: str = "file") -> os.stat_result:
         raise FacecleanError(f"is a folder, not a file: {p}")
     if not stat.S_ISREG(st.st_mode):
         raise FacecleanError(f"{p}: {kind(st.st_mode)}, not a regular file")
+    if paths.kernel(p, st):  # /proc/self/mem stats as a regular file of 0 bytes
+        raise FacecleanError(f"{p}: a kernel file (/proc, /sys), not a regular file")
     paths.note_input(st)  # a command never overwrites what it reads (io.paths)
     return st
 
@@ -96,9 +98,12 @@ def read_bytes(path: str | os.PathLike, limit: int = MAX_FILE, what: str = "file
         raise FacecleanError(f"{p.name}: {size_text(size)}, over the {size_text(limit)} limit")
     parts, total = [], 0
     with open_binary(p, what) as f:  # the stat size first, then on while it grows
-        while total <= limit and (part := f.read(min(size, limit) + 1 if not parts else MiB)):
-            parts.append(part)
-            total += len(part)
+        try:
+            while total <= limit and (part := f.read(min(size, limit) + 1 if not parts else MiB)):
+                parts.append(part)
+                total += len(part)
+        except OSError as e:  # a disk error, a file that fails mid-read: one line
+            raise FacecleanError(f"cannot read {p}: {e.strerror or e}") from None
     if total > limit:
         raise FacecleanError(f"{p.name}: over the {size_text(limit)} limit")
     return b"".join(parts) if len(parts) != 1 else parts[0]
