@@ -273,7 +273,7 @@ class Live(Base):
             tops = tops_of(old) if old is not None else None
             live = calibrate(anim, elapsed + 1e-9, tops=tops or None, take="live")
             live = _with_hold(live, hold[0][0], hold[-1][0])
-            self.use(self.tuning.calibrated(live).with_choice())
+            self.use(self.tuning.calibrated(live).with_choice(), None, "calibrate")
         except FacecleanError as e:
             self.broadcast({"type": "error", "for": "calibrate", "message": f"faceclean: {e}"})
 

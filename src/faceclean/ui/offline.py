@@ -31,11 +31,16 @@ from faceclean.ui.session import MAX_PATH, Base, number, seq, text
 from faceclean.ui.tuning import Tuning
 
 WARM = 2.0  # s cleaned before the shown window, so a causal cleaner has settled there
+PROBE = 2.0  # s of the take a new tuning must clean before it is taken (``apply``)
 MAX_NEUTRAL = 60.0  # s, the longest neutral hold
+F32_MAX = float(np.finfo(np.float32).max)
 
 
 def packet(kind: str, seq: int | None, start: int, values: np.ndarray) -> bytes:
-    """One binary message (module docstring): values (n, 52)."""
+    """One binary message (module docstring): values (n, 52); NaN is the one missing
+    mark, so an infinite value, or one beyond float32, goes out as NaN, never inf."""
+    values = np.asarray(values, np.float64)
+    values = np.where(np.abs(values) <= F32_MAX, values, np.nan)
     head = json.dumps(
         {"kind": kind, "seq": seq, "start": start, "count": len(values), "channels": 52}
     ).encode()
@@ -61,11 +66,12 @@ class Offline(Base):
         super().__init__(tuning)
         self.cleaned: np.ndarray | None = None  # (N, 52) of the whole take, current tuning
         self.cleaned_seq: int | None = None
+        self.good: Tuning | None = None  # the last tuning that cleaned the whole take
         self.window = (0.0, min(10.0, float(np.nanmax(self.times))))  # s, what the page shows
         self._work = threading.Condition()
-        self._job: tuple[Tuning, int | None] | None = None
+        self._job: tuple[Tuning, int | None, str | None] | None = None
         self._worker = threading.Thread(target=self._run, name="faceclean-ui-clean", daemon=True)
-        self._job = (self.tuning, None)
+        self._job = (self.tuning, None, None)
         self._worker.start()
 
     def hello(self) -> dict[str, Any]:
@@ -88,10 +94,19 @@ class Offline(Base):
         if cleaned is not None:
             client.send_bytes(packet("cleaned", s, 0, cleaned))
 
-    def use(self, tuning: Tuning, seq: int | None = None) -> None:
-        super().use(tuning, seq)
+    def apply(self, tuning: Tuning) -> None:
+        """Refuse, with the CLI's reason, a tuning that does not clean the take's first
+        PROBE s as ``clean`` would (its ``check_finite``: Kalman ``r=1e300`` turns the
+        finite take into NaN): the page's state stays what it was. What only fails
+        further on is refused by the worker, which puts the last good tuning back."""
+        t = self.times - np.nanmin(self.times)
+        n = max(int(np.searchsorted(t, PROBE, side="right")), 8)
+        tuning.clean(Animation(self.times[:n], self.take.values[:n], self.take.names))
+
+    def use(self, tuning: Tuning, seq: int | None = None, answers: str | None = None) -> None:
+        super().use(tuning, seq, answers)
         with self._work:
-            self._job = (tuning, seq)
+            self._job = (tuning, seq, answers)
             self._work.notify()
 
     # -- messages -------------------------------------------------------------------------
@@ -109,7 +124,7 @@ class Offline(Base):
         keep = np.flatnonzero(~(t < start))  # from the playhead on (NaN times kept)
         part = Animation(self.times[keep], self.take.values[keep], self.take.names)
         adjust = calibrate(part, seconds, take=self.path.name)
-        self.use(self.tuning.calibrated(adjust).with_choice(), seq(m))
+        self.use(self.tuning.calibrated(adjust).with_choice(), seq(m), "calibrate")
 
     def on_export(self, client: Client, m: dict[str, Any]) -> None:
         from faceclean import io
@@ -129,19 +144,37 @@ class Offline(Base):
             with self._work:
                 while self._job is None:
                     self._work.wait()
-                tuning, s = self._job
+                tuning, s, answers = self._job
                 self._job = None
             try:
                 self._window(tuning, s)
                 if self._newer():
                     continue
                 full = tuning.clean(self.take).arkit()[0]
-            except FacecleanError as e:  # e.g. a model that erases the face
-                self.broadcast({"type": "error", "seq": s, "message": f"faceclean: {e}"})
+            except FacecleanError as e:  # e.g. a model that erases the face further on
+                self._refused(tuning, s, answers, e)
                 continue
             with self.lock:
-                self.cleaned, self.cleaned_seq = full, s
+                self.cleaned, self.cleaned_seq, self.good = full, s, tuning
             self.broadcast_bytes(packet("cleaned", s, 0, full))
+
+    def _refused(
+        self, tuning: Tuning, s: int | None, answers: str | None, e: FacecleanError
+    ) -> None:
+        """The take refused ``tuning``: the pages are told which request failed, and the
+        last tuning that cleaned the whole take is the state again (so a save never
+        writes what was refused)."""
+        self.broadcast({"type": "error", "for": answers, "seq": s, "message": f"faceclean: {e}"})
+        with self.lock:
+            back = self.good if self.tuning is tuning and self.good is not None else None
+            if back is not None:
+                self.tuning = back
+        if back is not None:
+            self.broadcast({"type": "state", "seq": s, **back.describe()})
+            with self.lock:
+                cleaned, at = self.cleaned, self.cleaned_seq
+            if cleaned is not None:
+                self.broadcast_bytes(packet("cleaned", at, 0, cleaned))
 
     def _newer(self) -> bool:
         with self._work:

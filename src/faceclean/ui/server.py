@@ -19,7 +19,6 @@ import contextlib
 import hashlib
 import hmac
 import http
-import json
 import logging
 import re
 import secrets
@@ -28,6 +27,7 @@ from pathlib import Path
 from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
+from faceclean import strict_json
 from faceclean.errors import FacecleanError
 
 HERE = Path(__file__).resolve().parent
@@ -37,6 +37,7 @@ MAX_SENDS = 64  # messages queued to a slow page before the oldest views are dro
 TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8"}
 TYPES[".css"] = "text/css; charset=utf-8"
 MESH = "/mesh.json"  # the face the page draws (Session.mesh), besides the files
+ONCE = ("Host", "Origin", "Sec-Fetch-Site", "Cookie")  # headers a request carries once at most
 
 
 def files() -> dict[str, Path]:
@@ -64,7 +65,8 @@ class Client:
         self._lock = threading.Lock()
 
     def send(self, message: dict[str, Any]) -> None:
-        self._send(json.dumps(message, separators=(",", ":"), allow_nan=False))
+        """``message`` as strict JSON: a non-finite number goes out as null (missing)."""
+        self._send(strict_json.dumps(message, separators=(",", ":")))
 
     def send_bytes(self, data: bytes) -> None:
         self._send(data)
@@ -159,7 +161,11 @@ class Server:
 
     # -- HTTP: every request, the live channel's handshake included ------------------------
     def refusal(self, headers: Any, target: str) -> str | None:
-        """Why a request is refused (None: it is not): Host, Origin, token, in that order."""
+        """Why a request is refused (None: it is not): a header that must come once given
+        twice, then Host, Origin, token, in that order."""
+        for key in ONCE:  # two Hosts: which one would the browser have meant?
+            if len(headers.get_all(key)) > 1:
+                return f"the {key} header given more than once"
         if headers.get("Host") not in self.hosts:
             return "unknown Host (this server answers to 127.0.0.1 and localhost only)"
         origin = headers.get("Origin")
@@ -175,6 +181,15 @@ class Server:
         return None
 
     def _request(self, connection: Any, request: Any) -> Any:
+        """The answer to one request (None: the live channel's handshake goes on). Never
+        a 500: whatever goes wrong in here is a refusal of that request, in one line."""
+        try:
+            return self._answer(connection, request)
+        except Exception as e:  # e.g. a header the library cannot parse as one value
+            why = " ".join(f"{type(e).__name__}: {e}".split())[:200]
+            return _text(connection, http.HTTPStatus.BAD_REQUEST, f"bad request ({why})")
+
+    def _answer(self, connection: Any, request: Any) -> Any:
         from websockets.datastructures import Headers
         from websockets.http11 import Response
 
@@ -207,8 +222,6 @@ class Server:
     # -- the live channel -------------------------------------------------------------------
     def _channel(self, connection: Any) -> None:
         from websockets.exceptions import ConnectionClosed
-
-        from faceclean import strict_json
 
         client = Client(connection)
         self.session.attach(client)

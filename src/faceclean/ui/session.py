@@ -15,6 +15,8 @@ import math
 import threading
 from typing import Any
 
+import numpy as np
+
 from faceclean.adjust import Adjust
 from faceclean.channels import ARKIT52, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError
@@ -92,9 +94,11 @@ class Base:
             )
         getattr(self, "on_" + kind)(client, message)
 
-    def use(self, tuning: Tuning, seq: int | None = None) -> None:
-        """Make ``tuning`` current (already checked), let the mode act on it, tell the pages."""
-        with self.lock:
+    def use(self, tuning: Tuning, seq: int | None = None, answers: str | None = None) -> None:
+        """Make ``tuning`` current (already checked), let the mode act on it, tell the pages.
+        ``answers``: the message type it answers (a later refusal says it as ``for``).
+        The mode's ``apply`` refuses it by raising: then nothing changes."""
+        with self.lock, np.errstate(all="ignore"):  # results are checked, not warned about
             self.apply(tuning)
             self.tuning = tuning
         self.broadcast({"type": "state", "seq": seq, **tuning.describe()})
@@ -106,7 +110,7 @@ class Base:
         words = text(m, "words", optional=True)
         items = texts(m, "items")
         tracker = text(m, "tracker", optional=True)
-        self.use(self.tuning.changed(words, items, tracker), seq(m))
+        self.use(self.tuning.changed(words, items, tracker), seq(m), "set")
 
     def on_save(self, client: Client, m: dict[str, Any]) -> None:
         what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
@@ -127,13 +131,13 @@ class Base:
     def on_load(self, client: Client, m: dict[str, Any]) -> None:
         what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
         if what == "preset":
-            self.use(self.tuning.changed(path, [], self.tuning.tracker), seq(m))
+            self.use(self.tuning.changed(path, [], self.tuning.tracker), seq(m), "load")
         else:
             adjust = Adjust.load(path)
-            self.use(self.tuning.calibrated(adjust, path).with_choice(), seq(m))
+            self.use(self.tuning.calibrated(adjust, path).with_choice(), seq(m), "load")
 
     def on_uncalibrate(self, client: Client, m: dict[str, Any]) -> None:
-        self.use(self.tuning.calibrated(None).with_choice(), seq(m))
+        self.use(self.tuning.calibrated(None).with_choice(), seq(m), "uncalibrate")
 
 
 # -- field checks ----------------------------------------------------------------------------
@@ -150,6 +154,10 @@ def text(m: dict[str, Any], key: str, *, optional: bool = False, limit: int = MA
         raise FacecleanError(f"{key}: expected a text")
     if len(v) > limit or "\x00" in v:
         raise FacecleanError(f"{key}: at most {limit} characters, no NUL")
+    try:  # JSON's "\ud800" is a lone surrogate: no file name, no UTF-8 text holds it
+        v.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raise FacecleanError(f"{key}: not valid Unicode (a lone surrogate at {e.start})") from None
     return v.strip()
 
 
