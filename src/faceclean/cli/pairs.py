@@ -58,6 +58,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="also each pair's calibration clip (neutral, then a range of motion) with the same "
         "face and camera: NAME.rom.tracked.csv, NAME.rom.truth.csv (for calibration rows)",
     )
+    p.add_argument(
+        "--families",
+        default="painted",
+        help="appearance families, dealt in turn within each source: painted, photo, dressed "
+        "(default painted; docs/MODEL.md)",
+    )
+    p.add_argument(
+        "--portraits",
+        nargs="+",
+        metavar="PATH",
+        help="the photo family's portraits: images, folders, or the sdists docs/DATA.md names "
+        "(default ~/.cache/faceclean/portraits, filled by make portraits)",
+    )
+    p.add_argument(
+        "--independent",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N performers whose channels move one by one over their whole range",
+    )
+    p.add_argument(
+        "--neutral",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="also hold every scene's face at rest for S seconds (group 'neutral')",
+    )
     p.add_argument("--list", action="store_true", help="print this shard's jobs and stop")
 
 
@@ -71,13 +98,23 @@ def run(args: argparse.Namespace) -> int:
 
     pool_of.count(args.jobs, None)  # --jobs 0: refused before any take is read
 
-    jobs = engine.shard(_plan(args), *_shard(args.shard))
+    families = _families(args.families)
+    head, model = _files(args)
+    worker, usable = None, ()
+    if "photo" in families:  # the portraits that fit, before the plan deals them out
+        worker = engine.Worker(head, model, _portraits(args.portraits))
+        ok, skipped = worker.usable()
+        for line in skipped:
+            print(f"faceclean: {line}", file=sys.stderr)
+        if not ok:
+            raise FacecleanError("the photo family has no usable portrait (see above)")
+        usable = tuple(ok)
+    jobs = engine.shard(_plan(args, families, usable), *_shard(args.shard))
     out = Path(args.output)
     if args.list:
         for job in jobs:
             print(job.name, "(done)" if engine.done(job, out) else "")
         return 0
-    head, model = _files(args)
     todo = []  # in plan order, each pair followed by its calibration clip
     for j in jobs:
         todo += [(j, "pair")] if not engine.done(j, out) else []
@@ -88,7 +125,9 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise FacecleanError(f"cannot make the output folder {out}: {e.strerror or e}") from None
-    worker = engine.Worker(head, model)  # a bad mesh or model file: one line, before any job
+    portraits = [str(p) for p in _portraits(args.portraits)] if usable else []
+    # a bad mesh or model file: one line, before any job
+    worker = worker or engine.Worker(head, model, portraits)
     workers, note = pool_of.count(args.jobs, len(todo), "pairs to make")
     if note and todo:
         print(note, file=sys.stderr)
@@ -104,7 +143,8 @@ def run(args: argparse.Namespace) -> int:
                 _done(bar, _label(job, kind), _safe(worker, job, kind, out), failed)
         elif todo:
             del worker  # spawned workers (never a fork of MediaPipe) that die with this process
-            with pool_of.Pool(workers, initializer=_init, initargs=(str(head), str(model))) as pool:
+            init = (str(head), str(model), portraits)
+            with pool_of.Pool(workers, initializer=_init, initargs=init) as pool:
                 futures = {
                     pool.submit(_job, job, kind, str(out)): _label(job, kind) for job, kind in todo
                 }
@@ -119,7 +159,32 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plan(args: argparse.Namespace) -> list:
+def _families(text: str) -> tuple[str, ...]:
+    from faceclean.synthetic.scene import FAMILIES
+
+    names = tuple(dict.fromkeys(s.strip() for s in text.split(",") if s.strip()))
+    bad = [f for f in names if f not in FAMILIES]
+    if bad or not names:
+        raise FacecleanError(
+            f"unknown appearance family {bad[0] if bad else '(none)'!r} "
+            f"(one of: {', '.join(FAMILIES)})"
+        )
+    return names
+
+
+def _portraits(given: list[str] | None) -> list[Path]:
+    if given:
+        return [Path(g) for g in given]
+    cache = Path.home() / ".cache" / "faceclean" / "portraits"
+    if not cache.is_dir():
+        raise FacecleanError(
+            f"no portraits in {cache}: run make portraits (or give --portraits PATH)"
+        )
+    return [cache]
+
+
+def _plan(args: argparse.Namespace, families: tuple[str, ...] = ("painted",),
+          portraits: tuple[str, ...] = ()) -> list:  # fmt: skip
     from faceclean import io, settings
     from faceclean.batch import plan as files_of
     from faceclean.synthetic import engine
@@ -141,8 +206,11 @@ def _plan(args: argparse.Namespace) -> list:
         raise FacecleanError(f"--rates must lie in 24-60 Hz, got {args.rates!r}")
     if not 0.0 <= args.webcam_share <= 1.0:
         raise FacecleanError(f"--webcam-share must be in [0, 1], got {args.webcam_share}")
-    if not 0 <= args.synthetic <= 100_000:
-        raise FacecleanError(f"--synthetic must be in [0, 100000], got {args.synthetic}")
+    for flag, n in (("--synthetic", args.synthetic), ("--independent", args.independent)):
+        if not 0 <= n <= 100_000:
+            raise FacecleanError(f"{flag} must be in [0, 100000], got {n}")
+    if not 0.0 <= args.neutral <= 60.0:
+        raise FacecleanError(f"--neutral must be in [0, 60] s, got {args.neutral}")
     paths = []
     if args.shared:
         root = settings.takes_dir()
@@ -159,11 +227,15 @@ def _plan(args: argparse.Namespace) -> list:
     for p in paths:
         anim = io.load(p)  # an unreadable take: one line, before any work
         takes.append((str(p), Path(p).resolve().parent.name, anim.duration))
-    if not takes and args.synthetic == 0:
-        raise FacecleanError("nothing to render: give takes, --shared or --synthetic N")
+    if not takes and args.synthetic == 0 and args.independent == 0:
+        raise FacecleanError(
+            "nothing to render: give takes, --shared, --synthetic N or --independent N"
+        )
     return engine.plan(
-        takes, args.synthetic, args.seconds, names, rates, args.seed, args.webcam_share, held
-    )
+        takes, args.synthetic, args.seconds, names, rates, args.seed, args.webcam_share, held,
+        families=families, portraits=portraits, independent=args.independent,
+        neutral=args.neutral,
+    )  # fmt: skip
 
 
 def _shard(text: str) -> tuple[int, int]:
@@ -214,11 +286,11 @@ def _safe(worker, job, kind: str, out) -> tuple[bool, str]:
 _WORKER = None
 
 
-def _init(head: str, model: str) -> None:
+def _init(head: str, model: str, portraits: list[str]) -> None:
     global _WORKER
     from faceclean.synthetic import engine
 
-    _WORKER = engine.Worker(head, model)
+    _WORKER = engine.Worker(head, model, portraits)
 
 
 def _job(job, kind: str, out: str) -> tuple[bool, str]:

@@ -42,12 +42,26 @@ def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = Fal
     return Animation.from_arkit(t, np.clip(x, 0.0, 1.0))
 
 
-def _range_of_motion(x: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> None:
+def independent(seconds: float, seed: int, fps: float = 60.0) -> Animation:
+    """A performer with no habits: every channel moves on its own over its whole range (the
+    range-of-motion layer alone, events twice as dense), so that no source's co-activation
+    (a smile that always comes with a squint) is learned as truth. Values in [0, 1]."""
+    if not (np.isfinite(seconds) and 0.0 < seconds <= 24 * 3600.0):
+        raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
+    rng = np.random.default_rng(check_seed(seed))
+    t = np.arange(max(int(round(seconds * fps)), 1) + 1) / fps
+    x = np.zeros((len(t), 52))
+    _range_of_motion(x, t, rng, density=2.0)
+    return Animation.from_arkit(t, np.clip(x, 0.0, 1.0))
+
+
+def _range_of_motion(x: np.ndarray, t: np.ndarray, rng: np.random.Generator,
+                     density: float = 1.0) -> None:  # fmt: skip
     """Every channel, one event every 2-8 s on average: a smooth rise over 40 ms-1 s to
     a peak anywhere in 0.2-1 (a third of the events the channel's full 1), held 0-1.5 s,
     released as slowly or fast; left/right pairs move together a third of the time."""
     for j in range(52):
-        for s in _events(t[-1], rng.uniform(2.0, 8.0), rng):
+        for s in _events(t[-1], rng.uniform(2.0, 8.0) / density, rng):
             peak = 1.0 if rng.random() < 1 / 3 else rng.uniform(0.2, 1.0)
             attack, hold, release = (
                 rng.uniform(0.04, 1.0),

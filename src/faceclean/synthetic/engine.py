@@ -19,7 +19,7 @@ import hashlib
 import json
 import os
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,9 @@ from faceclean.timing import resample, stream_times
 FORMAT = "faceclean-pair/1"
 SYNTH = "synth:"  # source prefix of a synthetic performer: "synth:SEED"
 SYNTH_GROUP = "synthetic"  # the performance group every synthetic performer is in
+# a performer whose channels move one by one over their whole range, no habits between them
+INDEPENDENT = "independent:"  # "independent:SEED", group "independent"
+NEUTRAL = "neutral:"  # a face at rest (all weights 0): "neutral:", group "neutral"
 POSE = ("HeadYaw", "HeadPitch", "HeadRoll")
 
 
@@ -45,14 +48,20 @@ class Job:
     setting: str  # render setting (scene.SETTINGS)
     rate: float  # Hz, the tracker's nominal frame rate
     webcam: bool  # irregular timing with dropped frames, as a webcam delivers
+    family: str = "painted"  # appearance family (scene.FAMILIES)
+    portrait: str = ""  # the photo family's portrait
 
     @property
     def name(self) -> str:
-        stem = re.sub(r"[^A-Za-z0-9_-]+", "-", Path(self.source.removeprefix(SYNTH)).stem)
+        src = self.source
+        for prefix in (SYNTH, INDEPENDENT, NEUTRAL):
+            src = src.removeprefix(prefix)
+        stem = re.sub(r"[^A-Za-z0-9_-]+", "-", Path(src or "hold").stem)
         key = json.dumps(asdict(self), sort_keys=True).encode()
         digest = hashlib.sha1(key).hexdigest()[:8]
         timing = "webcam" if self.webcam else f"{self.rate:g}fps"
-        return f"{self.group}-{stem}-{self.start:g}s-{self.setting}-{timing}-{digest}"
+        look = f"{self.family}-" + (f"{self.portrait}-" if self.portrait else "")
+        return f"{self.group}-{stem}-{self.start:g}s-{look}{self.setting}-{timing}-{digest}"
 
 
 def plan(
@@ -64,12 +73,20 @@ def plan(
     seed: int = 0,
     webcam_share: float = 0.25,
     held_out: tuple[str, ...] = (),
+    families: tuple[str, ...] = ("painted",),
+    portraits: tuple[str, ...] = (),
+    independent: int = 0,
+    neutral: float = 0.0,
 ) -> list[Job]:
-    """Jobs over ``takes`` [(path, group, duration s)] cut into ``seconds`` clips, and
-    ``synthetic`` full-range performers. Each clip is rendered once in a setting drawn from
-    ``settings`` and once more in each ``held_out`` setting (for evaluation), each time with
-    a new scene (identity, light, camera) and a rate and timing drawn from ``seed``. Clips
-    are dealt round-robin over the sources (``_round_robin``). Same arguments, same list."""
+    """Jobs over ``takes`` [(path, group, duration s)] cut into ``seconds`` clips,
+    ``synthetic`` full-range performers and ``independent`` performers whose channels move
+    one by one. Each clip is rendered once in a setting drawn from ``settings`` and once
+    more in each ``held_out`` setting (for evaluation), each time with a new scene
+    (identity, light, camera) and a rate and timing drawn from ``seed``; its appearance
+    family is dealt in turn within its source (every source in every family), and a photo
+    clip's portrait in turn among ``portraits``. ``neutral`` > 0: each scene also holds a
+    neutral face that many seconds (source ``neutral:``, group ``neutral``). Clips are
+    dealt round-robin over the sources (``_round_robin``). Same arguments, same list."""
     if not (0.5 <= seconds <= 3600):
         raise FacecleanError(f"--seconds must be in [0.5, 3600], got {seconds}")
     rng = np.random.default_rng(seed)
@@ -78,22 +95,36 @@ def plan(
         n = max(int(duration // seconds), 1)
         clips += [(path, group, k * seconds, min(seconds, duration)) for k in range(n)]
     clips += [(f"{SYNTH}{seed * 100_000 + k}", SYNTH_GROUP, 0.0, seconds) for k in range(synthetic)]
+    clips += [(f"{INDEPENDENT}{seed * 100_000 + k}", "independent", 0.0, seconds)
+              for k in range(independent)]  # fmt: skip
+    if "photo" in families and not portraits:
+        raise FacecleanError("the photo family needs portraits (--portraits)")
     jobs = []
+    dealt: dict[str, int] = {}  # clips dealt per source (each source starts one on)
     for path, group, start, length in _round_robin(clips):
         drawn = settings[rng.integers(len(settings))]
+        n = dealt[group] = dealt.get(group, len(dealt)) + 1
+        family = families[n % len(families)]
+        portrait = ""
+        if family == "photo":  # drawn, not dealt: dealt in turn, it follows the sources
+            portrait = portraits[rng.integers(len(portraits))]
         for setting in (drawn, *held_out):
-            jobs.append(
-                Job(
-                    source=path,
-                    group=group,
-                    start=float(start),
-                    seconds=float(length),
-                    seed=int(rng.integers(2**31)),
-                    setting=setting,
-                    rate=float(rates[rng.integers(len(rates))]),
-                    webcam=bool(rng.random() < webcam_share),
-                )
+            job = Job(
+                source=path,
+                group=group,
+                start=float(start),
+                seconds=float(length),
+                seed=int(rng.integers(2**31)),
+                setting=setting,
+                rate=float(rates[rng.integers(len(rates))]),
+                webcam=bool(rng.random() < webcam_share),
+                family=family,
+                portrait=portrait,
             )
+            jobs.append(job)
+            if neutral > 0:  # the same face, light and camera, at rest
+                jobs.append(replace(job, source=NEUTRAL, group="neutral", start=0.0,
+                                    seconds=float(neutral), webcam=False))  # fmt: skip
     return jobs
 
 
@@ -130,6 +161,14 @@ def performance(job: Job) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
 
         anim = perform(job.seconds, int(job.source[len(SYNTH) :]), fps=60.0, full_range=True)
         return anim.times, anim.values, None
+    if job.source.startswith(INDEPENDENT):
+        from faceclean.evaluation.performer import independent
+
+        anim = independent(job.seconds, int(job.source[len(INDEPENDENT) :]), fps=60.0)
+        return anim.times, anim.values, None
+    if job.source == NEUTRAL:
+        t = np.arange(int(job.seconds * 60.0) + 1) / 60.0
+        return t, np.zeros((len(t), len(ARKIT52))), None
     anim = io.load(job.source)
     values, _ = anim.arkit()
     pose = _pose(anim)
@@ -184,7 +223,8 @@ def frame_times(job: Job, duration: float) -> np.ndarray:
 class Worker:
     """Everything a process loads once: the head mesh and the tracker model."""
 
-    def __init__(self, head_path: str | os.PathLike, tracker_path: str | os.PathLike) -> None:
+    def __init__(self, head_path: str | os.PathLike, tracker_path: str | os.PathLike,
+                 portraits: list[str] | None = None) -> None:  # fmt: skip
         from faceclean.synthetic.head import Head
 
         self.head = Head.load(head_path)
@@ -192,10 +232,52 @@ class Worker:
         from faceclean.synthetic.tracker import Tracker
 
         Tracker(tracker_path).close()  # refuse a bad model file before any job runs
+        self.portrait_sources = list(portraits or [])
+        self._portraits: dict[str, np.ndarray] | None = None
+        self._fitter = None
+
+    def portraits(self) -> dict[str, np.ndarray]:
+        """name -> RGB image of every portrait given (read once)."""
+        if self._portraits is None:
+            from faceclean.synthetic import portrait
+
+            self._portraits = dict(portrait.load(self.portrait_sources))
+        return self._portraits
+
+    def skin(self, scene):
+        """The portrait's fit for a photo scene (None for any other family)."""
+        if scene.family != "photo":
+            return None
+        from faceclean.synthetic.portrait import Fitter
+
+        images = self.portraits()
+        if scene.portrait not in images:
+            raise FacecleanError(f"portrait {scene.portrait!r} is not among --portraits")
+        if self._fitter is None:
+            self._fitter = Fitter(self.head, self.tracker_path)
+        return self._fitter.skin(scene.portrait, images[scene.portrait], scene.flip)
+
+    def usable(self) -> tuple[list[str], list[str]]:
+        """(portraits that fit, one line for each that does not: no face, too small)."""
+        ok, skipped = [], []
+        for name in self.portraits():
+            from faceclean.synthetic.scene import Scene
+
+            try:
+                self.skin(Scene.draw(0, "studio", self.head.n_identity, "photo", (name,)))
+                ok.append(name)
+            except FacecleanError as e:
+                skipped.append(str(e))
+        return ok, skipped
+
+    def scene(self, job: Job):
+        from faceclean.synthetic.scene import Scene
+
+        return Scene.draw(job.seed, job.setting, self.head.n_identity, job.family,
+                          (job.portrait,) if job.portrait else ())  # fmt: skip
 
     def run(self, job: Job, out: Path) -> dict:
         """Render, track and write one pair; returns its metadata record."""
-        from faceclean.synthetic.scene import Scene
 
         src_t, src_w, src_pose = performance(job)
         times = frame_times(job, float(src_t[-1]))
@@ -204,7 +286,7 @@ class Worker:
         if seen.sum() < 2:
             raise FacecleanError(f"{job.source}: fewer than 2 frames with values in the clip")
         times, truth = times[seen], np.clip(np.nan_to_num(truth[seen]), 0.0, 1.0)
-        scene = Scene.draw(job.seed, job.setting, self.head.n_identity)
+        scene = self.scene(job)
         if src_pose is not None:
             pose = np.nan_to_num(resample(src_t, src_pose, times))
         else:
@@ -231,10 +313,9 @@ class Worker:
         at the job's rate, the head still but for a small drift; NAME.rom.{truth,tracked}.csv."""
         from faceclean import io
         from faceclean.synthetic import rom
-        from faceclean.synthetic.scene import Scene
 
         times, truth = rom.clip(job.rate)
-        scene = Scene.draw(job.seed, job.setting, self.head.n_identity)
+        scene = self.scene(job)
         pose = drift(times, 0.3 * scene.pose_drift, job.seed + 1)
         tracked = self._track(scene, times, truth, pose)
         io.save(Animation(times, truth, ARKIT52, {"format": "csv"}), rom_path(out, job, "truth"),
@@ -247,7 +328,7 @@ class Worker:
         from faceclean.synthetic.render import Renderer
         from faceclean.synthetic.tracker import NAMES, Tracker
 
-        renderer = Renderer(self.head, scene)
+        renderer = Renderer(self.head, scene, self.skin(scene))
         tracked = np.full((len(times), len(NAMES)), np.nan)
         with Tracker(self.tracker_path) as tracker:
             for k, t in enumerate(times):

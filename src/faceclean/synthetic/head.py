@@ -49,6 +49,10 @@ class Head:
     region: np.ndarray  # (V,) int8 paint code
     normal_sum: sparse.csr_matrix  # (V, T): vertex normal = sum of its triangles' normals
     pivot: np.ndarray  # (3,) cm, the point the head turns about (between the ears)
+    landmarks: np.ndarray  # (68,) int, Multi-PIE landmark vertices (into the rendered ones)
+    eye_angle: np.ndarray  # (V,) deg from the eyeball's front axis; NaN off the eyeballs
+    brow_cm: np.ndarray  # (V,) cm to the nearest brow polyline (inf off the front skin)
+    lid_cm: np.ndarray  # (V,) cm to the nearest lid contour (inf off the front skin)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Head:
@@ -73,6 +77,22 @@ class Head:
     def vertices(self, base: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """(V, 3) cm for an identity's ``base`` (V*3,) and ARKit ``weights`` (52,)."""
         return (base + weights.astype(np.float32) @ self.deltas).reshape(-1, 3)
+
+    def regions(self, iris_deg: float = 21.0, pupil_deg: float = 8.0, brow_cm: float = 0.45,
+                lid_cm: float = 0.18) -> np.ndarray:  # fmt: skip
+        """(V,) paint codes for one look: an iris of ``iris_deg`` half-angle round a pupil of
+        ``pupil_deg``, brows ``brow_cm`` either side of their line, lid margins (lashes)
+        ``lid_cm`` wide; ``region`` is the default look."""
+        out = self.region.copy()
+        eye = ~np.isnan(self.eye_angle)
+        out[eye] = SCLERA
+        out[eye & (self.eye_angle < iris_deg)] = IRIS
+        out[eye & (self.eye_angle < pupil_deg)] = PUPIL
+        paintable = np.isin(self.region, (SKIN, BROW, LID))
+        out[paintable] = SKIN
+        out[paintable & (self.brow_cm < brow_cm)] = BROW
+        out[paintable & (self.lid_cm < lid_cm) & (out == SKIN)] = LID
+        return out
 
     def normals(self, v: np.ndarray) -> np.ndarray:
         """(V, 3) unit area-weighted vertex normals."""
@@ -115,18 +135,20 @@ def _build(z: dict[str, np.ndarray]) -> Head:
     region = np.full(len(used), SKIN, np.int8)
     for code, m in ((BACK, "M_BackHead"), (MOUTH, "M_GumsTongue"), (TEETH, "M_Teeth")):
         region[np.unique(tris[tri_mat == names.index(m)])] = code
+    eye_angle = np.full(len(used), np.nan, np.float32)
     for sclera in EYES:
         # the eyeball's front cap is the iris (21 deg half-angle) and its centre the pupil
         sv = np.unique(tris[tri_mat == names.index(sclera)])
         centre = (v0[sv].min(0) + v0[sv].max(0)) / 2
         d = v0[sv] - centre
         angle = np.degrees(np.arccos(np.clip(d[:, 2] / np.linalg.norm(d, axis=1), -1, 1)))
+        eye_angle[sv] = angle
         region[sv] = SCLERA
         region[sv[angle < 21.0]] = IRIS
         region[sv[angle < 8.0]] = PUPIL
     lm = remap[z["landmark_vertices"].astype(np.int64)]
     face = region == SKIN
-    _paint_regions(v0, lm, face, region)
+    brow_cm, lid_cm = _paint_regions(v0, lm, face, region)
 
     n_t = len(tris)
     rows = tris.reshape(-1)
@@ -144,11 +166,18 @@ def _build(z: dict[str, np.ndarray]) -> Head:
         region=region,
         normal_sum=normal_sum,
         pivot=pivot,
+        landmarks=lm,
+        eye_angle=eye_angle,
+        brow_cm=brow_cm,
+        lid_cm=lid_cm,
     )
 
 
-def _paint_regions(v0: np.ndarray, lm: np.ndarray, face: np.ndarray, region: np.ndarray) -> None:
-    """Lips, brows and lid margins from the 68 landmarks, on the frontal (x, y) projection."""
+def _paint_regions(v0: np.ndarray, lm: np.ndarray, face: np.ndarray, region: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Lips, brows and lid margins from the 68 landmarks, on the frontal (x, y) projection;
+    returns each vertex's distance (cm) to the brows and to the lids (inf off the front
+    skin), from which ``Head.regions`` paints other looks."""
     from matplotlib.path import Path as Polygon  # a point-in-polygon test
 
     front = face & (v0[:, 2] > v0[lm[[36, 45, 48, 54]], 2].min() - 1.0)
@@ -156,13 +185,19 @@ def _paint_regions(v0: np.ndarray, lm: np.ndarray, face: np.ndarray, region: np.
     lips = Polygon(v0[lm[48:60], :2]).contains_points(xy)
     mouth_gap = Polygon(v0[lm[60:68], :2]).contains_points(xy)
     region[front & lips & ~mouth_gap] = LIPS
+    brow_cm = np.full(len(v0), np.inf, np.float32)
+    lid_cm = np.full(len(v0), np.inf, np.float32)
+    skin = front & (region == SKIN)
     for brow in (lm[17:22], lm[22:27]):
         d = _polyline_distance(xy, v0[brow, :2])
+        brow_cm[skin] = np.minimum(brow_cm[skin], d[skin])
         region[front & (d < 0.45) & (region == SKIN)] = BROW
     for eye in (lm[36:42], lm[42:48]):
         loop = np.concatenate([eye, eye[:1]])
         d = _polyline_distance(xy, v0[loop, :2])
+        lid_cm[skin] = np.minimum(lid_cm[skin], d[skin])
         region[front & (d < 0.18) & (region == SKIN)] = LID
+    return brow_cm, lid_cm
 
 
 def _polyline_distance(p: np.ndarray, line: np.ndarray) -> np.ndarray:

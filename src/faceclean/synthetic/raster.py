@@ -20,13 +20,14 @@ except ImportError:  # pragma: no cover - the pairs extra brings numba
 def rasterise(
     xy: np.ndarray, depth: np.ndarray, colour: np.ndarray, triangles: np.ndarray, size: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Draw triangles (T, 3) over vertices ``xy`` (V, 2) px, ``depth`` (V,), ``colour`` (V, 3).
+    """Draw triangles (T, 3) over vertices ``xy`` (V, 2) px, ``depth`` (V,), ``colour`` (V, C)
+    (any C attributes, interpolated: RGB, or a texture's coordinates and shading).
 
-    Returns (image (size, size, 3) float32, coverage (size, size) bool).
+    Returns (image (size, size, C) float32, coverage (size, size) bool).
     """
     if numba is None:
         raise FacecleanError("the renderer needs numba: pip install 'faceclean[pairs]'")
-    image = np.zeros((size, size, 3), np.float32)
+    image = np.zeros((size, size, colour.shape[1]), np.float32)
     zbuf = np.full((size, size), np.inf, np.float32)
     _draw(
         xy.astype(np.float32),
@@ -65,7 +66,7 @@ def _draw_py(xy, depth, colour, tris, image, zbuf):  # pragma: no cover - compil
                 z = wa * depth[a] + wb * depth[b] + wc * depth[c]
                 if z < zbuf[y, x]:
                     zbuf[y, x] = z
-                    for k in range(3):
+                    for k in range(image.shape[2]):
                         image[y, x, k] = wa * colour[a, k] + wb * colour[b, k] + wc * colour[c, k]
 
 

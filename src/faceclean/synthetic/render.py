@@ -4,8 +4,11 @@ Camera at the origin looking down -z (y up), the head's pivot ``scene.distance``
 front of it. A vertex p (cm, camera space) lands at pixel
 ``u = f p_x / -p_z + c_x``, ``v = -f p_y / -p_z + c_y`` with ``f = (size / 2) / tan(fov / 2)``.
 Shading (linear RGB, Gouraud): ``albedo (ambient + key max(0, n.l)) + specular max(0, n.h)^24``,
-then gamma 1/2.2 per vertex (Gouraud in display space). The camera: Gaussian blur, sensor
-noise drawn from (seed, frame), JPEG.
+then gamma 1/2.2 per vertex (Gouraud in display space). A portrait's skin (``photo``,
+portrait.py) is sampled per pixel at coordinates interpolated like colours, lit about its
+own level. Accessories (``dressed``) are drawn over the face (dress.py). The camera:
+Gaussian blur (plus motion blur from the head's turn), auto-exposure and white balance,
+sensor noise drawn from (seed, frame), JPEG.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from scipy.ndimage import gaussian_filter
 
 from faceclean.synthetic import head as H
 from faceclean.synthetic.head import Head
+from faceclean.synthetic.portrait import Skin
 from faceclean.synthetic.raster import rasterise
 from faceclean.synthetic.scene import Scene
 
@@ -24,13 +28,17 @@ from faceclean.synthetic.scene import Scene
 class Renderer:
     """Frames of one take: ``frame(weights, pose_deg, index) -> (size, size, 3) uint8``."""
 
-    def __init__(self, head: Head, scene: Scene) -> None:
-        self.head, self.scene = head, scene
+    def __init__(self, head: Head, scene: Scene, skin: Skin | None = None) -> None:
+        self.head, self.scene, self.skin = head, scene, skin
         alpha = np.zeros(head.n_identity, np.float32)
         k = min(len(scene.identity), head.n_identity)
         alpha[:k] = scene.identity[:k]
+        if skin is not None:  # the portrait's fitted face, varied by the scene's identity
+            alpha *= scene.identity_scale
+            alpha[: len(skin.alpha)] += skin.alpha
         self.base = head.identity(alpha)  # (V*3,) cm
-        self.albedo = _albedo(head, scene)  # (V, 3) linear RGB
+        self.albedo = _albedo(head, scene, skin)  # (V, 3) linear RGB
+        self._pose = None  # the last frame's pose (motion blur)
         n = scene.resolution
         self.focal = (n / 2) / np.tan(np.radians(scene.fov) / 2)  # px
         self.centre = np.array([n / 2 * (1 + scene.offset[0]), n / 2 * (1 + scene.offset[1])])
@@ -42,29 +50,80 @@ class Renderer:
         self.half = self.light + np.array([0, 0, 1], np.float32)  # Blinn half vector (view +z)
         self.half /= np.linalg.norm(self.half)
 
-    def frame(self, weights: np.ndarray, pose_deg: np.ndarray, index: int) -> np.ndarray:
+    def project(self, weights: np.ndarray, pose_deg: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """(pixel positions (V, 2), depths (V,) cm) of the posed head's vertices."""
+        return self._posed(weights, pose_deg)[:2]
+
+    def _posed(self, weights, pose_deg):
         s, hd = self.scene, self.head
         v = hd.vertices(self.base, np.nan_to_num(weights))  # (V, 3) cm, head space
         r = rotation(*pose_deg)
         p = (v - hd.pivot) @ r.T
         p[:, 2] -= s.distance  # camera space, in front of the camera at -z
-        nrm = hd.normals(v) @ r.T
         depth = -p[:, 2]
         xy = np.empty((len(p), 2), np.float32)
         xy[:, 0] = self.focal * p[:, 0] / depth + self.centre[0]
         xy[:, 1] = -self.focal * p[:, 1] / depth + self.centre[1]
+        return xy, depth, hd.normals(v) @ r.T
+
+    def frame(self, weights: np.ndarray, pose_deg: np.ndarray, index: int) -> np.ndarray:
+        s, hd = self.scene, self.head
+        xy, depth, nrm = self._posed(weights, pose_deg)
         lambert = np.maximum(nrm @ self.light, 0.0)[:, None]
         spec = np.maximum(nrm @ self.half, 0.0)[:, None] ** 24
-        colour = self.albedo * (s.ambient + s.key * lambert) + s.specular * spec
+        shade = s.ambient + s.key * lambert  # (V, 1)
+        colour = self.albedo * shade + s.specular * spec
         colour = np.clip(colour, 0.0, 1.0) ** (1 / 2.2) * 255.0  # gamma per vertex, not pixel
-        img, covered = rasterise(xy, depth, colour, hd.triangles, s.resolution)
+        if self.skin is None:
+            img, covered = rasterise(xy, depth, colour, hd.triangles, s.resolution)
+        else:  # paint, and the portrait's coordinates, weight and light to sample it with
+            k = self.skin
+            attrs = np.concatenate([colour, k.coords, k.weight[:, None], shade,
+                                    s.specular * spec], axis=1)  # fmt: skip
+            img, covered = rasterise(xy, depth, attrs, hd.triangles, s.resolution)
+            img = self._texture(img, covered)
         img = np.where(covered[..., None], img, self.background)
-        return self._camera(img, index)
+        if s.family == "dressed":
+            from faceclean.synthetic import dress
 
-    def _camera(self, img: np.ndarray, index: int) -> np.ndarray:
+            img = dress.dress(img, xy[hd.landmarks], s, index)
+        return self._camera(img, index, pose_deg)
+
+    def _texture(self, attrs: np.ndarray, covered: np.ndarray) -> np.ndarray:
+        """(size, size, 3) display-space pixels: the portrait sampled (bilinear) at each
+        pixel's interpolated coordinates, lit, blended with the paint by its weight."""
+        from scipy.ndimage import map_coordinates
+
+        k, s = self.skin, self.scene
+        out = attrs[..., :3].copy()
+        on = covered & (attrs[..., 5] > 0.01)
+        if not on.any():
+            return out
+        a = attrs[on]  # (P, 8)
+        where = [a[:, 4], a[:, 3]]  # (row, column) px
+        tex = np.stack([map_coordinates(k.texture[..., c], where, order=1, mode="nearest")
+                        for c in range(3)], axis=1)  # fmt: skip
+        # the photograph is already lit: our light varies it about its level, not over it
+        lit = tex * np.array(s.tint) * (a[:, 6:7] / (s.ambient + 0.6 * s.key)) + a[:, 7:8]
+        lit = np.clip(lit, 0.0, 1.0) ** (1 / 2.2) * 255.0
+        w = a[:, 5:6]
+        out[on] = w * lit + (1.0 - w) * a[:, :3]
+        return out
+
+    def _camera(self, img: np.ndarray, index: int, pose_deg: np.ndarray | None = None
+                ) -> np.ndarray:  # fmt: skip
         s = self.scene
-        if s.blur > 0:
-            img = gaussian_filter(img, sigma=(s.blur, s.blur, 0))
+        blur = s.blur
+        if s.motion_blur and pose_deg is not None:  # the turn since the last frame, deg
+            if self._pose is not None:
+                blur += s.motion_blur * float(np.abs(np.asarray(pose_deg) - self._pose).max())
+            self._pose = np.asarray(pose_deg, np.float64).copy()
+        if blur > 0:
+            img = gaussian_filter(img, sigma=(min(blur, 6.0), min(blur, 6.0), 0))
+        if s.exposure or s.white != (1.0, 1.0, 1.0):  # auto-exposure hunting, white balance
+            swing = 1.0 + s.exposure * np.sin(2 * np.pi * 0.13 * index / 30.0 + s.seed % 7)
+            img = img * (swing * np.array(s.white, np.float32))
         rng = np.random.default_rng([s.seed, 7, index])
         img += s.noise * rng.standard_normal(img.shape, dtype=np.float32)
         frame = np.clip(img + 0.5, 0, 255).astype(np.uint8)
@@ -91,16 +150,16 @@ def rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
     return (ry @ rx @ rz).astype(np.float32)
 
 
-def _albedo(head: Head, s: Scene) -> np.ndarray:
+def _albedo(head: Head, s: Scene, skin: Skin | None = None) -> np.ndarray:
     """(V, 3) linear RGB per vertex: the painted regions, with a faint per-vertex mottle."""
     rng = np.random.default_rng([s.seed, 3])
     paint = {
         H.SKIN: s.skin,
-        H.BACK: np.array(s.brows) * 0.8,  # hair
+        H.BACK: np.array(s.brows) * 0.8 if s.hair is None else s.hair,  # hair
         H.MOUTH: (0.35, 0.08, 0.08),
         H.TEETH: (0.75, 0.72, 0.65),
         H.SCLERA: (0.85, 0.82, 0.80),
-        H.IRIS: s.iris,
+        H.IRIS: s.iris if skin is None else skin.iris,
         H.PUPIL: (0.02, 0.02, 0.02),
         H.LIPS: s.lips,
         H.BROW: s.brows,
@@ -109,6 +168,6 @@ def _albedo(head: Head, s: Scene) -> np.ndarray:
     table = np.zeros((10, 3), np.float32)
     for code, rgb in paint.items():
         table[code] = rgb
-    albedo = table[head.region]
+    albedo = table[head.regions(s.iris_deg, s.pupil_deg, s.brow_cm, s.lid_cm)]
     mottle = rng.normal(1.0, 0.04, (len(albedo), 1)).astype(np.float32)
     return albedo * mottle

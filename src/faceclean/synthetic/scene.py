@@ -11,11 +11,23 @@ out, so a model is judged on lighting and cameras it never saw:
 - ``studio``: soft frontal light, a good camera close by, little noise;
 - ``webcam``: a laptop camera at arm's length, flat light, noise and strong JPEG;
 - ``window``: a hard side light from one window, shadows on half the face, mid noise.
+
+Appearance families are the other axis: what the face itself looks like. Training holds
+one family out and scores on it (docs/MODEL.md), so a model is judged on a *look* it
+never saw:
+
+- ``painted``: the ICT head painted per vertex (head.py), its iris, pupil, brows, lid
+  margins, hair and skin shine drawn per scene;
+- ``photo``: the head fitted to a real portrait and textured from it (portrait.py): real
+  skin, brows, lashes, spectacles where the person wore them;
+- ``dressed``: the painted head in a real room: spectacles, a cap's brim or a fringe of
+  hair, a hand near the face, a camera's auto-exposure and white balance wandering,
+  motion blur, harder compression (dress.py).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -64,6 +76,7 @@ SETTINGS: dict[str, dict[str, tuple[float, float]]] = {
 }
 TRAIN_SETTINGS = ("studio", "webcam")
 HELD_OUT_SETTING = "window"
+FAMILIES = ("painted", "photo", "dressed")
 
 # skin albedo (linear RGB) from light to dark: a person's tone is drawn along this line
 SKIN_TONES = np.array(
@@ -96,13 +109,46 @@ class Scene:
     jpeg: int  # quality 1..100
     offset: tuple[float, float]  # where the head sits in the frame, fraction of the width
     pose_drift: float  # deg, amplitude of the head's wander when the take has no pose
+    # the look (FAMILIES); the defaults are the painted head as it was first drawn
+    family: str = "painted"
+    iris_deg: float = 21.0  # iris half-angle on the eyeball
+    pupil_deg: float = 8.0
+    brow_cm: float = 0.45  # brow half-width
+    lid_cm: float = 0.18  # lash line width
+    hair: tuple[float, float, float] | None = None  # None: the brows' colour x 0.8
+    portrait: str = ""  # photo: the portrait's name (portrait.py)
+    flip: bool = False  # photo: the portrait mirrored
+    identity_scale: float = 1.0  # photo: the fitted identity + this x the drawn one
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)  # photo: gains on the texture
+    white: tuple[float, float, float] = (1.0, 1.0, 1.0)  # camera white balance gains
+    exposure: float = 0.0  # auto-exposure swing, fraction of the level
+    motion_blur: float = 0.0  # px of blur per deg of head turn in a frame
+    glasses: float = 0.0  # rim width, fraction of the eye's width; 0: none
+    glasses_colour: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    hat: float = 0.0  # how far a brim or fringe comes down, fraction of forehead; 0: none
+    hand: float = 0.0  # a hand near the face, its size in face widths; 0: none
 
     @classmethod
-    def draw(cls, seed: int, setting: str, n_identity: int = 100) -> Scene:
+    def draw(cls, seed: int, setting: str, n_identity: int = 100, family: str = "painted",
+             portraits: tuple[str, ...] = ()) -> Scene:  # fmt: skip
+        """The scene of ``seed`` in ``setting`` and ``family`` (``photo`` draws one of
+        ``portraits``, the names of the portraits at hand)."""
         if setting not in SETTINGS:
             raise FacecleanError(
                 f"unknown render setting {setting!r} (one of: {', '.join(SETTINGS)})"
             )
+        if family not in FAMILIES:
+            raise FacecleanError(
+                f"unknown appearance family {family!r} (one of: {', '.join(FAMILIES)})"
+            )
+        if family == "photo" and not portraits:
+            raise FacecleanError("the photo family needs portraits (faceclean pairs --portraits)")
+        return replace(
+            cls._draw(seed, setting, n_identity), **_look(seed, setting, family, portraits)
+        )
+
+    @classmethod
+    def _draw(cls, seed: int, setting: str, n_identity: int) -> Scene:
         s = SETTINGS[setting]
         rng = np.random.default_rng([seed, list(SETTINGS).index(setting)])
 
@@ -149,6 +195,37 @@ class Scene:
         d = asdict(self)
         d["identity"] = [round(a, 6) for a in self.identity]
         return d
+
+
+def _look(seed: int, setting: str, family: str, portraits: tuple[str, ...]) -> dict:
+    """The family's own draws, from a stream of their own (the scene's other draws stay)."""
+    rng = np.random.default_rng([seed, list(SETTINGS).index(setting), 100 + FAMILIES.index(family)])
+    u = rng.uniform
+    look: dict = {"family": family}
+    if family in ("painted", "dressed"):
+        look.update(iris_deg=u(17.0, 24.0), pupil_deg=u(5.5, 9.5), brow_cm=u(0.28, 0.65),
+                    lid_cm=u(0.1, 0.3), specular=u(0.02, 0.3),
+                    hair=_t(rng.choice(HAIR) * u(0.6, 1.3)))  # fmt: skip
+    if family == "photo":
+        look.update(portrait=str(portraits[rng.integers(len(portraits))]),
+                    flip=bool(rng.random() < 0.5), identity_scale=u(0.0, 0.5),
+                    tint=_t(u(0.85, 1.15, 3)), specular=u(0.0, 0.08))  # fmt: skip
+    if family == "dressed":
+        look.update(
+            white=_t(u(0.8, 1.2, 3)),
+            exposure=u(0.05, 0.3),
+            motion_blur=u(0.3, 1.5),
+            glasses=u(0.05, 0.15) if rng.random() < 0.6 else 0.0,
+            glasses_colour=_t(rng.choice(FRAMES) * u(0.7, 1.3)),
+            hat=u(0.2, 0.8) if rng.random() < 0.5 else 0.0,
+            hand=u(0.3, 0.6) if rng.random() < 0.5 else 0.0,
+        )
+    return look
+
+
+HAIR = np.array([[0.03, 0.02, 0.015], [0.12, 0.07, 0.04], [0.35, 0.22, 0.1], [0.6, 0.5, 0.3],
+                 [0.45, 0.15, 0.06], [0.4, 0.4, 0.4]])  # fmt: skip
+FRAMES = np.array([[0.04, 0.04, 0.04], [0.3, 0.15, 0.05], [0.6, 0.6, 0.62], [0.5, 0.1, 0.1]])
 
 
 def _t(a) -> tuple[float, ...]:

@@ -99,6 +99,31 @@ class Tracker:
         self.close()
 
 
+def landmarks(model_path: str | os.PathLike, image: np.ndarray) -> np.ndarray | None:
+    """(478, 3) MediaPipe face landmarks of one still RGB ``image`` (H, W, 3) uint8, in
+    pixels (x right, y down; z toward the camera negative, in x's pixel scale; 468-477 the
+    irises), or None when no face is found. A fresh landmarker in IMAGE mode: no tracking
+    state carried from another picture."""
+    import mediapipe as mp
+
+    path = Path(model_path)
+    bundle = read_bytes(path, MAX_MODEL, "tracker model file")
+    check_bundle(bundle, path)
+    os.environ.setdefault("GLOG_minloglevel", "2")
+    from mediapipe.tasks.python import BaseOptions
+    from mediapipe.tasks.python.vision import FaceLandmarker, FaceLandmarkerOptions, RunningMode
+
+    options = FaceLandmarkerOptions(base_options=BaseOptions(model_asset_buffer=bundle),
+                                    running_mode=RunningMode.IMAGE, num_faces=1)  # fmt: skip
+    with FaceLandmarker.create_from_options(options) as marker:
+        img = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(image))
+        result = marker.detect(img)
+    if not result.face_landmarks:
+        return None
+    h, w = image.shape[:2]
+    return np.array([(p.x * w, p.y * h, p.z * w) for p in result.face_landmarks[0]])
+
+
 def check_bundle(bundle: bytes, path: str | os.PathLike) -> None:
     """Refuse, in one line, bytes that are not a Face Landmarker bundle (see the module)."""
     bad = f"{os.fspath(path)}: not a usable face landmarker model"
