@@ -224,10 +224,15 @@ def test_vmc_values_without_apply_are_bounded():
 
 # A sender's usual bundle: stamped, with pose bones and a passthrough message.
 def _stream_bundle(values, t=1.0, yaw=0.1):
+    """A sender's frame, laid out as vmc.Encoder lays it out, but written here: a sender
+    may send NaN (our Encoder never does)."""
     names = ("eyeBlinkLeft", "jawOpen", "Joy", "jawOpen")  # a repeated name: the last wins
     pose = np.array([yaw, -0.2, 0.05, 0.1, 0.0, 0.0, np.nan, np.nan, np.nan])
-    f = Frame(names, np.asarray(values, float), t, pose, (ROOT,))
-    return vmc.Encoder(stamp=True).encode(f)
+    vals = [
+        osc.message("/VMC/Ext/Blend/Val", n, float(v)) for n, v in zip(names, values, strict=True)
+    ]
+    head = [osc.message("/VMC/Ext/T", float(t)), ROOT, *vmc._bone_messages(pose, {})]
+    return osc.bundle([*head, *vals, osc.message("/VMC/Ext/Blend/Apply")])
 
 
 def _primed():  # a sender's decoder after two frames: it knows their layout

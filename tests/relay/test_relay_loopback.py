@@ -187,7 +187,12 @@ def test_recorded_livelink_packets_come_out_as_vmc_frames():
 
 
 def ll(t: float, values: np.ndarray) -> bytes:
-    return livelink.Encoder().encode(Frame(ARKIT52, values, t))
+    """A Live Link sender's packet with ``values`` as given (a sender may send NaN; our
+    Encoder never does): the encoder's header and timing, then the 61 floats."""
+    packet = livelink.Encoder().encode(Frame(ARKIT52, np.zeros(52), t))
+    floats = np.zeros(livelink.N_SHAPES + livelink.N_POSE)
+    floats[:52] = values
+    return packet[: -4 * len(floats)] + floats.astype(">f4").tobytes()
 
 
 def test_order_duplicates_silence_nan_and_restart():

@@ -138,7 +138,11 @@ class Encoder:
         number = (number + 2**31) % 2**32 - 2**31  # wrap into i32
         self._count = number + 1
         head = self._head(frame.device or self.device, frame.subject or self.subject)
+        sub = sub if abs(sub) <= bounds.MAX_VALUE else 0.0  # NaN compares False
         timing = _TIMING.pack(number, sub, num, den, N_SHAPES + N_POSE)
+        # nothing NaN or infinite goes out: a value not finite within float32 is 0, the
+        # value of a channel or angle the frame lacks (docs/ROBUSTNESS.md, class 12)
+        floats = np.where(np.abs(floats) <= bounds.MAX_VALUE, floats, 0.0)
         return head + timing + floats.astype(_BE_F32).tobytes()
 
 

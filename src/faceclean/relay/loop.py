@@ -289,7 +289,9 @@ class Relay:
             if not frame.is_face:
                 if self._vmc_out:
                     self.stats.passthrough += 1
-                    self._send(self.encoder.encode(frame))
+                    data = self.encoder.encode(frame)
+                    if data:  # b"": nothing finite was left to forward
+                        self._send(data)
                 continue
             heard = self.clock()
             if sender != self._source and not self._takes_over(sender, heard):

@@ -8,7 +8,10 @@ Measured about 4-6x faster than python-osc's parser on a 52-value VMC frame
 
 from __future__ import annotations
 
+import math
 import struct
+
+import numpy as np
 
 from faceclean.relay.frame import Malformed
 
@@ -18,6 +21,7 @@ _I32 = struct.Struct(">i")
 _F32 = struct.Struct(">f")
 _F64 = struct.Struct(">d")
 MAX_DEPTH = 8  # nested bundles
+_EXPONENT = 0x7F800000  # a float32's exponent bits; all set: inf or NaN (a float64's high word too)
 
 
 def pad(b: bytes) -> bytes:
@@ -163,3 +167,55 @@ def bundle(elements: list[bytes]) -> bytes:
         parts.append(_I32.pack(len(e)))
         parts.append(e)
     return b"".join(parts)
+
+
+def finite(data: bytes) -> bool:
+    """Whether no float argument (``f``, ``d``) of any message of the packet is NaN or
+    infinite. A screen first: OSC arguments are 32-bit aligned, and a packet with no word
+    whose float32 exponent bits are all set has no such float (a float64's high word is
+    such a word too); only one that has is walked. A packet that cannot be walked is not
+    finite (it is not sent)."""
+    if len(data) % 4 == 0:
+        words = np.frombuffer(data, ">u4")
+        if not ((words & _EXPONENT) == _EXPONENT).any():
+            return True
+    try:
+        return all(finite_message(data, s, e) for _, s, e in messages(data))
+    except Malformed:
+        return False
+
+
+def finite_message(data: bytes, start: int, end: int) -> bool:
+    """Whether the message at [start, end) is well formed with no NaN or infinite float."""
+    if not well_formed(data, start, end):
+        return False
+    _, at = string(data, start, end)
+    if at == end:
+        return True
+    tags, at = string(data, at, end)
+    for tag in tags[1:]:
+        size = _SIZES[tag]
+        if tag in "fd":
+            (v,) = (_F32 if tag == "f" else _F64).unpack_from(data, at)
+            if not math.isfinite(v):
+                return False
+        if size is None:
+            _, at = string(data, at, end)
+        elif size == -1:
+            (n,) = _I32.unpack_from(data, at)
+            at += 4 + ((n + 3) & ~3)
+        else:
+            at += size
+    return True
+
+
+def finite_part(data: bytes) -> bytes:
+    """The packet as it is when ``finite``; else a bundle of its messages that are (b"":
+    none is)."""
+    if finite(data):
+        return data
+    try:
+        kept = [data[s:e] for _, s, e in messages(data) if finite_message(data, s, e)]
+    except Malformed:
+        return b""
+    return bundle(kept) if kept else b""

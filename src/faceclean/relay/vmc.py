@@ -289,6 +289,7 @@ class Encoder:
         self.style = names
         self.stamp = stamp
         self._heads: dict[str, bytes] = {}  # name -> i32 size + message up to its float
+        self._at: dict[str, tuple[float, float, float]] = {}  # bone -> last finite position
 
     def _head(self, name: str) -> bytes:
         head = self._heads.get(name)
@@ -300,26 +301,43 @@ class Encoder:
         return head
 
     def encode(self, frame: Frame) -> bytes:
+        """One datagram; nothing NaN or infinite goes out (docs/ROBUSTNESS.md, class 12):
+        a Val whose value is not finite within float32 is left out (the receiver keeps
+        its last), a pose bone's position is the last finite one sent for it ((0, 0, 0)
+        before any), a passthrough message with a NaN or infinite float is left out
+        (b"": nothing of the datagram is left to send)."""
         if not frame.is_face:
             if len(frame.passthrough) == 1:  # a datagram forwarded unchanged
-                return frame.passthrough[0]
-            return osc.bundle(list(frame.passthrough))
-        floats = np.asarray(frame.values, ">f4").tobytes()  # (M,) big-endian f32
+                return osc.finite_part(frame.passthrough[0])
+            kept = [e for e in frame.passthrough if osc.finite(e)]
+            return osc.bundle(kept) if kept else b""
+        values = np.asarray(frame.values, np.float64)
+        floats = values.astype(">f4").tobytes()  # (M,) big-endian f32
+        good = np.abs(values) <= bounds.MAX_VALUE  # NaN compares False
         parts = [osc.BUNDLE, osc.IMMEDIATE]
-        elements = list(frame.passthrough)
+        elements = [e for e in frame.passthrough if osc.finite(e)]
         if frame.pose is not None:
-            elements += _bone_messages(frame.pose, frame.positions or {})
+            elements += _bone_messages(frame.pose, self._positions(frame.positions or {}))
         if self.stamp and frame.t is not None:
             elements.insert(0, osc.message(TIME.decode(), float(frame.t)))
         for e in elements:
             parts.append(struct.pack(">i", len(e)))
             parts.append(e)
         for i, name in enumerate(frame.names):
-            parts.append(self._head(name))
-            parts.append(floats[4 * i : 4 * i + 4])
+            if good[i]:
+                parts.append(self._head(name))
+                parts.append(floats[4 * i : 4 * i + 4])
         parts.append(struct.pack(">i", len(_APPLY_MSG)))
         parts.append(_APPLY_MSG)
         return b"".join(parts)
+
+    def _positions(self, given: dict) -> dict[str, tuple[float, float, float]]:
+        """Each pose bone's position to send: as received when finite within float32,
+        else the last such one sent for that bone (held), else (0, 0, 0)."""
+        for bone, p in given.items():
+            if bone in POSE_BONES and all(abs(float(v)) <= bounds.MAX_VALUE for v in p):
+                self._at[bone] = tuple(float(v) for v in p)
+        return self._at
 
 
 def _bone_messages(pose: np.ndarray, positions: dict) -> list[bytes]:
