@@ -67,24 +67,50 @@ def read(path: str | os.PathLike) -> Animation:
 
 
 def write(anim: Animation, f: BinaryIO) -> None:
-    """Write the layout above, one frame per line."""
-    if np.isinf(anim.values).any() or not np.isfinite(anim.times).all():
-        raise FacecleanError("JSON cannot hold infinite values or non-finite times")
+    """Write the layout above, one frame per line. Strict JSON only: NaN is null (a
+    missing value); an infinite value (weights, ``pose`` angles, times) has no JSON
+    spelling and is refused in one line naming where it is, before anything is written."""
     head = {"format": FORMAT, "channels": list(anim.names), "times": anim.times.tolist()}
     extra: dict[str, Any] = {}
     pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
-    if pose.ndim == 2 and pose.shape[0] == anim.n_frames and pose.shape[1]:
-        extra["pose_names"] = list(anim.meta.get("pose_names", ()))
+    pose_names = list(anim.meta.get("pose_names", ()))
+    has_pose = pose.ndim == 2 and pose.shape[0] == anim.n_frames and pose.shape[1] > 0
+    _refuse_infinite(anim.values, list(anim.names), "channel")
+    if has_pose:
+        _refuse_infinite(pose, pose_names, "pose column")
+        extra["pose_names"] = pose_names
         extra["pose"] = _rows(pose)
+    if not np.isfinite(anim.times).all():
+        k = int(np.flatnonzero(~np.isfinite(anim.times))[0])
+        raise FacecleanError(f"JSON cannot hold a non-finite time (frame {k + 1})")
     if "timecode_start" in anim.meta:
         extra["timecode_start"] = float(anim.meta["timecode_start"])
-    parts = [json.dumps(head)[:-1], ',\n "values": [']
-    parts.append(",".join("\n  " + json.dumps(r) for r in _rows(anim.values)))
+
+    def dumps(v: Any) -> str:  # no NaN or Infinity token, ever: a strict reader reads it
+        try:
+            return json.dumps(v, allow_nan=False)
+        except ValueError:
+            raise FacecleanError("JSON cannot hold a non-finite number (timecode_start)") from None
+
+    parts = [dumps(head)[:-1], ',\n "values": [']
+    parts.append(",".join("\n  " + dumps(r) for r in _rows(anim.values)))
     parts.append("\n ]")
     for k, v in extra.items():
-        parts.append(f",\n {json.dumps(k)}: {json.dumps(v)}")
+        parts.append(f",\n {dumps(k)}: {dumps(v)}")
     parts.append("\n}\n")
     f.write("".join(parts).encode("utf-8"))
+
+
+def _refuse_infinite(a: np.ndarray, names: list[str], what: str) -> None:
+    """FacecleanError naming the first infinite cell of ``a`` (N, M), if any."""
+    bad = np.argwhere(np.isinf(a))
+    if len(bad):
+        row, col = (int(v) for v in bad[0])
+        name = names[col] if col < len(names) else str(col)
+        raise FacecleanError(
+            f"JSON cannot hold infinite values: {what} {name!r} is {a[row, col]:+g} at frame "
+            f"{row + 1} ({len(bad)} such cells); write another format (CSV, NPZ) or fix them"
+        )
 
 
 def _rows(a: np.ndarray) -> list[list[float | None]]:
