@@ -7,6 +7,12 @@ early stopping and the choice of pre-filter; the render settings named by ``--he
 (default ``window``) are never used. A pair's calibration clip (``pairs --rom``: its
 NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its own. The written
 model runs with ``--model M.npz``.
+
+Only real pairs train (``paired.usable``): a value that is infinite or beyond 1e6 is read
+as missing (said on stderr), a pair that is no tracker's reading of its truth is skipped
+(said, per pair), and a folder with none left writes nothing ("no pairs found in DIR:
+..."). The model is checked before it is written (``formats.write``); a refusal names the
+pairs whose values were far outside a weight's range.
 """
 
 from __future__ import annotations
@@ -30,6 +36,19 @@ def run(args: argparse.Namespace) -> int:
     pairs = [p for p in paired.load(args.pairs) if p.setting != "window"]
     if not pairs:
         raise FacecleanError(f"{args.pairs}: no pairs outside the held-out render setting")
+    raw = pairs
+    pairs, skipped, notes = paired.usable(pairs)
+    if not pairs:
+        more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
+        raise FacecleanError(
+            f"no pairs found in {args.pairs}: {len(skipped)} candidates, none a real pair: "
+            + "; ".join(skipped[:3])
+            + more
+        )
+    for line in skipped:
+        print(f"skipped {line}", file=sys.stderr)
+    for line in notes:
+        print(f"note: {line}", file=sys.stderr)
     groups = paired.groups(pairs)
     val_groups = set(args.val_sources) if args.val_sources else set()
     unknown = val_groups - set(groups)
@@ -80,8 +99,11 @@ def run(args: argparse.Namespace) -> int:
         from faceclean.neural.paired import train_lstm
 
         epochs = args.epochs or 8
-        best = train_lstm(train, val, args.out, epochs=epochs, seed=args.seed,
-                          threads=args.threads, report=report)  # fmt: skip
+        try:
+            best = train_lstm(train, val, args.out, epochs=epochs, seed=args.seed,
+                              threads=args.threads, report=report)  # fmt: skip
+        except FacecleanError as e:
+            raise FacecleanError(f"{e}{_poisoned(raw)}") from None
         print(f"wrote {args.out}: lstm, validation MSE {best.get('val_mse', float('nan')):.5f}")
         return 0
     if arch == "ridge":
@@ -93,6 +115,32 @@ def run(args: argparse.Namespace) -> int:
     else:
         w.config.update(trained_on=sorted({p.group for p in train}),
                         validated_on=sorted(val_groups))  # fmt: skip
-    w.save(args.out)
+    try:
+        w.save(args.out)  # checked first: finite, and loadable as written
+    except FacecleanError as e:
+        raise FacecleanError(f"{e}{_poisoned(raw)}") from None
     print(f"wrote {args.out}: {arch}, {len(w.inputs)} channels, hidden {w.config['hidden']}")
     return 0
+
+
+FAR = 10.0  # a value this far outside a weight's [0, 1] is no blendshape reading
+
+
+def _poisoned(pairs) -> str:
+    """The pairs a refused model was made from whose values lie far outside [0, 1] (the
+    largest first), as the end of the refusal's line."""
+    import numpy as np
+
+    worst = {}
+    for p in pairs:
+        for a in (p.tracked.values, p.truth.values):
+            with np.errstate(invalid="ignore"):
+                big = np.abs(a[~np.isnan(a)])
+            if big.size and big.max() > FAR:
+                worst[p.name] = max(worst.get(p.name, 0.0), float(big.max()))
+    if not worst:
+        return "; no pair holds a value far outside [0, 1]"
+    names = sorted(worst, key=lambda n: -worst[n])
+    listed = ", ".join(f"{n} ({worst[n]:.3g})" for n in names[:5])
+    more = f" and {len(names) - 5} more" if len(names) > 5 else ""
+    return f"; made from pairs with values far outside [0, 1]: {listed}{more}"

@@ -26,7 +26,7 @@ import json
 import os
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -34,12 +34,14 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
+from faceclean.filters.base import MAX_ABS
 from faceclean.timing import resample
 
 ROLES = (("tracked", "truth"), ("raw", "clean"))
 EXTS = (".csv", ".json", ".npz", ".glb", ".gltf")
 MAX_META = 1 << 20  # bytes of a pair's metadata JSON
 TIME_TOL = 5e-4  # s: a tracked/truth pair's instants agree to half a millisecond
+MIN_FRAMES = 2  # frames a pair needs where the tracker read the face and the truth is whole
 
 
 @dataclass(eq=False)
@@ -71,9 +73,27 @@ def find(folder: str | os.PathLike) -> list[tuple[str, Path, Path, Path | None]]
         found += _in_folder(d)
     if not found:
         raise FacecleanError(
-            f"{root}: no pairs (NAME.tracked.csv + NAME.truth.csv, or NAME.raw.* + NAME.clean.*)"
+            f"no pairs found in {root}: {_unpaired(root)}; a pair is NAME.tracked.EXT + "
+            "NAME.truth.EXT, or NAME.raw.EXT + NAME.clean.EXT"
         )
     return found
+
+
+def _unpaired(root: Path) -> str:
+    """What a folder without a single pair holds, in words (one line)."""
+    files = [p for d in [root, *(q for q in root.iterdir() if q.is_dir())] for p in d.iterdir()
+             if not p.is_dir() and not p.name.startswith(".")]  # fmt: skip
+    if not files:
+        return "nothing but folders" if any(root.iterdir()) else "the folder is empty"
+    roles = "|".join(r for pair in ROLES for r in pair)
+    lonely = sorted(p.name for p in files if re.fullmatch(rf".+\.({roles})\.[A-Za-z]+", p.name))
+    said = []
+    if lonely:
+        said.append(f"{len(lonely)} takes without their partner ({lonely[0][:80]}, ...)")
+    rest = [p.suffix.lower() or "(none)" for p in files if p.name not in lonely]
+    for ext in sorted(set(rest)):
+        said.append(f"{rest.count(ext)} {ext[:16]} files that are no pair's take")
+    return ", ".join(said)
 
 
 def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
@@ -97,8 +117,6 @@ def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
 
 def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
     """Every pair of a folder (see the module docstring)."""
-    from faceclean import io
-
     pairs = []
     for name, tracked_path, truth_path, meta_path in find(folder):
         meta: dict = {}
@@ -106,14 +124,14 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
             meta = _meta(meta_path)
         elif require_meta:
             continue  # a pair still being written: its JSON comes last
-        tracked, truth = io.load(tracked_path), io.load(truth_path)
+        tracked, truth = _take(tracked_path, folder), _take(truth_path, folder)
         rom_path = tracked_path.with_name(tracked_path.name.replace(".tracked.", ".rom.tracked."))
-        rom = io.load(rom_path) if rom_path != tracked_path and rom_path.is_file() else None
+        rom = _take(rom_path, folder) if rom_path != tracked_path and rom_path.is_file() else None
         rom_truth = None
         if rom is not None:
             clip_truth = rom_path.with_name(rom_path.name.replace(".rom.tracked.", ".rom.truth."))
             if clip_truth.is_file():
-                rom_truth = aligned(io.load(clip_truth), rom, str(rom_path), same_times=True)
+                rom_truth = aligned(_take(clip_truth, folder), rom, str(rom_path), same_times=True)
         job = meta.get("job") if isinstance(meta.get("job"), dict) else {}
         same = tracked_path.name.startswith(f"{name}.{ROLES[0][0]}.")  # tracked + truth
         pairs.append(
@@ -129,6 +147,71 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
             )
         )
     return pairs
+
+
+def _take(path: Path, folder: str | os.PathLike) -> Animation:
+    """A pair's take (``io.load``); a refusal names the file (from the pairs folder on),
+    whatever the reader said (a header cell over 256 bytes: which of the pairs holds it)."""
+    from faceclean import io
+
+    try:
+        return io.load(path)
+    except FacecleanError as e:
+        try:
+            where = str(path.relative_to(folder))
+        except ValueError:
+            where = str(path)
+        raise FacecleanError(f"{where}: {e}" if where not in str(e) else str(e)) from None
+
+
+def usable(pairs: Sequence[Pair]) -> tuple[list[Pair], list[str], list[str]]:
+    """(the real pairs among ``pairs`` as training reads them, why each other one is not,
+    what was read as missing), the reasons one line each, naming the pair.
+
+    A value that is infinite or beyond ``MAX_ABS`` (1e6) is no reading: it is read as
+    missing, as every cleaner reads it (filters/base.py rule 2), in the tracked take, the
+    truth and the calibration clip, so that no fit ever meets it. A real pair then has
+    an ARKit channel in its tracked take, ``MIN_FRAMES`` frames at least where the tracker
+    read the face and the truth is whole on those channels, and a tracked take that is
+    not its truth (the same numbers: a folder of truth takes under tracked names)."""
+    kept, skipped, notes = [], [], []
+    for p in pairs:
+        tracked, n_x = _readings(p.tracked)
+        truth, n_y = _readings(p.truth)
+        if n_x or n_y:
+            notes.append(f"{p.name}: {n_x} tracked and {n_y} truth values infinite or beyond "
+                         f"{MAX_ABS:g}, read as missing")  # fmt: skip
+        x, present = tracked.arkit(ARKIT52)
+        if not present.any():
+            skipped.append(f"{p.name}: the tracked take has no ARKit channel")
+            continue
+        y = truth.arkit(ARKIT52)[0][:, present]
+        x = x[:, present]
+        good = np.isfinite(x).any(axis=1) & np.isfinite(y).all(axis=1)
+        if good.sum() < MIN_FRAMES:
+            skipped.append(f"{p.name}: no {MIN_FRAMES} frames where the tracker read the face "
+                           "and the truth is whole")  # fmt: skip
+            continue
+        if np.array_equal(x[good], y[good]):
+            skipped.append(f"{p.name}: the tracked take is its truth (the same numbers); a "
+                           "pair needs a tracker's reading of the performance")  # fmt: skip
+            continue
+        rom = rom_truth = None
+        if p.rom is not None and p.rom_truth is not None:
+            (rom, n_r), (rom_truth, n_t) = _readings(p.rom), _readings(p.rom_truth)
+            if n_r or n_t:
+                notes.append(f"{p.name}.rom: {n_r + n_t} values infinite or beyond "
+                             f"{MAX_ABS:g}, read as missing")  # fmt: skip
+        kept.append(replace(p, tracked=tracked, truth=truth, rom=rom, rom_truth=rom_truth))
+    return kept, skipped, notes
+
+
+def _readings(anim: Animation) -> tuple[Animation, int]:
+    """(``anim`` with its infinite or beyond-MAX_ABS values NaN, how many there were)."""
+    v = anim.values
+    bad = ~(np.abs(v) <= MAX_ABS) & ~np.isnan(v)
+    n = int(bad.sum())
+    return (anim.with_values(np.where(bad, np.nan, v)) if n else anim), n
 
 
 def with_clips(pairs: Sequence[Pair]) -> list[Pair]:

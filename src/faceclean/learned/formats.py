@@ -6,9 +6,13 @@ from here. A checkpoint's ``config`` (a 0-d JSON string) carries its ``format``.
 
 from __future__ import annotations
 
+import io
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from faceclean import strict_json
 from faceclean.errors import FacecleanError
@@ -53,15 +57,65 @@ def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict]:
     """(config, the other arrays) of a checkpoint (``read_arrays``); the config is only
     parsed here: each format's loader checks it."""
     p = Path(path)
-    arrays = read_arrays(p)
+    return split(read_arrays(p), p.name)
+
+
+def split(arrays: dict[str, Any], label: str) -> tuple[dict[str, Any], dict]:
+    """(config, the other arrays) of a checkpoint's arrays: the config parsed (strict
+    JSON, an object), not yet checked."""
+    arrays = dict(arrays)
     try:
         raw = str(arrays.pop("config")[()])
     except (KeyError, ValueError, TypeError, IndexError) as e:
-        raise FacecleanError(f"{p.name}: no readable 'config' ({e})") from None
-    config = strict_json.loads(raw, f"{p.name}: config", max_depth=strict_json.MAX_DEPTH)
+        raise FacecleanError(f"{label}: no readable 'config' ({e})") from None
+    config = strict_json.loads(raw, f"{label}: config", max_depth=strict_json.MAX_DEPTH)
     if not isinstance(config, dict):
-        raise FacecleanError(f"{p.name}: 'config' is not a JSON object")
+        raise FacecleanError(f"{label}: 'config' is not a JSON object")
     return config, arrays
+
+
+def write(
+    path: str | os.PathLike,
+    config: dict[str, Any],
+    arrays: dict[str, Any],
+    check: Callable[[dict[str, np.ndarray]], object],
+    *,
+    compressed: bool = False,
+) -> None:
+    """Write a checkpoint only once it is known good, so that no model that its loader
+    refuses, or that holds a NaN, is ever written (docs/ROBUSTNESS.md, class 13): every
+    array finite; the config strict JSON (a non-finite fact, such as a score that could
+    not be measured, is null); the bytes within what ``read_arrays`` accepts, and read
+    back from memory as it reads a file, then given to ``check``, the format's own loader
+    (it raises FacecleanError for what it would refuse). Then written atomically; else
+    one line, ``m.npz: not written: <why>``, and nothing written."""
+    name = Path(path).name
+    for key, a in arrays.items():
+        a = np.asarray(a)
+        if a.dtype.kind in "fc" and not np.isfinite(a).all():
+            n = int((~np.isfinite(a)).sum())
+            raise FacecleanError(
+                f"{name}: not written: array {key!r} holds {n} NaN or infinite numbers"
+            )
+    data = {**arrays, "config": np.array(strict_json.dumps(config))}
+    buf = io.BytesIO()
+    (np.savez_compressed if compressed else np.savez)(buf, **data)
+    blob = buf.getvalue()
+    if len(blob) > MAX_MODEL_BYTES:
+        raise FacecleanError(
+            f"{name}: not written: over the {MAX_MODEL_BYTES // MiB} MiB a model may be"
+        )
+    try:
+        with np.load(io.BytesIO(blob), allow_pickle=False) as z:
+            back = {k: z[k] for k in z.files}
+        if sum(a.nbytes for a in back.values()) > MAX_MODEL_BYTES:
+            raise FacecleanError(f"unpacks to over {MAX_MODEL_BYTES // MiB} MiB")
+        check(back)
+    except FacecleanError as e:
+        raise FacecleanError(f"{name}: not written: {e}") from None
+    from faceclean.io.atomic import atomic_write
+
+    atomic_write(path, blob)
 
 
 def is_model_file(path: str | os.PathLike) -> bool:

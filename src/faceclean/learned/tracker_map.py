@@ -61,7 +61,6 @@ user's ``detail`` setting; config ``lift_top`` true or false (absent: false).
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -173,10 +172,11 @@ class MapWeights:
         return cls(dict(config), out)
 
     def save(self, path: str | os.PathLike) -> None:
-        from faceclean.io.atomic import atomic_open
-
-        with atomic_open(path, "wb") as f:
-            np.savez(f, config=np.array(json.dumps(self.config)), **self.arrays)
+        """Write the map, once ``formats.write`` has checked it: every array finite, and
+        the file as written loads (``build``); else one line, and nothing written."""
+        label = Path(path).name
+        formats.write(path, self.config, self.arrays,
+                      lambda a: MapWeights.build(*formats.split(a, label), label))  # fmt: skip
 
 
 def _detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:

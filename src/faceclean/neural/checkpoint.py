@@ -9,7 +9,6 @@ runtime).
 
 from __future__ import annotations
 
-import io
 import os
 from pathlib import Path
 from typing import Any
@@ -17,9 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from faceclean import strict_json
 from faceclean.errors import FacecleanError
-from faceclean.io.atomic import atomic_write
 from faceclean.learned import formats
 from faceclean.learned.formats import LSTM as FORMAT
 from faceclean.neural.model import LSTMCleaner
@@ -49,18 +46,22 @@ def save(
     extra: dict[str, Any] | None = None,
     optimizer: torch.optim.Optimizer | None = None,
 ) -> None:
-    """Write ``model`` (and optionally its Adam state) atomically to ``path`` (.npz).
+    """Write ``model`` (and optionally its Adam state) atomically to ``path`` (.npz),
+    once ``formats.write`` has checked it: every array finite, and the file as written
+    loads in the numpy runtime (``LSTMWeights.from_arrays``); else one line, nothing
+    written.
 
-    ``extra``: JSON-serialisable training facts stored in the config.
+    ``extra``: JSON-serialisable training facts stored in the config (NaN: null).
     """
+    from faceclean.learned.checkpoint import LSTMWeights
+
     config = {"format": FORMAT, **model.config(), **(extra or {})}
     data = arrays(model)
-    data["config"] = np.array(strict_json.dumps(config))  # NaN: null (configs are read strictly)
     if optimizer is not None:
         data.update(_optimizer_arrays(model, optimizer))
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **data)
-    atomic_write(path, buf.getvalue())
+    label = Path(path).name
+    formats.write(path, config, data, lambda a: LSTMWeights.from_arrays(a, label),
+                  compressed=True)  # fmt: skip
 
 
 def read(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
