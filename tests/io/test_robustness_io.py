@@ -622,3 +622,60 @@ def test_an_output_that_cannot_be_written_is_refused_before_the_work(tmp_path, c
         "cannot write in /proc/" in err)  # fmt: skip
     if where == "dangling":
         assert not (tmp_path / "gone").exists()
+
+
+# -- issue 37: nothing non-finite written; kernel files are not files -------------------------
+
+
+def _ll_angles(head_yaw: str, head_pitch: str) -> bytes:
+    head = b"Timecode,BlendshapeCount,EyeBlinkLeft,JawOpen,HeadYaw,HeadPitch\n"
+    rows = [f"00:00:00:{i:02d}.000,2,0.1,0.2,{head_yaw if i == 2 else 0.1},"
+            f"{head_pitch if i == 3 else 0.0}" for i in range(6)]  # fmt: skip
+    return head + "\n".join(rows).encode() + b"\n"
+
+
+def _strict(text: str):
+    def refuse(name):
+        raise ValueError(f"{name} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.mark.parametrize(("yaw", "pitch"), [("1e308", "-1e308"), ("1.7e308", "-0.5")])
+def test_huge_finite_angles_convert_to_strict_json(tmp_path, capsys, yaw, pitch):
+    src = tmp_path / "take.csv"
+    src.write_bytes(_ll_angles(yaw, pitch))
+    out = tmp_path / "take.json"
+    assert main(["convert", str(src), "-o", str(out)]) == 0
+    doc = _strict(out.read_text())  # a strict reader reads it: no Infinity token
+    pose = np.array(doc["pose"], dtype=np.float64)
+    assert np.isfinite(pose).all() and pose[2, 0] == float(yaw)
+    back = io.load(out)
+    np.testing.assert_array_equal(back.meta["pose"], pose)
+
+
+@pytest.mark.parametrize(("yaw", "pitch"), [("inf", "0.1"), ("0.1", "-inf"), ("1e309", "0.2")])
+def test_infinite_angles_are_refused_by_json_in_one_line(tmp_path, capsys, yaw, pitch):
+    src = tmp_path / "take.csv"
+    src.write_bytes(_ll_angles(yaw, pitch))
+    out = tmp_path / "take.json"
+    assert main(["convert", str(src), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "JSON cannot hold infinite values" in err, err
+    assert "HeadYaw" in err or "HeadPitch" in err
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["take.csv"]
+
+
+@pytest.mark.parametrize("option", ["--calibration", "--preset", "--model"])
+def test_kernel_files_are_refused_as_the_special_files_they_are(tmp_path, capsys, option):
+    """/proc/self/mem stats as a regular file of 0 bytes and fails mid-read (EIO)."""
+    src = tmp_path / "take.csv"
+    src.write_bytes(_ll_angles("0.1", "0.1"))
+    out = tmp_path / "o.csv"
+    code = main(["clean", str(src), "-o", str(out), option, "/proc/self/mem"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "internal error" not in err and "Errno" not in err
+    assert not out.exists()
+    with pytest.raises(FacecleanError, match="kernel file"):
+        io.load("/proc/self/mem")

@@ -266,3 +266,58 @@ def test_ifacialmocap_head_reaches_livelink_out():
         f = livelink.decode(rx.recv(65536))
     np.testing.assert_allclose(f.pose, np.radians([20, 10, 5, 2, 1, 0, 2, 1, 0]), atol=1e-6)
     assert POSE[0] == "HeadYaw"
+
+
+# -- issue 37: a non-finite number never goes out --------------------------------------------
+
+
+def _floats(datagram: bytes) -> list[float]:
+    """Every float argument of a VMC datagram, read by python-osc (the peer's parser)."""
+    from pythonosc.osc_bundle import OscBundle
+    from pythonosc.osc_message import OscMessage
+
+    def walk(element) -> list[float]:
+        if isinstance(element, OscBundle):
+            return [v for e in element for v in walk(e)]
+        return [a for a in element.params if isinstance(a, float)]
+
+    if OscBundle.dgram_is_bundle(datagram):
+        return walk(OscBundle(datagram))
+    return walk(OscMessage(datagram))
+
+
+BAD = (float("nan"), float("inf"), float("-inf"))
+
+
+@pytest.mark.parametrize("out", ["vmc", "livelink"])
+def test_a_non_finite_head_position_is_never_relayed(out):
+    """A sender's NaN and +-inf Head *position* (and a NaN body bone, a NaN extra channel):
+    nothing NaN or infinite reaches the engine; the Head keeps its last good position."""
+    good = (0.0, 0.06, 0.01)
+    q = unity_quaternion(np.array([0.2, 0.0, 0.0]))
+    with raw_receiver() as rx:
+        send = f"{out}://127.0.0.1:{rx.getsockname()[1]}"
+        with _serving(_relay("vmc://127.0.0.1:0", send)) as relay:
+            tx = UDPClient("127.0.0.1", relay.address.port)
+            got = []
+            for i in range(12):
+                position = good if i < 2 else (BAD[i % 3], 0.06, BAD[(i + 1) % 3])
+                hips = ("/VMC/Ext/Bone/Pos", ["Hips", BAD[i % 3], 1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+                extra = [_bone("Head", q, position), hips]
+                values = [0.2 + 0.01 * i, BAD[i % 3]]
+                tx.send(vmc_bundle(["jawOpen", "Joy"], values, t=1.0 + i / 60, extra=extra))
+                got.append(rx.recv(65536))
+    assert len(got) == 12
+    if out == "livelink":
+        floats = np.frombuffer(got[-1][-4 * 61 :], ">f4")
+        assert all(np.isfinite(np.frombuffer(d[-4 * 61 :], ">f4")).all() for d in got)
+        assert floats[52] == pytest.approx(0.2, abs=1e-3)  # the yaw came through
+        return
+    for d in got:
+        floats = _floats(d)
+        assert floats and np.isfinite(floats).all(), floats
+    from pythonosc.osc_bundle import OscBundle
+
+    last = [m for m in OscBundle(got[-1]) if m.address == "/VMC/Ext/Bone/Pos"]
+    assert [m.params[0] for m in last] == ["Head"]  # the NaN Hips message is left out
+    assert tuple(last[0].params[1:4]) == pytest.approx(good)  # held, not (nan, 0.06, inf)

@@ -163,3 +163,107 @@ def test_messages_are_bounded_and_checked(server):
         with pytest.raises(ConnectionClosed):
             _reply(ws)
         assert ws.close_code == 1009  # message too big
+
+
+# -- issue 37: never a 500, never "internal error", never a refused state ----------------------
+
+
+def _twice(server, header: str) -> tuple[int, bytes]:
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=10)
+    conn.putrequest("GET", f"/?token={server.token}", skip_host=True, skip_accept_encoding=True)
+    conn.putheader("Host", f"127.0.0.1:{server.port}")
+    conn.putheader(header, f"127.0.0.1:{server.port}" if header == "Host" else "x")
+    conn.endheaders()
+    r = conn.getresponse()
+    out = r.status, r.read()
+    conn.close()
+    return out
+
+
+@pytest.mark.parametrize("header", ["Host", "Origin", "Sec-Fetch-Site"])
+def test_a_header_given_twice_is_refused_not_a_500(server, header):
+    status, body = _twice(server, header)
+    assert status in (400, 403), (status, body)
+    assert body.startswith(b"faceclean ui: ") and body.count(b"\n") == 1
+    assert _get(server, f"/?token={server.token}")[0] == 200  # and the page lives
+
+
+def _said(ws, seq: int) -> dict:
+    """The reply to the message numbered ``seq`` (states of others' changes skipped)."""
+    while True:
+        m = _reply(ws)
+        if m.get("seq") == seq and m["type"] in ("error", "saved", "state", "exported"):
+            return m
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        {"type": "save", "what": "preset", "path": "{d}/p\ud800.json"},
+        {"type": "save", "what": "levels", "path": "{d}/l\udcff.json"},
+        {"type": "export", "path": "{d}/t\ud800.csv"},
+        {"type": "load", "what": "levels", "path": "/proc/self/mem"},
+        {"type": "load", "what": "preset", "path": "/proc/self/mem"},
+        {"type": "load", "what": "levels", "path": "/proc/self/status"},
+        {"type": "load", "what": "levels", "path": "/sys/kernel/mm/transparent_hugepage/enabled"},
+    ],
+)
+def test_hostile_paths_get_one_line_never_an_internal_error(server, tmp_path, message):
+    m = {k: v.replace("{d}", str(tmp_path)) for k, v in message.items()}
+    with _open(server) as ws:
+        ws.send(json.dumps({**m, "seq": 21}))  # ASCII JSON: "\ud800" stays an escape
+        got = _said(ws, 21)
+    assert got["type"] == "error" and got["for"] == m["type"], got
+    text = got["message"]
+    assert text.startswith("faceclean: ") and "\n" not in text
+    assert "internal error" not in text and "Errno" not in text, text
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_a_refused_setting_leaves_the_state_and_is_never_saved(server, take, tmp_path, capsys):
+    """Kalman r=1e300 turns the take into NaN: refused for the "set" that asked, the
+    state stays, and a later save writes the state that is, which the CLI loads."""
+    with _open(server) as ws:
+        ws.send(json.dumps({"type": "set", "words": "kalman", "items": ["q=0.5"], "seq": 30}))
+        before = _said(ws, 30)
+        assert before["type"] == "state" and before["items"] == ["q=0.5"]
+        ws.send(json.dumps({"type": "set", "words": "kalman", "items": ["r=1e300"], "seq": 31}))
+        got = _said(ws, 31)
+        assert got["type"] == "error" and got["for"] == "set", got
+        assert "not finite" in got["message"] and "\n" not in got["message"]
+        preset = tmp_path / "p.json"
+        ws.send(json.dumps({"type": "save", "what": "preset", "path": str(preset), "seq": 32}))
+        saved = _said(ws, 32)
+        assert saved["type"] == "saved", saved
+    with connect(_uri(server, server.token), max_size=None) as ws:  # a page opened now
+        state = json.loads(ws.recv(timeout=10))["state"]
+    assert state["items"] == ["q=0.5"] and "1e300" not in state["command"]
+    assert "1e300" not in preset.read_text() and "1e+300" not in preset.read_text()
+    out = tmp_path / "o.csv"
+    assert main(["clean", str(take), "-o", str(out), "--preset", str(preset)]) == 0, (
+        capsys.readouterr().err
+    )
+    with _open(server) as ws:  # back to the module's state for the other tests
+        ws.send(json.dumps({"type": "set", "words": "one-euro", "items": [], "seq": 33}))
+        assert _said(ws, 33)["type"] == "state"
+
+
+def test_page_messages_are_strict_json_and_binary_has_no_inf():
+    from faceclean.ui.offline import packet
+    from faceclean.ui.server import Client
+
+    sent = []
+
+    class Connection:
+        def send(self, data):
+            sent.append(data)
+
+    Client(Connection()).send({"type": "frames", "x": [float("inf"), float("nan"), 1.0]})
+    assert json.loads(sent[0], parse_constant=lambda c: 1 / 0)["x"] == [None, None, 1.0]
+    values = np.full((2, 52), 0.5)
+    values[0, :3] = [np.inf, -np.inf, 1e300]
+    data = packet("cleaned", 1, 0, values)
+    head = int.from_bytes(data[:4], "little")
+    floats = np.frombuffer(data[4 + head :], "<f4").reshape(2, 52)
+    assert not np.isinf(floats).any() and np.isnan(floats[0, :3]).all()
+    assert (floats[1] == 0.5).all()

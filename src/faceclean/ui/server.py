@@ -37,7 +37,7 @@ MAX_SENDS = 64  # messages queued to a slow page before the oldest views are dro
 TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8"}
 TYPES[".css"] = "text/css; charset=utf-8"
 MESH = "/mesh.json"  # the face the page draws (Session.mesh), besides the files
-ONCE = ("Host", "Origin", "Sec-Fetch-Site", "Cookie")  # headers a request carries once at most
+ONCE = ("Host", "Origin", "Sec-Fetch-Site")  # headers a request carries once at most
 
 
 def files() -> dict[str, Path]:
@@ -175,7 +175,7 @@ class Server:
             return "a request from another site"
         given = parse_qs(urlsplit(target).query).get("token", [""])[0]
         if not given:
-            given = _cookie(headers.get("Cookie") or "", self.cookie)
+            given = _cookie("; ".join(headers.get_all("Cookie")), self.cookie)
         if not hmac.compare_digest(given.encode(), self.token.encode()):
             return "no valid token (open the URL the command printed)"
         return None
