@@ -33,6 +33,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "replaced, the rest of the page kept",
     )
     p.add_argument("--lstm", action="store_true", help="with --pairs: also the paper's LSTM")
+    p.add_argument(
+        "--families",
+        action="store_true",
+        help="with --pairs: the appearance table (leave one family and one source out) "
+        "instead of the tracker table",
+    )
+    p.add_argument(
+        "--shipped",
+        metavar="NPZ",
+        help="with --families: the model of the 'shipped before' row (default the shipped one)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     check_writable(args.json, args.markdown)  # now, not after the evaluation
+    if args.pairs and args.families:
+        return _families(args, progress)
     if args.pairs:
         return _pairs(args, progress)
     seed = evaluate.SEED if args.seed is None else args.seed
@@ -80,6 +93,29 @@ def _keep_tracker_section(path: str | None, text: str) -> str:
     start = old.index(tracker_results.BEGIN)
     section = old[start : old.index(tracker_results.END) + len(tracker_results.END)]
     return tracker_results.insert(text, section + "\n")
+
+
+def _families(args: argparse.Namespace, progress) -> int:
+    """``eval --pairs DIR --families``: the appearance table (evaluation/family_eval.py)."""
+    import json
+    from pathlib import Path
+
+    from faceclean import settings
+    from faceclean.evaluation import family_eval, tracker_results
+    from faceclean.io.atomic import atomic_write
+
+    shipped = Path(args.shipped) if args.shipped else settings.MODELS / "mediapipe.npz"
+    result = family_eval.evaluate(args.pairs, shipped=shipped, report=progress)
+    section = family_eval.markdown(result)
+    if args.json:
+        atomic_write(args.json, json.dumps(result, indent=1))
+    if args.markdown:
+        page = Path(args.markdown)
+        old = page.read_text(encoding="utf-8") if page.is_file() else ""
+        atomic_write(args.markdown, tracker_results.insert(
+            old, section, family_eval.BEGIN, family_eval.END))  # fmt: skip
+    print(section)
+    return 0
 
 
 def _pairs(args: argparse.Namespace, progress) -> int:

@@ -52,6 +52,7 @@ class Pair:
     group: str  # the performance source (split unit)
     setting: str  # render setting, or "studio-take" for a studio's own pair
     meta: dict = field(default_factory=dict)
+    family: str = "painted"  # appearance family (synthetic/scene.py); a studio's own: "take"
     rom: Animation | None = None  # NAME.rom.tracked.*: the same face's calibration clip
     rom_truth: Animation | None = None  # NAME.rom.truth.*: the clip's weights, at its instants
 
@@ -142,6 +143,7 @@ def load(folder: str | os.PathLike, require_meta: bool = False) -> list[Pair]:
                 group=str(job.get("group", tracked_path.resolve().parent.name)),
                 setting=str(job.get("setting", "studio-take")),
                 meta=meta,
+                family=str(job.get("family", "painted" if job else "take")),
                 rom=rom,
                 rom_truth=rom_truth,
             )
@@ -226,6 +228,7 @@ def with_clips(pairs: Sequence[Pair]) -> list[Pair]:
             group=p.group,
             setting=p.setting,
             meta={"clip": True},
+            family=p.family,
         )  # fmt: skip
         for p in pairs
         if p.rom is not None and p.rom_truth is not None

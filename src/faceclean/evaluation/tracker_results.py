@@ -138,10 +138,10 @@ def _ratio(hit: dict | None, fold: dict) -> str:
     return " / ".join(out)
 
 
-def insert(page: str, section: str) -> str:
+def insert(page: str, section: str, begin: str = BEGIN, end: str = END) -> str:
     """``page`` with the section between its markers replaced (appended when absent)."""
-    if BEGIN in page and END in page:
-        head, rest = page.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
+    if begin in page and end in page:
+        head, rest = page.split(begin, 1)
+        _, tail = rest.split(end, 1)
         return head + section.rstrip("\n") + tail
     return page.rstrip("\n") + "\n\n" + section

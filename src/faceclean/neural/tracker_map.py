@@ -28,6 +28,7 @@ from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.tracker_map import MAX_DETAIL, MAX_LIFT, MapWeights
+from faceclean.neural import map_groups
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
 # (1-0.5 Hz, beta 5-20) ones hold a face at rest hard and open up when it moves (the speed
@@ -185,6 +186,16 @@ def _solve_detail(gram: np.ndarray, xty: np.ndarray, lam: float, own: np.ndarray
     return coef, c, d
 
 
+def _fold_solve(w: MapWeights, gram: np.ndarray, xty: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The linear part from moments of [z, e, 1]: per output group as ``w``'s chosen
+    structure says (map_groups.py), else one ridge over every input (``_solve_detail``)."""
+    if "structure" in w.config:
+        choice = {g: (k, float(lam)) for g, (k, lam) in w.config["structure"].items()}
+        return map_groups.solve(gram, xty, w.inputs, choice)
+    return _solve_detail(gram, xty, w.config["lam"], _own(w))
+
+
 def _own(w: MapWeights) -> np.ndarray:
     """(M,) each output's input of the same name, -1 for none."""
     return np.array([w.inputs.index(o) if o in w.inputs else -1 for o in w.outputs])
@@ -226,10 +237,26 @@ def _score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tu
     return out + ((mean(np.concatenate(peaks)) if peaks else float("nan"),) if closure else ())
 
 
+def fold_key(p: Pair, families: bool) -> str:
+    """The fold a pair is scored in: its source, or with ``families`` its appearance family
+    and source ("photo/neurosync"): a fold held out leaves both out (``_left_out``)."""
+    return f"{p.family}/{p.group}" if families else p.group
+
+
+def _left_out(p: Pair, key: str) -> bool:
+    """Whether ``key``'s fold keeps ``p`` out of its training: the same source, or (a
+    family fold) the same look."""
+    family, _, group = key.rpartition("/")
+    return p.group == group or (bool(family) and p.family == family)
+
+
 def _sources(pool: Sequence[Pair]) -> tuple[list[str], list[str | None]]:
-    """(the sources scored, sorted; each pair's source, None for a clip: never scored)."""
+    """(the folds scored, sorted; each pair's fold, None for a clip: never scored). With
+    more than one appearance family in ``pool`` a fold is a (family, source) cell, left out
+    both ways at once; else a source."""
     perf = {id(p) for p in performances(pool)}
-    scored = [p.group if id(p) in perf else None for p in pool]
+    many = len({p.family for p in pool}) > 1
+    scored = [fold_key(p, many) if id(p) in perf else None for p in pool]
     return sorted({s for s in scored if s is not None}), scored
 
 
@@ -249,7 +276,7 @@ def _folds(pool, feats, rest: bool, scored) -> dict[str, tuple]:
     total = [sum(m[i] for m in moments) for i in (0, 1)]
     folds = {}
     for g in sorted({s for s in scored if s is not None}):
-        out = [i for i, p in enumerate(pool) if p.group == g]
+        out = [i for i, p in enumerate(pool) if _left_out(p, g)]
         folds[g] = (*(total[j] - sum(moments[i][j] for i in out) for j in (0, 1)),
                     [feats[i] for i in out if scored[i] == g])  # fmt: skip
     return folds
@@ -292,6 +319,7 @@ def fit(
     deadband: float = DEADBAND,
     knees: Sequence[float | None] = KNEES,
     details: Sequence[float] = DETAILS,
+    structured: bool = True,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
@@ -302,7 +330,9 @@ def fit(
     is made leaving one source out in turn instead (``_cross_validate``), not on ``val``
     alone: one source's faces are too few to tell pre-filters apart; and so is the blink
     lift's knee among ``knees`` (``_choose_lift``; ``(None,)``: no lift) and the detail's
-    scale among ``details``. Without ``cv`` the map has no detail."""
+    scale among ``details``. Without ``cv`` the map has no detail. ``structured`` (with
+    ``cv`` and ``rest``): which inputs each output group reads is chosen on the folds too,
+    every fit shrunk toward the tracker's own channel (map_groups.py)."""
     report = report or (lambda _e: None)
     torch.set_num_threads(1)  # a tiny net: more threads only contend
     names = channels(train)
@@ -312,7 +342,11 @@ def fit(
         feats = features(w, pool)
         if refit:
             gram, xty = _moments(*_stack(feats, rest, detail=True))
-            _set_linear(w, *_solve_detail(gram, xty, w.config["lam"], _own(w)))
+            if structured and rest:  # per output group, on the folds (map_groups.py)
+                _, scored = _sources(pool)
+                choice = map_groups.choose(w, _folds(pool, feats, rest, scored), report)
+                w.config["structure"] = {g: [k, lam] for g, (k, lam) in choice.items()}
+            _set_linear(w, *_fold_solve(w, gram, xty))
             _choose_lift(w, pool, rest, knees, report)
         w.config.update(frames=int(sum(len(f[0]) for f in feats)))
         return w
@@ -492,12 +526,10 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report, tops=TO
         return  # nothing to lift, or too few sources to choose
     raw_mse = _raw_mse(pool, w.inputs, rest, scored)
     folds = _folds(pool, feats, rest, scored)
-    own = _own(w)
-    coefs = {g: _solve_detail(gram, xty, w.config["lam"], own)
-             for g, (gram, xty, _) in folds.items()}  # fmt: skip
+    coefs = {g: _fold_solve(w, gram, xty) for g, (gram, xty, _) in folds.items()}
     # each fold's training performances, which its gains are fitted on
-    trains = {g: [f for f, s in zip(feats, scored, strict=True) if s not in (None, g)]
-              for g in groups}  # fmt: skip
+    trains = {g: [f for f, s, p in zip(feats, scored, pool, strict=True)
+                  if s is not None and not _left_out(p, g)] for g in groups}  # fmt: skip
     linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
     lo, hi = CLOSURE_BAND
     found = []  # (score, knee, top, closure)

@@ -1,0 +1,216 @@
+"""The appearance table of docs/RESULTS.md: MediaPipe cleaners judged on a look, a source
+and identities that no fit and no choice saw.
+
+Folds leave one appearance family and one performance source out at once: a fold (F, S)
+fits on every pair of another family *and* another source (with their calibration clips),
+and is scored on the pairs of family F and source S. Everything the shipped fit chooses
+(pre-filter, shrinkage, detail, the structure of each output group, the blink lift) is
+chosen again inside the fold, on its own training pairs' folds, so the held-out family
+never reaches a choice (nested). Rows:
+
+- raw: MediaPipe's scores as they come;
+- one-euro: One Euro tuned on the fold's training pairs;
+- shipped before: the model shipped before this table (trained on painted faces only;
+  unseen here, for continuity);
+- map, every input: the tracker map as fitted before issue 34 (one ridge over every
+  input), on the fold's training pairs;
+- map, by group (ours): the same, each output group's inputs chosen on folds
+  (neural/map_groups.py).
+
+Columns per family: MSE as x raw (frame-weighted over the family's folds), x raw per
+channel group (gaze apart), blink closure, jitter (x the truth's), lag. The neutral rows:
+on the family's neutral holds, the worst channel's mean |output - truth| after the first
+half second (the cleaner's start). The per-channel table: x raw per channel, pooled over
+held-out families.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.channels import GROUPS
+from faceclean.evaluation import paired
+from faceclean.evaluation.paired import Pair
+from faceclean.evaluation.tracker_eval import Build, outputs, tune_one_euro
+
+GAZE = tuple(n for n in GROUPS["eyes"] if n.startswith("eyeLook"))
+TABLE_GROUPS = {"gaze": GAZE, "lids": tuple(n for n in GROUPS["eyes"] if n not in GAZE),
+                **{g: m for g, m in GROUPS.items() if g != "eyes"}}  # fmt: skip
+SETTLE_S = 0.5  # s a cleaner is given to start on a neutral hold
+NEUTRAL = "neutral"
+# the pre-filters a fold's fit chooses among (a subset of tracker_map.PREFILTERS: the
+# nested fits run 20 times over; the full list is the shipped fit's)
+FOLD_PREFILTERS = (None, (1.0, 10.0, 4.0), (4.0, 20.0, 4.0), (2.0, 50.0, 4.0))
+Report = Callable[[str], None]
+
+
+def evaluate(folder: str | Path, shipped: str | Path | None = None,
+             report: Report | None = None) -> dict[str, Any]:  # fmt: skip
+    """{"families": {F: {row: scores}}, "neutral": {F: {row: worst}}, "channels": {row:
+    {name: x raw}}, "chosen": {fold: structure}, "pairs": counts}."""
+    from faceclean.filters.one_euro import OneEuro
+    from faceclean.learned.tracker_map import TrackerMap
+    from faceclean.neural import tracker_map as fit
+
+    report = report or (lambda _s: None)
+    pairs = paired.load(folder, require_meta=True)
+    families = sorted({p.family for p in pairs})
+    if len(families) < 2:
+        raise ValueError("the appearance table needs pairs of two families or more")
+    per: dict[str, dict[str, list]] = {}  # family -> row -> [(out, pair)]
+    chosen: dict[str, Any] = {}
+    for fam in families:
+        for group in sorted({p.group for p in pairs if p.family == fam}):
+            test = [p for p in pairs if p.family == fam and p.group == group]
+            train = [p for p in pairs if p.family != fam and p.group != group]
+            if not test or len({p.group for p in train}) < 3:
+                continue
+            report(f"fold {fam}/{group}: {len(train)} training pairs, {len(test)} test")
+            train = paired.with_clips(train)
+            mc, beta = tune_one_euro(train)
+            rows: dict[str, Build] = {
+                "raw": lambda n: None,
+                "one-euro": lambda n, mc=mc, beta=beta: OneEuro(names=n, min_cutoff=mc,
+                                                               beta=beta),
+            }  # fmt: skip
+            if shipped is not None:
+                rows["shipped before"] = lambda n: TrackerMap(model=shipped, names=n)
+            for label, structured in (("map, every input", False), ("map, by group (ours)", True)):
+                w = fit.fit(train, [], prefilters=FOLD_PREFILTERS, structured=structured)
+                rows[label] = lambda n, w=w: TrackerMap(weights=w, names=n)
+                if structured:
+                    chosen[f"{fam}/{group}"] = w.config.get("structure")
+            for name, build in rows.items():
+                outs = outputs(build, test)
+                per.setdefault(fam, {}).setdefault(name, []).extend(zip(outs, test, strict=True))
+    return {
+        "families": {f: {r: _scores(v) for r, v in rows.items()} for f, rows in per.items()},
+        "neutral": {f: {r: _neutral(v) for r, v in rows.items()} for f, rows in per.items()},
+        "channels": _channels(per),
+        "chosen": chosen,
+        "pairs": paired.summary_json(pairs),
+    }
+
+
+def _scores(outs: Sequence[tuple]) -> dict[str, float]:
+    """Frame-weighted MSE and per-group MSE over performances (neutral holds apart), mean
+    blink closure, jitter and lag."""
+    from faceclean.evaluation.metrics import summary
+
+    perf = [(o, p) for o, p in outs if p.group != NEUTRAL]
+    res: dict[str, float] = {}
+    sq = {g: [0.0, 0] for g in ("all", *TABLE_GROUPS)}
+    rows = []
+    for out, p in perf:
+        for g, members in (("all", None), *TABLE_GROUPS.items()):
+            e = _err(out, p, members)
+            sq[g][0] += float(e.sum())
+            sq[g][1] += e.size
+        rows.append(summary(out, p.truth))
+    for g, (s, n) in sq.items():
+        res["mse" if g == "all" else f"mse_{g}"] = s / max(n, 1)
+    for key in ("jitter_ratio", "lag_ms", "blink_closure"):
+        vals = [r[key] for r in rows if np.isfinite(r[key])]
+        res[key] = float(np.mean(vals)) if vals else float("nan")
+    res["pairs"] = len(perf)
+    return res
+
+
+def _err(out, p: Pair, members: Sequence[str] | None) -> np.ndarray:
+    """Squared errors (finite ones) over the channels both takes have (``members`` only)."""
+    names = [n for n in out.names if n in p.truth.names and (members is None or n in members)]
+    if not names:
+        return np.zeros(0)
+    x, _ = out.arkit(names)
+    y, _ = p.truth.arkit(names)
+    e = (x - y) ** 2
+    return e[np.isfinite(e)]
+
+
+def _neutral(outs: Sequence[tuple]) -> dict[str, Any] | None:
+    """The worst channel's mean |output - truth| on neutral holds after SETTLE_S."""
+    holds = [(o, p) for o, p in outs if p.group == NEUTRAL]
+    if not holds:
+        return None
+    names = [n for n in holds[0][0].names if n in holds[0][1].truth.names]
+    dev = []
+    for out, p in holds:
+        keep = out.times - out.times[0] >= SETTLE_S
+        x, _ = out.arkit(names)
+        y, _ = p.truth.arkit(names)
+        dev.append(np.nanmean(np.abs(x[keep] - y[keep]), axis=0))
+    mean = np.nanmean(dev, axis=0)
+    k = int(np.nanargmax(mean))
+    return {"worst": float(mean[k]), "channel": names[k], "holds": len(holds)}
+
+
+def _channels(per: dict) -> dict[str, dict[str, float]]:
+    """Per row, per channel: MSE as x raw, pooled over every held-out family's folds."""
+    out: dict[str, dict[str, float]] = {}
+    rows = {r for fam in per.values() for r in fam}
+    for row in sorted(rows):
+        num: dict[str, float] = {}
+        den: dict[str, float] = {}
+        for fam in per.values():
+            for (out_r, p), (out_raw, _) in zip(fam.get(row, []), fam["raw"], strict=False):
+                if p.group == NEUTRAL:
+                    continue
+                for n in out_r.names:
+                    if n not in p.truth.names:
+                        continue
+                    e = _err(out_r, p, (n,))
+                    e0 = _err(out_raw, p, (n,))
+                    num[n] = num.get(n, 0.0) + float(e.sum())
+                    den[n] = den.get(n, 0.0) + float(e0.sum())
+        out[row] = {n: num[n] / den[n] for n in num if den.get(n, 0.0) > 1e-9}
+    return out
+
+
+BEGIN, END = "<!-- appearance families: begin -->", "<!-- appearance families: end -->"
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The section of docs/RESULTS.md: per held-out family, per group, neutral, per channel."""
+    lines = [BEGIN, "", "## MediaPipe on looks no fit saw: leave one family and one source out", ""]
+    lines += [
+        "Each fold fits on the pairs of the *other* appearance families and the *other* "
+        "performance sources, every choice made again on those alone, and is scored on one "
+        "family's pairs of one source (evaluation/family_eval.py). Families: `painted` (the "
+        "ICT head painted per vertex, iris, brows, lashes and hair drawn per face), `photo` "
+        "(the head fitted to a real portrait and textured from it, docs/DATA.md), `dressed` "
+        "(spectacles, a cap or fringe, a hand near the face, auto-exposure, white balance, "
+        "motion blur). Every identity is new. "
+        f"Pairs: `{result['pairs']}`.",
+        "",
+        "| held-out family | cleaner | MSE x raw | " + " | ".join(TABLE_GROUPS) +
+        " | blink closure | jitter (x truth) | lag ms | neutral: worst channel off |",
+        "|---|---|---|" + "---|" * len(TABLE_GROUPS) + "---|---|---|---|",
+    ]  # fmt: skip
+    for fam, rows in result["families"].items():
+        raw = rows["raw"]
+        for name, s in rows.items():
+            groups = " | ".join(
+                f"{s[f'mse_{g}'] / raw[f'mse_{g}']:.2f}" if raw[f"mse_{g}"] > 0 else "-"
+                for g in TABLE_GROUPS
+            )
+            neu = result["neutral"].get(fam, {}).get(name)
+            neutral = f"{neu['worst']:.3f} ({neu['channel']})" if neu else "-"
+            lines.append(
+                f"| {fam} | {name} | {s['mse'] / raw['mse']:.2f} | {groups} | "
+                f"{s['blink_closure']:.2f} | {s['jitter_ratio']:.2f} | {s['lag_ms']:.0f} | "
+                f"{neutral} |"
+            )
+    chans = result["channels"]
+    rows = [r for r in chans if r != "raw"]
+    lines += ["", "Per channel, MSE x raw pooled over every held-out family:", "",
+              "| channel | " + " | ".join(rows) + " |", "|---|" + "---|" * len(rows)]  # fmt: skip
+    names = sorted({n for r in rows for n in chans[r]}, key=lambda n: n)
+    for n in names:
+        lines.append(f"| {n} | " + " | ".join(
+            f"{chans[r][n]:.2f}" if n in chans[r] else "-" for r in rows) + " |")  # fmt: skip
+    lines += ["", END]
+    return "\n".join(lines) + "\n"

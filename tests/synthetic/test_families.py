@@ -1,0 +1,144 @@
+"""Appearance families: each look renders and MediaPipe finds the face; a portrait is fitted
+and textured (a portrait made here: the painted head's own render); a portrait with no face
+or too small a face is skipped in one line and the job goes on; the plan deals every
+source into every family and holds each scene's face at rest."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from faceclean.errors import FacecleanError
+from faceclean.settings import mesh_file, tracker_model
+from faceclean.synthetic import engine
+from faceclean.synthetic.scene import FAMILIES, Scene
+
+pytest.importorskip("numba")
+pytest.importorskip("mediapipe")
+
+
+@pytest.fixture(scope="module")
+def head():
+    from faceclean.synthetic.head import Head
+
+    p = mesh_file("ict_full.npz")
+    if p is None or not p.is_file() or tracker_model() is None:
+        pytest.skip("shared ict_full.npz or face_landmarker.task absent")
+    return Head.load(p)
+
+
+@pytest.fixture(scope="module")
+def portrait_file(head, tmp_path_factory):
+    """A 'photograph': the painted head rendered large and frontal, saved as a PNG."""
+    from faceclean.synthetic.portrait import _frontal
+    from faceclean.synthetic.render import Renderer
+
+    scene = _frontal(Scene.draw(5, "studio", head.n_identity, "painted"), head.n_identity)
+    img = Renderer(head, scene).frame(np.zeros(52), np.zeros(3), 0)
+    path = tmp_path_factory.mktemp("portraits") / "rendered.png"
+    Image.fromarray(img).save(path)
+    return path
+
+
+def test_scenes_of_each_family_differ_and_are_recorded():
+    looks = {f: Scene.draw(7, "studio", family=f, portraits=("p",)) for f in FAMILIES}
+    assert {s.family for s in looks.values()} == set(FAMILIES)
+    assert looks["photo"].portrait == "p" and looks["dressed"].exposure > 0
+    assert looks["painted"].identity == looks["dressed"].identity  # same seed, same person
+    assert Scene.draw(7, "studio", family="dressed") == looks["dressed"]  # seeded
+    with pytest.raises(FacecleanError, match="appearance family"):
+        Scene.draw(7, "studio", family="clay")
+    with pytest.raises(FacecleanError, match="portraits"):
+        Scene.draw(7, "studio", family="photo")
+
+
+def test_every_family_renders_a_face_mediapipe_finds(head, portrait_file):
+    from faceclean.synthetic.portrait import Fitter, load
+    from faceclean.synthetic.render import Renderer
+    from faceclean.synthetic.tracker import Tracker
+
+    images = dict(load([str(portrait_file)]))
+    fitter = Fitter(head, tracker_model())
+    frames = {}
+    for fam in FAMILIES:
+        scene = Scene.draw(3, "studio", head.n_identity, fam, ("rendered",))
+        skin = fitter.skin("rendered", images["rendered"], scene.flip) if fam == "photo" else None
+        frames[fam] = Renderer(head, scene, skin).frame(np.zeros(52), np.zeros(3), 30)
+        with Tracker(tracker_model()) as t:
+            assert t.track(frames[fam], 0.0) is not None, fam
+    # the photo's skin is the portrait's: its mean colour near the portrait's face
+    skin = fitter.skin("rendered", images["rendered"], False)
+    assert skin.weight.max() == 1.0 and 0.05 < skin.weight.mean() < 0.9
+    assert np.isfinite(skin.coords).all() and np.abs(skin.alpha).max() < 10
+
+
+def test_a_portrait_without_a_usable_face_is_skipped_in_one_line(head, portrait_file, tmp_path):
+    from faceclean.synthetic.portrait import Fitter
+
+    fitter = Fitter(head, tracker_model())
+    blank = np.full((300, 300, 3), 128, np.uint8)
+    with pytest.raises(FacecleanError, match="no face found; skipped"):
+        fitter.skin("blank", blank, False)
+    big = np.asarray(Image.open(portrait_file))
+    tiny = np.full((900, 900, 3), 90, np.uint8)  # the face 70 px wide in a large frame
+    small = np.asarray(Image.fromarray(big).resize((70, 70)))
+    tiny[400:470, 400:470] = small
+    with pytest.raises(FacecleanError, match=r"no face found|too small to texture"):
+        fitter.skin("tiny", tiny, False)
+
+
+def test_the_plan_deals_every_source_into_every_family_and_holds_each_face_at_rest():
+    takes = [(f"/takes/{g}/{k}.csv", g, 40.0) for g in ("a", "b") for k in range(2)]
+    jobs = engine.plan(takes, 3, 10.0, ("studio",), (30.0,), families=FAMILIES,
+                       portraits=("p1", "p2"), independent=3, neutral=2.0)  # fmt: skip
+    clips = [j for j in jobs if j.group != "neutral"]
+    holds = [j for j in jobs if j.group == "neutral"]
+    assert len(holds) == len(clips)  # one hold per scene, the same seed: the same face
+    assert {(j.seed, j.family) for j in holds} == {(j.seed, j.family) for j in clips}
+    for g in ("a", "b", "synthetic", "independent"):
+        assert {j.family for j in clips if j.group == g} == set(FAMILIES), g
+    assert {j.portrait for j in clips if j.family == "photo"} <= {"p1", "p2"}
+    assert all(j.portrait == "" for j in clips if j.family != "photo")
+    t, w, pose = engine.performance(holds[0])
+    assert pose is None and not w.any() and t[-1] == pytest.approx(2.0)
+
+
+def test_pairs_skips_a_bad_portrait_and_makes_the_rest(portrait_file, tmp_path):
+    bad = tmp_path / "blank.png"
+    Image.fromarray(np.full((200, 200, 3), 128, np.uint8)).save(bad)
+    out = tmp_path / "pairs"
+    cmd = [
+        sys.executable,
+        "-m",
+        "faceclean",
+        "pairs",
+        "--independent",
+        "3",
+        "--seconds",
+        "1",
+        "--settings",
+        "studio",
+        "--rates",
+        "24",
+        "--webcam-share",
+        "0",
+        "--families",
+        "painted,photo,dressed",
+        "--portraits",
+        str(portrait_file),
+        str(bad),
+        "-o",
+        str(out),
+    ]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    skipped = [line for line in r.stderr.splitlines() if "blank" in line]
+    assert len(skipped) == 1 and "no face found; skipped" in skipped[0]
+    names = sorted(p.name for p in out.glob("*.json"))
+    assert len(names) == 3 and {n.split("-")[2] for n in names} == set(FAMILIES)
+    again = subprocess.run(cmd, capture_output=True, text=True)
+    assert "3 of 3 pairs already done; 0 to make" in again.stdout
