@@ -139,6 +139,6 @@ def test_pairs_skips_a_bad_portrait_and_makes_the_rest(portrait_file, tmp_path):
     skipped = [line for line in r.stderr.splitlines() if "blank" in line]
     assert len(skipped) == 1 and "no face found; skipped" in skipped[0]
     names = sorted(p.name for p in out.glob("*.json"))
-    assert len(names) == 3 and {n.split("-")[2] for n in names} == set(FAMILIES)
+    assert len(names) == 3 and {n.split("-")[3] for n in names} == set(FAMILIES)
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert "3 of 3 pairs already done; 0 to make" in again.stdout
