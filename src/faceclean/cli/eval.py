@@ -40,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "instead of the tracker table",
     )
     p.add_argument(
+        "--jobs", type=int, default=1, metavar="N", help="with --families: folds in parallel"
+    )
+    p.add_argument(
         "--shipped",
         metavar="NPZ",
         help="with --families: the model of the 'shipped before' row (default the shipped one)",
@@ -105,7 +108,10 @@ def _families(args: argparse.Namespace, progress) -> int:
     from faceclean.io.atomic import atomic_write
 
     shipped = Path(args.shipped) if args.shipped else settings.MODELS / "mediapipe.npz"
-    result = family_eval.evaluate(args.pairs, shipped=shipped, report=progress)
+    from faceclean import workers
+
+    jobs, _ = workers.count(args.jobs, 64, "folds")
+    result = family_eval.evaluate(args.pairs, shipped=shipped, report=progress, jobs=jobs)
     section = family_eval.markdown(result)
     if args.json:
         atomic_write(args.json, json.dumps(result, indent=1))

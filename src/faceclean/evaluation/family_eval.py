@@ -49,51 +49,89 @@ Report = Callable[[str], None]
 
 
 def evaluate(folder: str | Path, shipped: str | Path | None = None,
-             report: Report | None = None) -> dict[str, Any]:  # fmt: skip
+             report: Report | None = None, jobs: int = 1) -> dict[str, Any]:  # fmt: skip
     """{"families": {F: {row: scores}}, "neutral": {F: {row: worst}}, "channels": {row:
-    {name: x raw}}, "chosen": {fold: structure}, "pairs": counts}."""
-    from faceclean.filters.one_euro import OneEuro
-    from faceclean.learned.tracker_map import TrackerMap
-    from faceclean.neural import tracker_map as fit
+    {name: x raw}}, "chosen": {fold: structure}, "pairs": counts}; folds in ``jobs``
+    worker processes."""
+    from concurrent.futures import as_completed
+
+    from faceclean import workers
 
     report = report or (lambda _s: None)
     pairs = paired.load(folder, require_meta=True)
     families = sorted({p.family for p in pairs})
     if len(families) < 2:
         raise ValueError("the appearance table needs pairs of two families or more")
-    per: dict[str, dict[str, list]] = {}  # family -> row -> [(out, pair)]
-    chosen: dict[str, Any] = {}
+    folds = []
     for fam in families:
         for group in sorted({p.group for p in pairs if p.family == fam}):
-            test = [p for p in pairs if p.family == fam and p.group == group]
             train = [p for p in pairs if p.family != fam and p.group != group]
-            if not test or len({p.group for p in train}) < 3:
-                continue
-            report(f"fold {fam}/{group}: {len(train)} training pairs, {len(test)} test")
-            train = paired.with_clips(train)
-            mc, beta = tune_one_euro(train)
-            rows: dict[str, Build] = {
-                "raw": lambda n: None,
-                "one-euro": lambda n, mc=mc, beta=beta: OneEuro(names=n, min_cutoff=mc,
-                                                               beta=beta),
-            }  # fmt: skip
-            if shipped is not None:
-                rows["shipped before"] = lambda n: TrackerMap(model=shipped, names=n)
-            for label, structured in (("map, every input", False), ("map, by group (ours)", True)):
-                w = fit.fit(train, [], prefilters=FOLD_PREFILTERS, structured=structured)
-                rows[label] = lambda n, w=w: TrackerMap(weights=w, names=n)
-                if structured:
-                    chosen[f"{fam}/{group}"] = w.config.get("structure")
-            for name, build in rows.items():
-                outs = outputs(build, test)
-                per.setdefault(fam, {}).setdefault(name, []).extend(zip(outs, test, strict=True))
+            if len({p.group for p in train}) >= 3:
+                folds.append((fam, group))
+    per: dict[str, dict[str, list]] = {}  # family -> row -> [(out, pair)]
+    chosen: dict[str, Any] = {}
+    by_name = {p.name: p for p in pairs}
+
+    def take(fam, group, result) -> None:
+        rows, structure, line = result
+        chosen[f"{fam}/{group}"] = structure
+        for name, outs in rows.items():
+            per.setdefault(fam, {}).setdefault(name, []).extend(
+                (out, by_name[n]) for n, out in outs)  # fmt: skip
+        report(f"fold {fam}/{group}: {line}")
+
+    if jobs <= 1:
+        for fam, group in folds:
+            take(fam, group, fold(str(folder), fam, group, shipped, pairs))
+    else:
+        with workers.Pool(jobs) as pool:
+            futures = {pool.submit(fold, str(folder), fam, group, shipped): (fam, group)
+                       for fam, group in folds}  # fmt: skip
+            for f in as_completed(futures):
+                take(*futures[f], f.result())
+    per = {f: {r: sorted(v, key=lambda o: o[1].name) for r, v in rows.items()}
+           for f, rows in sorted(per.items())}  # fmt: skip
     return {
         "families": {f: {r: _scores(v) for r, v in rows.items()} for f, rows in per.items()},
         "neutral": {f: {r: _neutral(v) for r, v in rows.items()} for f, rows in per.items()},
         "channels": _channels(per),
-        "chosen": chosen,
+        "chosen": dict(sorted(chosen.items())),
         "pairs": paired.summary_json(pairs),
     }
+
+
+def fold(folder: str, fam: str, group: str, shipped, pairs=None) -> tuple:
+    """One fold: (row -> [(test pair name, output)], the by-group map's structure, a line)."""
+    from faceclean.filters.one_euro import OneEuro
+    from faceclean.learned.tracker_map import TrackerMap
+    from faceclean.neural import tracker_map as fit
+
+    pairs = pairs if pairs is not None else paired.load(folder, require_meta=True)
+    test = [p for p in pairs if p.family == fam and p.group == group]
+    train = paired.with_clips([p for p in pairs if p.family != fam and p.group != group])
+    mc, beta = tune_one_euro(train)
+    rows: dict[str, Build] = {
+        "raw": lambda n: None,
+        "one-euro": lambda n: OneEuro(names=n, min_cutoff=mc, beta=beta),
+    }
+    if shipped is not None:
+        rows["shipped before"] = lambda n: TrackerMap(model=shipped, names=n)
+    structure = None
+    for label, structured in (("map, every input", False), ("map, by group (ours)", True)):
+        w = fit.fit(train, [], prefilters=FOLD_PREFILTERS, structured=structured)
+        rows[label] = lambda n, w=w: TrackerMap(weights=w, names=n)
+        if structured:
+            structure = w.config.get("structure")
+    out = {name: [(p.name, o) for p, o in zip(test, outputs(b, test), strict=True)]
+           for name, b in rows.items()}  # fmt: skip
+    raw = sum(float(np.nansum((o.values - p.truth.arkit(o.names)[0]) ** 2))
+              for p, (_, o) in zip(test, out["raw"], strict=True))  # fmt: skip
+    parts = []
+    for name, outs in out.items():
+        sq = sum(float(np.nansum((o.values - p.truth.arkit(o.names)[0]) ** 2))
+                 for p, (_, o) in zip(test, outs, strict=True))  # fmt: skip
+        parts.append(f"{name} {sq / max(raw, 1e-12):.2f}x")
+    return out, structure, f"{len(train)} training pairs, {len(test)} test: " + ", ".join(parts)
 
 
 def _scores(outs: Sequence[tuple]) -> dict[str, float]:
