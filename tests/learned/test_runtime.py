@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import functools
 import json
+import subprocess
+import sys
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -205,23 +208,67 @@ def test_channels_map_by_name(weights, clip):
     np.testing.assert_allclose(got.values[:, :-2], np.array(want), atol=1e-7)
 
 
-@pytest.mark.parametrize("output", OUTPUTS)
-@pytest.mark.parametrize("kernel", KERNELS)
-def test_fast_step_allocates_only_its_output(kernel, output):
-    weights = _weights(output)
+def _step_peaks(kernel: str, output: str, control: bool) -> dict[int, tuple[int, int]]:
+    """{S: (peak bytes, bound)} over 58 warm steps of S streams (the control: plus a
+    temporary of the bound's size each step).
+
+    tracemalloc counts every thread of the process, and the compiled step releases the
+    GIL: run this where no other thread allocates (``_isolated_peaks``).
+    """
+    out = {}
     for S in (1, 16):
-        c = Learned(weights=weights, kernel=kernel)
+        c = Learned(weights=_weights(output), kernel=kernel)
         c.jit_max_streams = 64  # the chosen kernel at every stream count
         x = np.full((S, 52), 0.3) if S > 1 else np.full(52, 0.3)
         c.step(x, np.zeros(S) if S > 1 else 0.0)
-        c.step(x, np.full(S, 0.01) if S > 1 else 0.01)  # warm (compiles, allocates)
+        y = c.step(x, np.full(S, 0.01) if S > 1 else 0.01)  # warm (compiles, allocates)
+        bound = 2 * y.nbytes + 2048  # the returned frame and the one before it, not the state
         tracemalloc.start()
         for i in range(2, 60):
             t = 0.01 * i
+            scratch = np.empty(bound if control else 0, np.uint8)  # the control's temporary
             y = c.step(x, np.full(S, t) if S > 1 else t)
+            del scratch
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
-        assert peak < 2 * y.nbytes + 2048, (S, peak)  # the returned frame, not the state
+        out[S] = (peak, bound)
+    return out
+
+
+@functools.cache
+def _isolated_peaks(control: bool = False) -> dict[str, dict[int, tuple[int, int]]]:
+    """``_step_peaks`` for every kernel and head, in a fresh interpreter with one thread.
+
+    In the test process pytest-xdist's I/O thread (or any other) may allocate during the
+    measurement on a loaded machine; a child process runs the main thread alone.
+    """
+    code = (
+        "import json, sys, threading\n"
+        f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
+        "from test_runtime import KERNELS, OUTPUTS, _step_peaks\n"
+        f"peaks = {{f'{{k}}-{{o}}': _step_peaks(k, o, {control})\n"
+        "         for k in KERNELS for o in OUTPUTS}\n"
+        "assert threading.active_count() == 1, threading.enumerate()\n"
+        "print(json.dumps(peaks))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    peaks = json.loads(proc.stdout.splitlines()[-1])
+    return {k: {int(S): tuple(v) for S, v in d.items()} for k, d in peaks.items()}
+
+
+@pytest.mark.parametrize("output", OUTPUTS)
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_fast_step_allocates_only_its_output(kernel, output):
+    for S, (peak, bound) in _isolated_peaks()[f"{kernel}-{output}"].items():
+        assert peak < bound, (S, peak, bound)
+
+
+def test_the_allocation_measure_sees_a_temporary():
+    """The control: a step that also allocates the bound's size in bytes fails the bound."""
+    for name, peaks in _isolated_peaks(control=True).items():
+        for S, (peak, bound) in peaks.items():
+            assert peak >= bound, (name, S, peak, bound)
 
 
 def test_state_is_a_few_kilobytes(weights):
