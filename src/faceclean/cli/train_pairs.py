@@ -3,8 +3,10 @@
 ``--arch map`` (default) fits the tracker map (learned/tracker_map.py), ``ridge`` the
 linear baseline, ``lstm`` the paper's LSTM. The sources named by ``--val-sources`` (the
 pairs' performance groups; default: the largest one) are held out of fitting and used for
-early stopping and the choice of pre-filter; the render settings named by ``--held-out``
-(default ``window``) are never used. A pair's calibration clip (``pairs --rom``: its
+early stopping and the choice of pre-filter; pairs of one look never use the ``window``
+render setting (held out for the tracker table), while pairs of several appearance
+families (``pairs --families``) use every setting: the map's choices are made leaving a
+family and a source out at once (neural/map_groups.py). A pair's calibration clip (``pairs --rom``: its
 NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its own. The written
 model runs with ``--model M.npz``.
 
@@ -33,7 +35,9 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.io.atomic import writable
 
     writable(args.out)  # refused now, not after the training
-    pairs = [p for p in paired.load(args.pairs) if p.setting != "window"]
+    pairs = paired.load(args.pairs)
+    if len({p.family for p in pairs}) < 2:  # one look: the window setting is what is held out
+        pairs = [p for p in pairs if p.setting != "window"]  # (with families: the family is)
     if not pairs:
         raise FacecleanError(f"{args.pairs}: no pairs outside the held-out render setting")
     raw = pairs
