@@ -6,9 +6,9 @@ pairs' performance groups; default: the largest one) are held out of fitting and
 early stopping and the choice of pre-filter; pairs of one look never use the ``window``
 render setting (held out for the tracker table), while pairs of several appearance
 families (``pairs --families``) use every setting: the map's choices are made leaving a
-family and a source out at once (neural/map_groups.py). A pair's calibration clip (``pairs --rom``: its
-NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its own. The written
-model runs with ``--model M.npz``.
+family and a source out at once (neural/map_groups.py). A pair's calibration clip
+(``pairs --rom``: its NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its
+own. The written model runs with ``--model M.npz``.
 
 Only real pairs train (``paired.usable``): a value that is infinite or beyond 1e6 is read
 as missing (said on stderr), a pair that is no tracker's reading of its truth is skipped

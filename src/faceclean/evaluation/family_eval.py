@@ -250,5 +250,13 @@ def markdown(result: dict[str, Any]) -> str:
     for n in names:
         lines.append(f"| {n} | " + " | ".join(
             f"{chans[r][n]:.2f}" if n in chans[r] else "-" for r in rows) + " |")  # fmt: skip
+    still = result.get("still")
+    if still:
+        lines += ["", "A still real face (scikit-image's astronaut, shaken by a hand-held "
+                  "sub-pixel walk, `evaluation/still.py`): frame-to-frame change and drift.",
+                  "", "| cleaner | change | x raw | drift |", "|---|---|---|---|"]  # fmt: skip
+        for name, m in still.items():
+            lines.append(f"| {name} | {m['change']:.5f} | {m['change_ratio']:.2f} | "
+                         f"{m['drift']:.4f} |")  # fmt: skip
     lines += ["", END]
     return "\n".join(lines) + "\n"
