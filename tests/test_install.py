@@ -27,7 +27,7 @@ from helpers import REPO
 
 THREE = REPO / "node_modules" / "three"
 INPUTS = ("pyproject.toml", "setup.py", "README.md", "MANIFEST.in", "package.json")
-INPUTS += ("package-lock.json",)
+INPUTS += ("package-lock.json", "LICENSE")
 
 pytestmark = pytest.mark.skipif(
     not (THREE / "package.json").is_file(),
