@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 HELP = "evaluate every cleaner on takes from sources the learned models never saw"
 
@@ -45,7 +46,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--shipped",
         metavar="NPZ",
-        help="with --families: the model of the 'shipped before' row (default the shipped one)",
+        help="with --families: the model of the 'shipped before' row "
+        "(default benchmarks/tracker/mediapipe-before.npz)",
     )
 
 
@@ -98,6 +100,10 @@ def _keep_tracker_section(path: str | None, text: str) -> str:
     return tracker_results.insert(text, section + "\n")
 
 
+# the MediaPipe map shipped before issue 34 (painted faces only): the continuity row
+BEFORE = Path(__file__).resolve().parents[3] / "benchmarks" / "tracker" / "mediapipe-before.npz"
+
+
 def _families(args: argparse.Namespace, progress) -> int:
     """``eval --pairs DIR --families``: the appearance table (evaluation/family_eval.py)."""
     import json
@@ -107,11 +113,25 @@ def _families(args: argparse.Namespace, progress) -> int:
     from faceclean.evaluation import family_eval, tracker_results
     from faceclean.io.atomic import atomic_write
 
-    shipped = Path(args.shipped) if args.shipped else settings.MODELS / "mediapipe.npz"
     from faceclean import workers
 
+    before = Path(args.shipped) if args.shipped else (BEFORE if BEFORE.is_file() else None)
     jobs, _ = workers.count(args.jobs, 64, "folds")
-    result = family_eval.evaluate(args.pairs, shipped=shipped, report=progress, jobs=jobs)
+    result = family_eval.evaluate(args.pairs, shipped=before, report=progress, jobs=jobs)
+    model = settings.tracker_model()
+    if model is not None and model.is_file():  # the still real face, the shipped models
+        from faceclean.evaluation import still
+        from faceclean.learned.tracker_map import TrackerMap
+
+        take = still.still_take(model, seconds=8)
+        rows = {"raw": take}
+        for label, path in (("shipped before", before),
+                            ("shipped now", settings.MODELS / "mediapipe.npz")):  # fmt: skip
+            if path is not None:
+                rows[label] = TrackerMap(model=path, names=take.names).clean(take)
+        result["still"] = {k: still.measures(v) for k, v in rows.items()}
+        for v in result["still"].values():
+            v["change_ratio"] = v["change"] / result["still"]["raw"]["change"]
     section = family_eval.markdown(result)
     if args.json:
         atomic_write(args.json, json.dumps(result, indent=1))
