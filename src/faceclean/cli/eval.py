@@ -109,11 +109,9 @@ def _families(args: argparse.Namespace, progress) -> int:
     import json
     from pathlib import Path
 
-    from faceclean import settings
+    from faceclean import settings, workers
     from faceclean.evaluation import family_eval, tracker_results
     from faceclean.io.atomic import atomic_write
-
-    from faceclean import workers
 
     before = Path(args.shipped) if args.shipped else (BEFORE if BEFORE.is_file() else None)
     jobs, _ = workers.count(args.jobs, 64, "folds")
