@@ -38,6 +38,7 @@ MAY_IMPORT: dict[str, set[str]] = {
         "calibration",  # the tracker table's calibration row (a pair's own clip)
     },
     "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
+    "trackers": {"synthetic", "relay", "io"},  # the model bundle check; the live send
     "report": {"evaluation", "face", "io", "faceclean"},
     "ui": {"resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"},
     "neural": {"filters", "learned", "evaluation", "face", "io", "cli"},

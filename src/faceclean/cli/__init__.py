@@ -25,7 +25,7 @@ COMMANDS: tuple[str, ...] = (
     "demo", "clean", "calibrate", "info", "convert", "tune",
     "corrupt", "synth",
     "pairs", "train", "eval", "plot", "export", "bench",
-    "relay", "replay",
+    "relay", "replay", "track",
     "report", "face-mesh", "ui",
     "fuzz",
 )  # fmt: skip

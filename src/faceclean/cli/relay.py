@@ -145,6 +145,14 @@ def run(args: argparse.Namespace) -> int:
     cleaner, what = build_cleaner(choice)
     cleaner, levels = with_levels(args, choice, cleaner)
     what += f"; levels: {levels}" if levels else ""
+    if args.tracker == "mediapipe":  # one warning line if the stream does not look raw
+        from faceclean.channels import ARKIT52
+        from faceclean.trackers import signature
+
+        def warn(why: str) -> None:
+            print(signature.warning(why, "the stream"), file=sys.stderr, flush=True)
+
+        cleaner = signature.Watch(cleaner, ARKIT52, warn)
     from faceclean.channels import POSE
 
     pose = choice.build_pose(POSE)  # head/eye angles: the rotation filter

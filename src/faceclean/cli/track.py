@@ -1,0 +1,230 @@
+"""``faceclean track VIDEO -o OUT``: a video (or a camera) to a clean take.
+
+MediaPipe Face Landmarker (VIDEO mode) tracks every frame at the video's own time
+(variable frame rate included), the MediaPipe cleaner (``--tracker mediapipe``, the
+default here) or the cleaner the options name cleans it, and the take is written in the
+format OUT's extension says (Live Link CSV with HeadYaw/HeadPitch/HeadRoll, JSON, NPZ,
+glTF/GLB with a head node). A face lost for some frames leaves missing frames. Several
+videos (or ``-o OUTDIR/``) run as a batch, ``--jobs N`` at once; ``--keep-raw`` writes the
+raw scores beside each take (``take.raw.csv``) to re-clean without re-tracking.
+
+Live: ``faceclean track --camera 0 --send vmc://127.0.0.1:39539 [--record take.csv]``
+tracks a webcam, stamps each frame at capture, cleans and sends as the relay does;
+``--camera FILE`` plays a video file as the camera (for tests: no camera needed).
+See docs/TRACK.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from faceclean.cli import options
+from faceclean.errors import FacecleanError
+
+HELP = "track a video (or a webcam) with MediaPipe and write (or send) a clean take"
+EXTENSIONS = {"livelink": ".csv", "csv": ".csv", "json": ".json", "npz": ".npz", "gltf": ".glb"}
+EPILOG = (
+    options.SETTINGS_HELP
+    + """\
+videos:
+  faceclean track clip.mp4 -o clip.csv          Live Link CSV (+ head angles); .json, .npz,
+                                                .glb write those formats
+  faceclean track a.mp4 b.webm -o out/ --jobs 2  a batch: out/a.csv, out/b.csv
+  faceclean track clip.mp4 -o clip.csv --keep-raw  also clip.raw.csv: MediaPipe's raw scores
+live:
+  faceclean track --camera 0 --send vmc://127.0.0.1:39539 --record take.csv
+  faceclean track --camera clip.mp4 --send livelink://127.0.0.1:11111  a file as the camera
+"""
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="VIDEO", nargs="*", help="video file(s)")
+    p.add_argument("-o", "--output", metavar="OUT", help="take file, or OUTDIR/ for a batch")
+    options.add_arguments(p)
+    p.set_defaults(tracker="mediapipe")  # what this command's scores are
+    p.add_argument(
+        "--format",
+        dest="fmt",
+        choices=tuple(EXTENSIONS),
+        help="batch: the format of each take (default livelink: OUTDIR/NAME.csv); one "
+        "video: force a format over OUT's extension",
+    )
+    p.add_argument(
+        "--keep-raw", action="store_true", help="also write the raw scores: NAME.raw.csv"
+    )
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="batch: N videos at once")
+    p.add_argument(
+        "--tracker-model", metavar="FILE", help="face_landmarker.task (default: settings)"
+    )
+    live = p.add_argument_group("live (a camera)")
+    live.add_argument(
+        "--camera", metavar="N|FILE", help="camera index, or a video file played as a camera"
+    )
+    live.add_argument("--send", metavar="URL", help="vmc://HOST:PORT or livelink://HOST:PORT")
+    live.add_argument("--record", metavar="FILE", help="save raw to FILE, cleaned to FILE.clean")
+    live.add_argument("--stats", type=float, metavar="SECONDS", help="print counters this often")
+    live.add_argument("--ui", action="store_true", help="(not built yet for track: refused)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.camera is not None:
+        if args.input or args.output:
+            raise FacecleanError("--camera is live: give --send URL, not videos or -o")
+        from faceclean.cli import track_live
+
+        return track_live.run(args)
+    if args.send or args.record or args.ui or args.stats is not None:
+        raise FacecleanError("--send, --record, --stats and --ui go with --camera")
+    if not args.input:
+        raise FacecleanError("give a video file (or --camera N --send URL)")
+    if not args.output:
+        raise FacecleanError("give -o OUT (a take file, or OUTDIR/ for several videos)")
+    from faceclean.cli.clean_take import build_cleaner, build_levels
+
+    choice = options.choice(args)  # bad options fail now, before any tracking
+    from faceclean.synthetic.tracker import NAMES
+
+    build_cleaner(choice, NAMES)
+    build_levels(args, choice, NAMES)
+    out = args.output
+    batch = len(args.input) > 1 or out.endswith(("/", "\\")) or Path(out).is_dir()
+    if not batch:
+        if args.jobs != 1:
+            raise FacecleanError("--jobs is for a batch (several videos into OUTDIR/)")
+        print(track_one(args, args.input[0], out, progress=True))
+        return 0
+    return _batch(args)
+
+
+def outputs(args: argparse.Namespace, video: str, out: str) -> tuple[str, str | None]:
+    """(take path, raw path or None) for one video."""
+    raw = None
+    if args.keep_raw:
+        p = Path(out)
+        raw = str(p.with_name(f"{p.stem}.raw.csv"))
+    return out, raw
+
+
+def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = False) -> str:
+    """Track, clean and write one video; the line that says what was written."""
+    import time
+
+    from faceclean import io
+    from faceclean.cli.clean_take import build_cleaner, build_levels, clean_with_progress
+    from faceclean.filters import rotation
+    from faceclean.trackers import face
+    from faceclean.trackers.video import check_video_file
+
+    check_video_file(video)  # noted as an input: an output naming it is refused
+    out, raw = outputs(args, video, out)
+    fmt = args.fmt
+    io.check_output(out, fmt, "livelink")
+    if raw is not None:
+        io.paths.distinct(out, raw)
+        io.check_output(raw, "livelink", "livelink")
+    model = face.model_path(args.tracker_model)
+    started = time.perf_counter()
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(unit="frame", file=sys.stderr, leave=False, desc=Path(video).name)
+        with bar:
+
+            def tick(done: int, total: int) -> None:
+                if total and bar.total != total:
+                    bar.total = total
+                bar.update(done - bar.n)
+
+            anim = face.track_video(video, model, tick)
+    else:
+        anim = face.track_video(video, model)
+    tracked = time.perf_counter() - started
+    choice = options.choice(args)
+    cleaner, what = build_cleaner(choice, anim.names)
+    adjust = build_levels(args, choice, anim.names)
+    mapped = anim.with_values(adjust.apply(anim.values, anim.names))
+    cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
+    cleaned = rotation.clean_pose(cleaned, choice.build_pose)
+    io.save(cleaned, out, fmt=fmt)
+    if raw is not None:
+        io.save(anim, raw, fmt="livelink")
+    lost = int((~anim.valid).sum())
+    ms = 1000.0 * tracked / max(anim.n_frames, 1)
+    return (
+        f"wrote {out}: {anim.n_frames} frames"
+        + (f" ({lost} without a face: missing)" if lost else "")
+        + f", {len(anim.names)} channels + head yaw/pitch/roll, cleaned with {what}"
+        + f"; tracked in {tracked:.1f} s ({ms:.1f} ms/frame)"
+        + (f"; raw scores in {raw}" if raw else "")
+    )
+
+
+def _batch(args: argparse.Namespace) -> int:
+    from concurrent.futures import as_completed
+
+    from tqdm import tqdm
+
+    from faceclean import workers
+
+    workers.count(args.jobs, None)  # --jobs 0: refused before anything is read
+    outdir = Path(args.output)
+    if outdir.exists() and not outdir.is_dir():
+        raise FacecleanError(f"-o {outdir}: several videos go into a folder (OUTDIR/)")
+    ext = EXTENSIONS[args.fmt or "livelink"]
+    jobs = [(v, str(outdir / f"{Path(v).stem}{ext}")) for v in args.input]
+    seen: dict[str, str] = {}
+    for v, o in jobs:
+        if o in seen:
+            raise FacecleanError(f"{seen[o]} and {v} would both write {o}: rename one")
+        seen[o] = v
+    n, note = workers.count(args.jobs, len(jobs), "videos" if len(jobs) != 1 else "video")
+    if note:
+        print(note, file=sys.stderr)
+    outdir.mkdir(parents=True, exist_ok=True)
+    failed: list[tuple[str, str]] = []
+    bar = tqdm(total=len(jobs), unit="video", file=sys.stderr, desc="tracking", leave=False)
+
+    def done(video: str, ok: bool, text: str) -> None:
+        bar.write(text if ok else f"FAILED {video}: {text}", file=sys.stdout)
+        bar.update(1)
+        if not ok:
+            failed.append((video, text))
+
+    with bar:
+        if n == 1:
+            for v, o in jobs:
+                done(v, *_job(args, v, o))
+        else:
+            with workers.Pool(n) as pool:
+                futures = {pool.submit(_job, args, v, o): v for v, o in jobs}
+                for future in as_completed(futures):
+                    done(futures[future], *future.result())
+    print(f"tracked {len(jobs) - len(failed)} of {len(jobs)} videos into {outdir}")
+    if failed:
+        print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
+        for video, why in failed:
+            print(f"  {video}: {why}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _job(args: argparse.Namespace, video: str, out: str) -> tuple[bool, str]:
+    """(True, the written line) or (False, why); never raises for a bad video."""
+    import os
+
+    from faceclean.io import paths
+
+    try:
+        with paths.command():  # in a worker too: this video is protected from its outputs
+            return True, track_one(args, video, out)
+    except FacecleanError as e:
+        return False, str(e)
+    except (OSError, MemoryError) as e:
+        return False, str(e) or type(e).__name__
+    except Exception as e:  # one bad video must not stop the batch
+        if os.environ.get("FACECLEAN_DEBUG"):
+            raise
+        return False, f"internal error: {type(e).__name__}: {e}"

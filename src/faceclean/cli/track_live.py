@@ -1,0 +1,83 @@
+"""``faceclean track --camera N|FILE --send URL``: the live half of ``track``.
+
+The camera (an OpenCV index, or a video file played at its own pace as a stand-in),
+MediaPipe on each newest frame at its capture time, the cleaner (causal only), the head
+angles' rotation filter, and one datagram per frame to ``--send`` (VMC or Live Link, the
+relay's encoders). Ctrl-C or SIGTERM stops it with exit 0 and a final counters line;
+a camera that stops delivering (unplugged) ends it with that said and exit 1; a file's
+end is a normal stop. ``--record take.csv`` writes the raw scores to take.csv and what
+was sent to take.clean.csv (the relay's recorder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from faceclean.cli import options
+from faceclean.errors import FacecleanError
+
+MIN_STATS, MAX_STATS = 0.001, 86400.0  # s, the --stats period
+
+
+def run(args: argparse.Namespace) -> int:
+    from faceclean.adjust import Adjust, Adjusted
+    from faceclean.channels import ARKIT52, POSE
+    from faceclean.cli.relay import build_cleaner
+    from faceclean.relay import parse
+    from faceclean.relay.loop import probe, warm_up
+    from faceclean.relay.recorder import Recorder
+    from faceclean.trackers.face import FaceTracker, model_path
+    from faceclean.trackers.live import Live
+    from faceclean.trackers.video import Camera
+
+    if args.ui:
+        raise FacecleanError("--ui: the camera page is not built yet (docs/TRACK.md); drop it")
+    if not args.send:
+        raise FacecleanError("--camera needs --send URL (vmc://HOST:PORT or livelink://HOST:PORT)")
+    if args.jobs != 1 or args.keep_raw or args.fmt:
+        raise FacecleanError("--jobs, --keep-raw and --format are for videos, not --camera")
+    if args.stats is not None and not MIN_STATS <= args.stats <= MAX_STATS:
+        raise FacecleanError(f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} s")
+    send = parse(args.send, "send")
+    choice = options.choice(args)
+    cleaner, what = build_cleaner(choice)  # an offline cleaner is refused
+    adjust = (options.calibration(args) or Adjust()).merged(choice.adjust(ARKIT52))
+    if not adjust.is_identity:
+        cleaner = Adjusted(cleaner, adjust, ARKIT52)
+    warm_up(cleaner)
+    probe(cleaner)
+    pose = choice.build_pose(POSE)
+    recorder = Recorder(args.record) if args.record else None
+    source = int(args.camera) if args.camera.strip().isdigit() else args.camera
+    model = model_path(args.tracker_model)
+    with (
+        FaceTracker(model) as tracker,
+        Camera(source) as camera,
+        Live(camera, tracker, cleaner, send, pose=pose, recorder=recorder) as live,
+    ):
+
+        def stop(signum: int, frame: object) -> None:
+            live.stop()
+
+        old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            print(f"track camera {args.camera} -> {send} ({what}); Ctrl-C stops", flush=True)
+            camera.start()
+            stats = live.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
+        finally:
+            for s, handler in old.items():
+                signal.signal(s, handler)
+    print(f"stopped: {stats.line()}", flush=True)
+    if recorder is not None and len(recorder):
+        take, cleaned = recorder.save()
+        print(f"recorded {len(recorder)} frames: {take} (raw), {cleaned} (cleaned)", flush=True)
+    elif recorder is not None:
+        print("recorded nothing: no face was sent, so no file was written", flush=True)
+    if stats.send_errors:
+        print(f"faceclean: {stats.send_errors} sends refused by {send}", file=sys.stderr)
+    if camera.ended and isinstance(source, int) and not live.stopped:
+        print(f"faceclean: camera {source} stopped delivering frames (unplugged?)", file=sys.stderr)
+        return 1
+    return 0

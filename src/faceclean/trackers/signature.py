@@ -1,0 +1,110 @@
+"""Does a take that claims to be raw MediaPipe look like it? One rule, from data.
+
+``--tracker mediapipe`` picks a cleaner fitted on MediaPipe's own output. A tool between
+MediaPipe and faceclean may have smoothed, rescaled or remapped the scores (or the take
+is no MediaPipe at all); that cleaner then makes it worse, silently. ``judge(values,
+names)`` says why a take does not look raw, or None. Three signs, each seen never in
+MediaPipe's raw output and each with a wide margin (measured on 85 rendered takes
+tracked by MediaPipe 0.10 in VIDEO mode, 73-600 frames each, docs/TRACK.md):
+
+1. **A channel MediaPipe does not move, moving.** MediaPipe gives no ``tongueOut`` and
+   keeps ``cheekSquint*``, ``noseSneer*``, ``cheekPuff`` and ``jawForward`` near zero
+   (largest seen: 0.008). Any of them above ``SILENT_MAX`` (0.05) is a sign.
+2. **Quantised levels.** Raw scores are float32: the smallest step between distinct
+   levels of a moving channel is tiny (median over channels at most 0.0004 in any
+   take). A median step of ``QUANTUM`` (0.005) or more is a sign (scores rounded to
+   two decimals, or to 1/100 as percent).
+3. **Rescaled to full range.** At most one channel in a raw take spans [0.01, 0.99];
+   ``FULL_RANGE`` (6) or more doing so is a sign of per-channel normalisation.
+
+Signs 2 and 3 need ``MIN_FRAMES`` frames with a face. Smoothing alone is not detected.
+``Watch`` wraps a live cleaner: it judges every ``MIN_FRAMES`` frames the stream brings
+until one judgement says something, calls ``on_warn(text)`` once, and is silent after.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from faceclean.channels import canonical
+
+SILENT = ("tongueOut", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft",
+          "noseSneerRight", "cheekPuff", "jawForward")  # fmt: skip
+SILENT_MAX = 0.05  # level; MediaPipe's largest on these: 0.008
+QUANTUM = 0.005  # level step; MediaPipe's median smallest step: at most 0.0004
+MOVING = 0.1  # a channel whose range exceeds this is moving
+FULL_RANGE = 6  # channels spanning [FULL_LO, FULL_HI]; MediaPipe: at most 1
+FULL_LO, FULL_HI = 0.01, 0.99
+MIN_FRAMES = 60  # face frames before signs 2 and 3 are judged
+
+
+def judge(values: np.ndarray, names: Sequence[str]) -> str | None:
+    """Why (N, M) ``values`` over channels ``names`` do not look like raw MediaPipe, in a
+    few words, or None when they do (or there is too little to tell)."""
+    v = np.asarray(values, np.float64)
+    v = v[np.isfinite(v).any(axis=1)] if v.ndim == 2 else v.reshape(0, len(names))
+    if not len(v):
+        return None
+    canon = [canonical(str(n)) for n in names]
+    hi = np.nanmax(np.where(np.isfinite(v), v, -np.inf), axis=0)
+    lo = np.nanmin(np.where(np.isfinite(v), v, np.inf), axis=0)
+    moving = [canon[j] for j in range(len(canon)) if canon[j] in SILENT and hi[j] > SILENT_MAX]
+    if moving:
+        j = canon.index(moving[0])
+        more = f" (and {len(moving) - 1} more)" if len(moving) > 1 else ""
+        return f"{moving[0]} reaches {hi[j]:.2f}{more}, a channel MediaPipe keeps near 0"
+    if len(v) < MIN_FRAMES:
+        return None
+    full = int(np.sum((lo <= FULL_LO) & (hi >= FULL_HI)))
+    if full >= FULL_RANGE:
+        return f"{full} channels span the whole 0-1 range, as per-channel rescaling makes"
+    steps = []
+    for j in np.flatnonzero(hi - lo > MOVING):
+        levels = np.unique(v[np.isfinite(v[:, j]), j])
+        steps.append(float(np.min(np.diff(levels))))
+    if steps and np.median(steps) >= QUANTUM:
+        return f"levels come in steps of {np.median(steps):.3g} (quantised)"
+    return None
+
+
+def warning(why: str, what: str) -> str:
+    """The one line said when ``what`` (a file, a stream) does not look raw."""
+    return (
+        f"faceclean: warning: {what} does not look like raw MediaPipe output ({why}); the "
+        "--tracker mediapipe cleaner is fitted on raw scores and may make this take worse: "
+        "give the tracker's raw output, or choose a cleaner with --method"
+    )
+
+
+class Watch:
+    """A stream cleaner that also watches its input for ``judge``'s signs (see the
+    module docstring); steps and resets as ``inner`` does."""
+
+    def __init__(self, inner, names: Sequence[str], on_warn: Callable[[str], None]) -> None:
+        self.inner = inner
+        self.names = tuple(names)
+        self.on_warn = on_warn
+        self.warned = False
+        self._rows: list[np.ndarray] = []
+
+    def __getattr__(self, name: str):
+        return getattr(self.inner, name)
+
+    def reset(self) -> None:
+        self._rows = []  # a new stream (or a warm-up's end) is judged on its own
+        self.inner.reset()
+
+    def step(self, frame: np.ndarray, t: float) -> np.ndarray:
+        if not self.warned:
+            x = np.asarray(frame, np.float64)
+            if np.isfinite(x).any():
+                self._rows.append(x.copy())
+            if len(self._rows) >= MIN_FRAMES:
+                why = judge(np.array(self._rows), self.names)
+                self._rows = []
+                if why is not None:
+                    self.warned = True
+                    self.on_warn(why)
+        return self.inner.step(frame, t)
