@@ -46,6 +46,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
             if not adjust.is_identity:
                 cleaner = Adjusted(cleaner, adjust, names)
             guard = None if args.scale is not None else (names, input)
+            cleaner = _watched(args, cleaner, names, input)
             pose = None
             if angles := stream.angle_names(src, fmt_in):
                 pose = choice.build_pose(angles)
@@ -55,6 +56,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     if args.scale is None:  # the same judgement as the stream's, block by block
         for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
             check_range(anim.values[a : a + stream.BLOCK], anim.names, input)
+    _signature(args, anim, input)
     cleaner, what = build_cleaner(choice, anim.names)
     adjust = build_levels(args, choice, anim.names)
     mapped = anim.with_values(adjust.apply(anim.values, anim.names))
@@ -64,6 +66,29 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     angles = rotation.pose_columns(anim)[1]
     missing = int((~anim.valid).sum())
     return _line(output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)
+
+
+def _signature(args: argparse.Namespace, anim: Animation, label: str) -> None:
+    """``--tracker mediapipe`` on a take that does not look raw: one warning line."""
+    if getattr(args, "tracker", None) != "mediapipe":
+        return
+    from faceclean.trackers import signature
+
+    why = signature.judge(anim.values, anim.names)
+    if why is not None:
+        print(signature.warning(why, label), file=sys.stderr)
+
+
+def _watched(args: argparse.Namespace, cleaner, names, label: str):
+    """The streamed form of ``_signature``: the cleaner, watching what it steps."""
+    if getattr(args, "tracker", None) != "mediapipe":
+        return cleaner
+    from faceclean.trackers import signature
+
+    def warn(why: str) -> None:
+        print(signature.warning(why, label), file=sys.stderr)
+
+    return signature.Watch(cleaner, names, warn)
 
 
 def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...]):
