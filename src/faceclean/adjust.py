@@ -47,7 +47,7 @@ import numpy as np
 
 from faceclean.channels import ARKIT52, GROUPS, canonical, channel_key
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import MAX_ABS, Cleaner
+from faceclean.filters.base import MAX_ABS, Stepper
 
 MAP_KEYS: tuple[str, ...] = ("gain", "offset", "curve", "clamp", "off")
 FORMAT = "faceclean-adjust/1"
@@ -391,7 +391,7 @@ def _show(key: str, value: Any) -> str:
     return f"{key} {value:.4g}"
 
 
-class Adjusted(Cleaner):
+class Adjusted(Stepper):
     """A stream cleaner whose input goes through a level mapping first (fixed columns)."""
 
     def __init__(self, inner: Any, adjust: Adjust, names: Sequence[str]) -> None:

@@ -45,7 +45,7 @@ from faceclean.adjust import Adjust, apply_levels
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, DEFAULT_TRACKER, TRACKERS
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner
+from faceclean.filters.base import Stepper
 
 NEUTRAL_S = 1.0  # s, default neutral hold at the start of the take
 HIGH = 99.5  # percentile taken as a channel's top
@@ -181,7 +181,7 @@ def _r(v: float) -> float:
     return round(v, 6)
 
 
-class LiveCalibration(Cleaner):
+class LiveCalibration(Stepper):
     """A stream cleaner that calibrates its neutral from the first ``seconds`` of a stream.
 
     Until then frames pass through ``base`` (a calibration file's mapping, or none) and

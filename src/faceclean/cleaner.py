@@ -46,7 +46,7 @@ class Cleaner:
         self.names = tuple(names)
         self.choice = choice
         self.source = choice.source
-        self.cleaner: filters.Cleaner = choice.build(self.names)  # the streaming cleaner inside
+        self.cleaner: filters.Stepper = choice.build(self.names)  # the streaming cleaner inside
         self._levels = choice.adjust(self.names).levels(self.names) if choice.levels else None
         self._shape = (len(self.names),) if self.streams == 1 else (self.streams, len(self.names))
         self.reset()

@@ -53,7 +53,7 @@ SHIPPED_MODELS = {"lstm": "lstm.npz", "adaptive": "adaptive.npz", "fc": "fc.npz"
 TRACKER_MODELS = {"mediapipe": "mediapipe.npz"}
 BACKENDS = ("numpy", "onnx")
 Item = tuple[str | None, str, Any]  # (channel pattern or None for every channel, key, value)
-Factory = Callable[[Sequence[str]], filters.Cleaner]
+Factory = Callable[[Sequence[str]], filters.Stepper]
 _HIDDEN = {"path", "model"}  # the model file is in the words, not a setting
 
 
@@ -140,10 +140,10 @@ class Choice:
     pose: Factory | None = field(default=None, repr=False)  # head/eye angles' cleaner
     pose_source: str = ""  # how to name it ("rotation (tuned preset) head.beta=2")
 
-    def build(self, names: Sequence[str] = ARKIT52) -> filters.Cleaner:
+    def build(self, names: Sequence[str] = ARKIT52) -> filters.Stepper:
         return self.factory(tuple(names))
 
-    def build_pose(self, names: Sequence[str] = POSE) -> filters.Cleaner:
+    def build_pose(self, names: Sequence[str] = POSE) -> filters.Stepper:
         """A fresh rotation cleaner for head/eye angle channels ``names``."""
         factory = self.pose or pose_factory([])[0]
         return factory(tuple(names))
@@ -253,7 +253,7 @@ def pose_factory(items: list[Item], preset: str | os.PathLike | None = None) -> 
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise FacecleanError(f"{pattern}.{key}: expected a number (got {value!r})")
 
-    def factory(names: Sequence[str]) -> filters.Cleaner:
+    def factory(names: Sequence[str]) -> filters.Stepper:
         params: dict[str, Any] = presets.expand(doc, names) if doc else {}
         for pattern, key, value in items:
             base = params.get(key, getattr(Rotation(names=names), key))
@@ -335,8 +335,8 @@ def _model(path: Path, items: list[Item], backend: str | None, shared: list[Item
     weights = getattr(probe, "weights", None)  # read once, shared by every build
     source = {"model": path} if weights is None else {"weights": weights}
 
-    def factory(names: Sequence[str]) -> filters.Cleaner:
-        def build(p: dict[str, Any]) -> filters.Cleaner:
+    def factory(names: Sequence[str]) -> filters.Stepper:
+        def build(p: dict[str, Any]) -> filters.Stepper:
             return cls(names=names, **source, **p)
 
         kw = dict(params)
@@ -377,8 +377,8 @@ def _classical(text: str, items: list[Item], shared: list[Item] = ()) -> Choice:
     _checked(cls, method, items, per)
     _known_patterns(items)
 
-    def factory(names: Sequence[str]) -> filters.Cleaner:
-        def build(p: dict[str, Any]) -> filters.Cleaner:
+    def factory(names: Sequence[str]) -> filters.Stepper:
+        def build(p: dict[str, Any]) -> filters.Stepper:
             return filters.make(method, p, names=names)
 
         params: dict[str, Any] = presets.expand(doc, names) if doc else {}
@@ -424,7 +424,7 @@ def _known_patterns(items: list[Item]) -> None:
 
 
 def _scoped(
-    build: Callable[[dict[str, Any]], filters.Cleaner],
+    build: Callable[[dict[str, Any]], filters.Stepper],
     params: dict[str, Any],
     names: Sequence[str],
     pattern: str,

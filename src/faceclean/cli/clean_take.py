@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from faceclean.animation import Animation
-    from faceclean.filters.base import Cleaner
+    from faceclean.filters.base import Stepper
     from faceclean.resolve import Choice
 
 PROGRESS_FRAMES = 5000  # show a progress bar from this many frames on
@@ -101,7 +101,7 @@ def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...
     return levels if scale is None else levels.scaled(scale)
 
 
-def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Cleaner, str]:
+def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Stepper, str]:
     """The cleaner the options chose, for these channels, and how to name it."""
     return choice.build(names), choice.source
 
@@ -130,7 +130,7 @@ def _line(
 def _stream(
     src: Path,
     out: str,
-    cleaner: Cleaner,
+    cleaner: Stepper,
     fmt: str,
     progress: bool = True,
     guard: tuple[tuple[str, ...], str] | None = None,
@@ -168,7 +168,7 @@ def _stream(
         return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check, **angles)
 
 
-def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
+def clean_with_progress(cleaner: Stepper, anim: Animation) -> Animation:
     """``cleaner.clean(anim)``, with a progress bar on stderr for long stream cleans.
 
     A stream cleaner that keeps the base batch path is stepped here frame by frame, which
@@ -178,11 +178,11 @@ def clean_with_progress(cleaner: Cleaner, anim: Animation) -> Animation:
     import numpy as np
     from tqdm import tqdm
 
-    from faceclean.filters.base import Cleaner, StreamCleaner, check_finite
+    from faceclean.filters.base import Stepper, StreamCleaner, check_finite
 
     valid = np.flatnonzero(anim.valid)
     own = type(cleaner).clean
-    stepped = own in (Cleaner.clean, StreamCleaner.clean)
+    stepped = own in (Stepper.clean, StreamCleaner.clean)
     if cleaner.offline or not stepped or len(valid) < PROGRESS_FRAMES:
         return cleaner.clean(anim)
     if own is StreamCleaner.clean:

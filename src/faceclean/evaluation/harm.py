@@ -21,12 +21,12 @@ import numpy as np
 from faceclean.channels import ARKIT52
 from faceclean.evaluation import metrics
 from faceclean.evaluation.dataset import Take
-from faceclean.filters.base import Cleaner
+from faceclean.filters.base import Stepper
 
 TARGET_SHIFT = 0.005  # weight units: no channel's mean may move more (issue 11)
 
 
-def measure(cleaner: Cleaner, take: Take) -> dict[str, Any]:
+def measure(cleaner: Stepper, take: Take) -> dict[str, Any]:
     """Level shift per channel and blink survival of one cleaned clean take."""
     x, present = take.animation.arkit()
     anim = take.animation.__class__.from_arkit(take.animation.times, x)
@@ -47,7 +47,7 @@ def measure(cleaner: Cleaner, take: Take) -> dict[str, Any]:
 
 
 def table(
-    cleaners: dict[str, Callable[[Take], Cleaner | None]], takes: Sequence[Take]
+    cleaners: dict[str, Callable[[Take], Stepper | None]], takes: Sequence[Take]
 ) -> dict[str, dict[str, Any]]:
     """label -> pooled figures over the takes its factory gives a cleaner for (a learned
     fold model is only run on the source it never saw: the factory returns None else)."""

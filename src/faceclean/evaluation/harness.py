@@ -21,7 +21,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
 from faceclean.evaluation import dataset, degrade, simulate
-from faceclean.filters import Cleaner
+from faceclean.filters import Stepper
 
 # condition -> (simulator preset, fps or None for the preset's own draw); degrade has
 # its own parameters for the same names (degrade.CONDITIONS).
@@ -115,7 +115,7 @@ def unpad(y: np.ndarray, values: Sequence[np.ndarray]) -> list[np.ndarray]:
     return out
 
 
-def run_streams(cleaner: Cleaner, inputs: Sequence[Animation]) -> list[np.ndarray]:
+def run_streams(cleaner: Stepper, inputs: Sequence[Animation]) -> list[np.ndarray]:
     """Clean every take; causal cleaners step all takes at once as streams (S, M)."""
     if cleaner.offline:
         return [cleaner.clean(a).values for a in inputs]

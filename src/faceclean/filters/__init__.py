@@ -13,7 +13,7 @@ from typing import Any
 
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import Cleaner, OfflineCleaner, StreamCleaner
+from faceclean.filters.base import OfflineCleaner, Stepper, StreamCleaner
 
 METHODS: dict[str, str] = {
     "ema": "faceclean.filters.ema:Ema",
@@ -31,7 +31,7 @@ METHODS: dict[str, str] = {
 
 __all__ = [
     "METHODS",
-    "Cleaner",
+    "Stepper",
     "OfflineCleaner",
     "StreamCleaner",
     "cleaner_class",
@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 
-def cleaner_class(method: str) -> type[Cleaner]:
+def cleaner_class(method: str) -> type[Stepper]:
     """The class implementing ``method``."""
     if method not in METHODS:
         raise FacecleanError(f"unknown method {method!r} (known: {', '.join(METHODS)})")
@@ -53,7 +53,7 @@ def make(
     params: dict[str, Any] | None = None,
     *,
     names: Sequence[str] = ARKIT52,
-) -> Cleaner:
+) -> Stepper:
     """The class of ``method`` built with ``params`` (its constructor's defaults for the
     rest); a bad parameter name or value is a one-line FacecleanError. Shipped tuned
     presets, model files and ``--set`` words are ``faceclean.resolve``'s."""
@@ -68,7 +68,7 @@ def make(
         raise FacecleanError(f"{method}: bad parameters ({e})") from None
 
 
-def settings_of(cls: type[Cleaner]) -> list[str]:
+def settings_of(cls: type[Stepper]) -> list[str]:
     """A cleaner class's settings: its constructor's keywords but ``names``/``weights``."""
     sig = inspect.signature(cls.__init__)
     return [p for p in sig.parameters if p not in ("self", "names", "weights")]

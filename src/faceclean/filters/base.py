@@ -91,8 +91,11 @@ def time_rules(t: np.ndarray, missing: np.ndarray, max_gap: float) -> tuple[np.n
     return start, advance, np.where(advance, dt, np.nan)
 
 
-class Cleaner(ABC):
-    """Anything that cleans animation: ``reset``, ``step``, ``clean``."""
+class Stepper(ABC):
+    """The step contract every cleaner class follows: ``reset``, ``step``, ``clean``.
+
+    (``faceclean.Cleaner`` is the public facade that wraps one of these.)
+    """
 
     name: ClassVar[str] = "cleaner"
     offline: ClassVar[bool] = False
@@ -107,7 +110,7 @@ class Cleaner(ABC):
     def stepwise(self) -> bool:
         """Whether ``clean`` is the base's reset-then-step: stepping the frames one by one
         gives its numbers, so a file may go through in blocks (io/stream.py)."""
-        return not self.offline and type(self).clean in (Cleaner.clean, StreamCleaner.clean)
+        return not self.offline and type(self).clean in (Stepper.clean, StreamCleaner.clean)
 
     @abstractmethod
     def reset(self) -> None: ...
@@ -141,9 +144,9 @@ def check_finite(inp: np.ndarray, out: np.ndarray, name: str) -> None:
         )
 
 
-def _checked(clean: Callable[[Cleaner, Animation], Animation]) -> Callable:
+def _checked(clean: Callable[[Stepper, Animation], Animation]) -> Callable:
     @functools.wraps(clean)
-    def wrapper(self: Cleaner, anim: Animation) -> Animation:
+    def wrapper(self: Stepper, anim: Animation) -> Animation:
         out = clean(self, anim)
         check_finite(anim.values, out.values, self.name)
         return out
@@ -152,7 +155,7 @@ def _checked(clean: Callable[[Cleaner, Animation], Animation]) -> Callable:
     return wrapper
 
 
-class StreamCleaner(Cleaner):
+class StreamCleaner(Stepper):
     """A causal cleaner with (S, M) state arrays. Subclasses give ``_start`` and ``_advance``.
 
     Parameters are fixed at construction (a new object changes them); ``__init__`` of a
@@ -179,7 +182,7 @@ class StreamCleaner(Cleaner):
         return None
 
     def clean(self, anim: Animation, progress: Callable[[int], object] | None = None) -> Animation:
-        """Reset, then step every valid frame (``Cleaner.clean``). A usual frame (every
+        """Reset, then step every valid frame (``Stepper.clean``). A usual frame (every
         value good, more than MIN_DT and at most max_gap after the last accepted one) goes
         to ``_advance`` at once, as ``step`` sends it, without step's conversions and
         checks of its arguments: the same numbers, some 15 us a frame less; a run of them,
@@ -187,7 +190,7 @@ class StreamCleaner(Cleaner):
         progress bar's ``update``) is told every PROGRESS_EVERY frames how many more are
         done."""
         if type(self).step is not StreamCleaner.step:  # a subclass's own step decides
-            return Cleaner.clean(self, anim)
+            return Stepper.clean(self, anim)
         self.reset()
         out = np.full_like(anim.values, np.nan)
         idx = np.flatnonzero(anim.valid)
@@ -287,7 +290,7 @@ def _merge(rows: np.ndarray, new: State, old: State) -> State:
                  for a, b in zip(new, old, strict=True))  # fmt: skip
 
 
-class OfflineCleaner(Cleaner):
+class OfflineCleaner(Stepper):
     """A non-causal cleaner: only ``clean`` works; ``step`` refuses.
 
     The stream rules carry over: missing frames stay NaN; a non-finite or absurd value

@@ -30,7 +30,7 @@ import numpy as np
 from faceclean import strict_json
 from faceclean.channels import ARKIT52, GROUPS, POSE_GROUPS, group_of
 from faceclean.errors import FacecleanError
-from faceclean.filters import METHODS, Cleaner, make
+from faceclean.filters import METHODS, Stepper, make
 from faceclean.io.atomic import atomic_write
 from faceclean.io.source import named, read_json
 from faceclean.settings import PRESETS
@@ -139,7 +139,7 @@ def build(
     preset: str | os.PathLike | Mapping[str, Any],
     names: Sequence[str] = ARKIT52,
     overrides: Mapping[str, Any] | None = None,
-) -> Cleaner:
+) -> Stepper:
     """The cleaner a preset describes, for channels ``names``.
 
     ``preset``: a file path, a shipped preset's name (e.g. "one-euro") or a parsed dict.

@@ -32,7 +32,7 @@ from faceclean.animation import Animation
 from faceclean.channels import group_of
 from faceclean.errors import FacecleanError
 from faceclean.evaluation.metrics import interp_rows, paired
-from faceclean.filters import Cleaner, cleaner_class, make
+from faceclean.filters import Stepper, cleaner_class, make
 from faceclean.filters import presets as _presets
 
 # method -> parameter -> (low, high), searched log-uniformly.
@@ -82,7 +82,7 @@ class Tuned:
         doc = self.document(about)
         _presets.save(path, self.method, doc["params"], doc.get("groups"), doc["about"])
 
-    def build(self, names: Sequence[str]) -> Cleaner:
+    def build(self, names: Sequence[str]) -> Stepper:
         return _presets.build(self.document(), names)
 
 

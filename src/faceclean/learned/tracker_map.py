@@ -71,7 +71,7 @@ import numpy as np
 
 from faceclean.channel_map import ChannelMap
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import MAX_ABS, MIN_DT, Cleaner, frame_rules
+from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import formats
 from faceclean.learned.formats import TRACKER_MAP as FORMAT
@@ -192,7 +192,7 @@ def _detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:
     return float(v) if v.ndim == 0 else v
 
 
-class TrackerMap(Cleaner):
+class TrackerMap(Stepper):
     """Tracker map cleaner (module docstring). ``min_cutoff``/``beta``/``d_cutoff`` (Hz)
     replace the model's pre-filter settings (scalars, or one per model input); ``detail``
     in [0, 1] replaces its detail scale: how much of the lag the pre-filter adds the map
