@@ -10,6 +10,7 @@ import pytest
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
+from faceclean.evaluation import tracker_eval
 from faceclean.synthetic import engine, rom
 from faceclean.synthetic.tracker import NAMES
 
@@ -78,6 +79,10 @@ def test_every_fold_scores_every_row_and_level_rows_beat_the_filters(result):
     assert not any(k.startswith("calibration") for k in result["folds"][engine.SYNTH_GROUP])
     # "real": the synthetic performers' fold left out (2 test pairs a fold for a and b)
     assert result["real"]["raw"]["test"]["pairs"] == 4
+    # each fold's tuned One Euro, as data (eval --pairs cleans the still face with it)
+    assert set(result["one_euro"]) == set(result["folds"])
+    for oe in result["one_euro"].values():
+        assert (oe["min_cutoff"], oe["beta"]) in tracker_eval.ONE_EURO_GRID
     assert result["real"]["raw"]["held"]["pairs"] == 2
 
 

@@ -147,7 +147,7 @@ def _pairs(args: argparse.Namespace, progress) -> int:
     import json
     from pathlib import Path
 
-    from faceclean import settings
+    from faceclean import resolve, settings
     from faceclean.evaluation import still, tracker_eval, tracker_results
     from faceclean.filters.one_euro import OneEuro
     from faceclean.io.atomic import atomic_write
@@ -159,16 +159,14 @@ def _pairs(args: argparse.Namespace, progress) -> int:
     if model is not None and model.is_file():
         take = still.still_take(model, seconds=8)
         best = max(result["folds"], key=lambda g: len(result["folds"][g]))
-        oe = next(k for k in result["folds"][best] if k.startswith("one-euro"))
-        mc, beta = (float(v.split()[0]) for v in oe.split("tuned ")[1].rstrip(")").split(", beta"))
+        tuned = result["one_euro"][best]  # {"min_cutoff": Hz, "beta": beta}
+        shipped = settings.MODELS / resolve.TRACKER_MODELS["mediapipe"]
         rows = {
             "raw": take,
-            "one-euro": OneEuro(names=take.names, min_cutoff=mc, beta=beta).clean(take),
-            "tracker map (ours, shipped)": TrackerMap(
-                model=settings.MODELS / "mediapipe.npz", names=take.names
-            ).clean(take),
+            "one-euro": OneEuro(names=take.names, **tuned).clean(take),
+            "tracker map (ours, shipped)": TrackerMap(model=shipped, names=take.names).clean(take),
             "tracker map (shipped), detail 1": TrackerMap(
-                model=settings.MODELS / "mediapipe.npz", names=take.names, detail=1.0
+                model=shipped, names=take.names, detail=1.0
             ).clean(take),
         }
         still_rows = {k: still.measures(v) for k, v in rows.items()}

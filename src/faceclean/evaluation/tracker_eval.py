@@ -43,10 +43,10 @@ from faceclean.channels import GROUPS
 from faceclean.evaluation import paired
 from faceclean.evaluation.metrics import summary
 from faceclean.evaluation.paired import Pair
-from faceclean.filters.base import Cleaner
+from faceclean.filters.base import Stepper
 
 ONE_EURO_GRID = [(mc, b) for mc in (0.5, 1.0, 2.0, 4.0) for b in (0.0, 0.3, 1.0, 3.0)]
-Build = Callable[[Sequence[str]], Cleaner | None]  # names -> a cleaner (None: raw)
+Build = Callable[[Sequence[str]], Stepper | None]  # names -> a cleaner (None: raw)
 Report = Callable[[str], None]
 
 
@@ -54,7 +54,7 @@ Report = Callable[[str], None]
 class PerPair:
     """A row whose cleaner is made for each pair (from the pair's own calibration clip)."""
 
-    make: Callable[[Pair], Cleaner]
+    make: Callable[[Pair], Stepper]
 
 
 def outputs(build: Build | PerPair, pairs: Sequence[Pair]) -> list[Animation]:
@@ -143,7 +143,8 @@ def evaluate(
 ) -> dict[str, Any]:
     """Every fold of the pairs in ``folder``: {"folds": {group: {row: {split: scores}}},
     "overall": {row: {split: scores}}, "pairs": counts, "chosen": {group: the fold's tracker
-    map choices (pre-filter, shrinkage, detail scale, blink knee)}}."""
+    map choices (pre-filter, shrinkage, detail scale, blink knee)}, "one_euro": {group: the
+    fold's tuned One Euro {"min_cutoff": Hz, "beta": beta}}}."""
     from faceclean.filters.one_euro import OneEuro
     from faceclean.learned.cleaner import Learned
     from faceclean.learned.tracker_map import TrackerMap
@@ -156,6 +157,7 @@ def evaluate(
     work.mkdir(parents=True, exist_ok=True)
     folds: dict[str, Any] = {}
     chosen: dict[str, Any] = {}  # group -> the fold map's choices (what each fold picked)
+    one_euro: dict[str, dict[str, float]] = {}  # group -> the fold's tuned One Euro
     for group in paired.groups(pairs):
         train, test, held = paired.split(pairs, group, held_out)
         if not train or not (test or held):
@@ -164,6 +166,7 @@ def evaluate(
         inner_train = [p for p in train if p not in inner_val]
         report(f"fold {group}: {len(train)} training pairs, {len(test)} + {len(held)} test")
         mc, beta = tune_one_euro(train)
+        one_euro[group] = {"min_cutoff": float(mc), "beta": float(beta)}
         # every learned row trains on the same data: the pairs and their calibration clips
         inner_train, inner_val = paired.with_clips(inner_train), paired.with_clips(inner_val)
         ridge = fit.fit_ridge(inner_train, inner_val)
@@ -206,10 +209,11 @@ def evaluate(
 
     real = {g: f for g, f in folds.items() if g != SYNTH_GROUP}
     return {"folds": folds, "overall": _overall(folds), "real": _overall(real) if real else None,
-            "pairs": paired.summary_json(pairs), "chosen": chosen}  # fmt: skip
+            "pairs": paired.summary_json(pairs), "chosen": chosen,
+            "one_euro": one_euro}  # fmt: skip
 
 
-def calibrated_one_euro(pair: Pair, min_cutoff: float, beta: float) -> Cleaner:
+def calibrated_one_euro(pair: Pair, min_cutoff: float, beta: float) -> Stepper:
     """One Euro behind the levels ``calibrate --rom --tracker mediapipe`` measures on the
     pair's calibration clip."""
     from faceclean.adjust import Adjusted
