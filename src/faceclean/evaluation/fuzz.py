@@ -32,7 +32,7 @@ from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 
 READERS = {"livelink": ".csv", "csv": ".csv", "json": ".json", "npz": ".npz", "glb": ".glb"}
-READERS["gltf"] = ".gltf"
+READERS.update(gltf=".gltf", mediapipe=".csv")
 DECODERS = ("vmc", "livelink-udp", "ifacialmocap")
 TARGETS: tuple[str, ...] = (*READERS, *DECODERS)
 MAX_BYTES = 4096  # arbitrary inputs up to this size
@@ -184,6 +184,8 @@ def seeds(target: str) -> tuple[bytes, ...]:
         return tuple(_file_seeds(target))
     if target in ("glb", "gltf"):
         return (_gltf_seed(target == "glb"),)
+    if target == "mediapipe":
+        return tuple(_mediapipe_seeds())
     return tuple(_packet_seeds(target))
 
 
@@ -219,6 +221,21 @@ def _file_seeds(fmt: str) -> list[bytes]:
             io.save(a, p, fmt)
             out.append(p.read_bytes())
     return out
+
+
+def _mediapipe_seeds() -> list[bytes]:
+    """As scripts around the Face Landmarker write them: ``frame``, ``timestamp_ms`` (ints)
+    and every category (``_neutral`` first), one lost face; and seconds in ``timestamp``."""
+    from faceclean.channels import MEDIAPIPE
+
+    anim = _sample_animation()
+    scores = np.clip(anim.values[:, : len(MEDIAPIPE)], 0, 1)  # (N, 52)
+    rows = ["frame,timestamp_ms," + ",".join(MEDIAPIPE)]
+    for k, (t, v) in enumerate(zip(anim.times, scores, strict=True)):
+        cells = [""] * len(v) if np.isnan(v).all() else [f"{x:.6f}" for x in v]
+        rows.append(f"{k},{round(t * 1000)}," + ",".join(cells))
+    short = ["timestamp,_neutral,jawOpen"] + [f"{k / 30:.4f},0.9,0.{k}" for k in range(4)]
+    return [("\n".join(r) + "\n").encode() for r in (rows, short)]
 
 
 def _gltf_seed(glb: bool) -> bytes:
