@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from faceclean.batch import Job, is_batch, plan
+from faceclean.cli.tasks import Failure, done, summary
 from faceclean.errors import FacecleanError
 
 __all__ = ["is_batch", "run"]
@@ -52,35 +53,22 @@ def run(args: argparse.Namespace) -> int:
     if note:
         print(note, file=sys.stderr)
     Path(args.output).mkdir(parents=True, exist_ok=True)
-    failed: list[tuple[Job, str]] = []
+    failed: list[Failure] = []
     bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, desc="cleaning", leave=False)
     with bar:
         if n == 1:
-            results = ((job, _clean(args, job)) for job in jobs)
-            for job, (ok, text) in results:
-                _done(bar, job, ok, text, failed)
+            for job in jobs:
+                done(bar, str(job.src), _clean(args, job), failed, echo=True)
         else:  # workers that die with this process, stopped at once by Ctrl-C
             with workers.Pool(n) as pool:
                 futures = {pool.submit(_clean, args, job): job for job in jobs}
                 for future in as_completed(futures):
-                    _done(bar, futures[future], *future.result(), failed)
+                    done(bar, str(futures[future].src), future.result(), failed, echo=True)
     print(f"cleaned {len(jobs) - len(failed)} of {len(jobs)} files into {args.output}")
     if skipped:  # batch.plan does not walk the output folder (earlier outputs)
         print(f"({skipped} file{'s' * (skipped > 1)} already in {args.output}, inside the "
               "input folder, not cleaned again)")  # fmt: skip
-    if failed:
-        print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
-        for job, why in failed:
-            print(f"  {job.src}: {why}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def _done(bar, job: Job, ok: bool, text: str, failed: list) -> None:
-    bar.write(text if ok else f"FAILED {job.src}: {text}", file=sys.stdout)
-    bar.update(1)
-    if not ok:
-        failed.append((job, text))
+    return summary(failed)
 
 
 def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:

@@ -11,6 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from faceclean.cli.tasks import done
 from faceclean.errors import FacecleanError
 
 HELP = "render faces from known weights, track them with MediaPipe: paired training data"
@@ -140,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     with bar:
         if workers <= 1 and todo:
             for job, kind in todo:
-                _done(bar, _label(job, kind), _safe(worker, job, kind, out), failed)
+                done(bar, _label(job, kind), _safe(worker, job, kind, out), failed)
         elif todo:
             del worker  # spawned workers (never a fork of MediaPipe) that die with this process
             init = (str(head), str(model), portraits)
@@ -149,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
                     pool.submit(_job, job, kind, str(out)): _label(job, kind) for job, kind in todo
                 }
                 for f in as_completed(futures):
-                    _done(bar, futures[f], f.result(), failed)
+                    done(bar, futures[f], f.result(), failed)
     print(f"made {len(todo) - len(failed)} of {len(todo)} in {out}")
     if failed:
         print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
@@ -262,14 +263,6 @@ def _files(args: argparse.Namespace) -> tuple[Path, Path]:
 
 def _label(job, kind: str) -> str:
     return job.name if kind == "pair" else f"{job.name} (calibration clip)"
-
-
-def _done(bar, label: str, result: tuple[bool, str], failed: list) -> None:
-    ok, text = result
-    if not ok:
-        bar.write(f"FAILED {label}: {text}", file=sys.stdout)
-        failed.append((label, text))
-    bar.update(1)
 
 
 def _safe(worker, job, kind: str, out) -> tuple[bool, str]:
