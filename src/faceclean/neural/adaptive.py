@@ -125,7 +125,7 @@ class AdaptiveNet(torch.nn.Module):
             dt = (t[:, n] - t[:, n - 1]).clamp_min(DT_MIN)[:, None]  # (B, 1) s
             xn = x[:, n]
             e = xn - y
-            edx_n = edx + _alpha(self.d_cutoff, dt) * (e / dt - edx)
+            edx_n = edx + alpha(self.d_cutoff, dt) * (e / dt - edx)
             en = e / E0
             f = torch.stack(
                 [
@@ -144,10 +144,10 @@ class AdaptiveNet(torch.nn.Module):
             o = self.head(h_n).reshape(B, M, 2)
             fc = (mc + be * edx_n.abs()) * torch.exp(o[..., 0].clamp(A_MIN, A_MAX))
             p = y + torch.sigmoid(o[..., 1]) * dt * edx_n
-            y_n = p + _alpha(fc, dt) * (xn - p)
+            y_n = p + alpha(fc, dt) * (xn - p)
             lo, hi = xn.clamp(max=0.0), xn.clamp(min=1.0)
             y_n = torch.minimum(torch.maximum(y_n, lo), hi)
-            slow_n = slow + _alpha(torch.tensor(F_SLOW), dt) * (y_n - slow)
+            slow_n = slow + alpha(torch.tensor(F_SLOW), dt) * (y_n - slow)
             shown = y_n + G_MAX * torch.tanh(self.boost) * (y_n - slow_n)
             shown = torch.minimum(torch.maximum(shown, lo), hi)
             if observed is not None:  # a lost frame holds output and state
@@ -196,7 +196,9 @@ class AdaptiveNet(torch.nn.Module):
         return net
 
 
-def _alpha(cutoff: Tensor, dt: Tensor) -> Tensor:
+def alpha(cutoff: Tensor, dt: Tensor) -> Tensor:
+    """The One Euro smoothing factor for ``cutoff`` Hz over ``dt`` s: 1 / (1 + tau / dt),
+    tau = 1 / (2 pi cutoff) (the differentiable twin of the runtime's)."""
     return 1.0 / (1.0 + 1.0 / (2.0 * math.pi * cutoff * dt))
 
 

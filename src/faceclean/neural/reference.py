@@ -121,14 +121,14 @@ class AdaptiveReference:
     @torch.no_grad()
     def step(self, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
         from faceclean.learned import adaptive as A
-        from faceclean.neural.adaptive import _alpha
+        from faceclean.neural.adaptive import alpha
 
         net, (y, edx, h, slow) = self.net, self.state
         S, M = y.shape
         xn = torch.from_numpy(np.asarray(x, np.float32))
         dtt = torch.from_numpy(np.asarray(dt, np.float32)).reshape(-1, 1).clamp_min(A.DT_MIN)
         e = xn - y
-        edx = edx + _alpha(net.d_cutoff, dtt) * (e / dtt - edx)
+        edx = edx + alpha(net.d_cutoff, dtt) * (e / dtt - edx)
         en = e / A.E0
         f = torch.stack(
             [
@@ -148,10 +148,10 @@ class AdaptiveReference:
         mc, be = net.log_min_cutoff.exp(), net.log_beta.exp()
         fc = (mc + be * edx.abs()) * torch.exp(o[..., 0].clamp(A.A_MIN, A.A_MAX))
         p = y + torch.sigmoid(o[..., 1]) * dtt * edx
-        y = p + _alpha(fc, dtt) * (xn - p)
+        y = p + alpha(fc, dtt) * (xn - p)
         lo, hi = xn.clamp(max=0.0), xn.clamp(min=1.0)
         y = torch.minimum(torch.maximum(y, lo), hi)
-        slow = slow + _alpha(torch.tensor(A.F_SLOW), dtt) * (y - slow)
+        slow = slow + alpha(torch.tensor(A.F_SLOW), dtt) * (y - slow)
         shown = y + A.G_MAX * torch.tanh(net.boost) * (y - slow)
         shown = torch.minimum(torch.maximum(shown, lo), hi)
         self.state = (y, edx, h, slow)
