@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,9 +18,11 @@ cv2 = pytest.importorskip("cv2")
 
 def _frames(n: int, size: int = 64) -> np.ndarray:
     """(n, size, size, 3) RGB, each frame a different grey: order can be checked."""
-    return np.repeat(np.arange(n, dtype=np.uint8)[:, None, None, None] * 8, size, 1).repeat(
-        size, 2
-    ).repeat(3, 3)
+    return (
+        np.repeat(np.arange(n, dtype=np.uint8)[:, None, None, None] * 8, size, 1)
+        .repeat(size, 2)
+        .repeat(3, 3)
+    )
 
 
 @pytest.mark.parametrize(
@@ -49,17 +52,15 @@ def test_not_a_video_missing_folder_and_truncated_are_one_line(tmp_path):
     text.write_text("not a video\n" * 50)
     for bad, words in ((text, "not a video"), (tmp_path / "gone.mp4", "no such file"),
                        (tmp_path, "not a regular file")):  # fmt: skip
-        with pytest.raises(FacecleanError, match=words) as e:
-            with Video(bad) as v:
-                list(v)
+        with pytest.raises(FacecleanError, match=words) as e, Video(bad) as v:
+            list(v)
         assert "\n" not in str(e.value)
     whole = write_video(tmp_path / "whole.avi", _frames(40), 30, "MJPG")
-    data = open(whole, "rb").read()
+    data = Path(whole).read_bytes()
     cut = tmp_path / "cut.avi"
     cut.write_bytes(data[: len(data) // 2])
-    with pytest.raises(FacecleanError, match="truncated|not a video"):
-        with Video(cut) as v:
-            list(v)
+    with pytest.raises(FacecleanError, match="truncated|not a video"), Video(cut) as v:
+        list(v)
 
 
 def test_a_video_read_is_protected_from_the_commands_outputs(tmp_path):

@@ -1,0 +1,72 @@
+"""trackers/face.py: MediaPipe on real video files: lost faces, the video's times, the head."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import BLANK, N_FRAMES, VFR_TIMES, YAW, yaw_of
+
+from faceclean.trackers.face import HEAD, head_angles
+from faceclean.trackers.signature import judge
+
+
+def _renderer_rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """The renderer's R = Ry Rx Rz (deg), written out here: MediaPipe's frame (x: the
+    subject's left as the camera sees it, y up, z out of the face)."""
+    y, x, z = np.radians([yaw, pitch, roll])
+    ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    rx = np.array([[1, 0, 0], [0, np.cos(x), -np.sin(x)], [0, np.sin(x), np.cos(x)]])
+    rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
+    return ry @ rx @ rz
+
+
+@pytest.mark.parametrize("ypr", [(20, 0, 0), (0, 15, 0), (0, 0, 10), (25, -10, 5)])
+def test_head_angles_are_live_links_the_x_mirror_of_mediapipes(ypr):
+    m = np.eye(4)
+    m[:3, :3] = 1.7 * _renderer_rotation(*ypr)  # a scale in the matrix is dropped
+    got = np.degrees(head_angles(m))
+    # Live Link: +yaw turns to the subject's right, +pitch down, roll mirrored too
+    np.testing.assert_allclose(got, [-ypr[0], ypr[1], -ypr[2]], atol=1e-9)
+
+
+def test_a_rendered_video_tracks_on_its_times_with_lost_faces_missing(face_video):
+    from faceclean.trackers.face import track_video
+
+    seen = []
+    anim = track_video(face_video, progress=lambda done, total: seen.append((done, total)))
+    assert anim.n_frames == N_FRAMES and len(anim.names) == 51
+    assert "tongueOut" not in anim.names
+    np.testing.assert_allclose(anim.times, np.arange(N_FRAMES) / 30.0, atol=1.5e-3)
+    lost = np.flatnonzero(~np.isfinite(anim.values).any(axis=1))
+    assert tuple(lost) == BLANK  # no face: missing rows, exactly there, never guessed
+    assert np.isnan(anim.meta["pose"][list(BLANK)]).all()
+    assert anim.meta["pose_names"] == HEAD
+    assert seen[-1] == (N_FRAMES, N_FRAMES)  # progress: done, the container's count
+    yaw = np.degrees(anim.meta["pose"][:, 0])
+    left = [i for i in range(N_FRAMES) if yaw_of(i) == YAW]
+    right = [i for i in range(N_FRAMES) if yaw_of(i) == -YAW and i not in BLANK]
+    # turned to the subject's left in the render: negative Live Link yaw, and back
+    assert np.median(yaw[left]) < -0.5 * YAW
+    assert np.median(yaw[right]) > 0.5 * YAW
+    jaw = anim.values[:, anim.names.index("jawOpen")]
+    assert np.nanmax(jaw) - np.nanmin(jaw) > 0.1  # the expression is tracked
+    assert judge(anim.values, anim.names) is None  # our own raw output passes the check
+
+
+def test_a_variable_frame_rate_video_keeps_its_times(vfr_video):
+    from faceclean.trackers.face import track_video
+
+    anim = track_video(vfr_video)
+    np.testing.assert_allclose(anim.times, VFR_TIMES - VFR_TIMES[0], atol=1e-3)
+    assert np.isfinite(anim.values).any(axis=1).sum() >= len(VFR_TIMES) - 2
+
+
+def test_a_video_without_a_face_is_refused(rendered, tmp_path):
+    from conftest import write_video
+
+    from faceclean.errors import FacecleanError
+    from faceclean.trackers.face import track_video
+
+    blank = write_video(tmp_path / "blank.mp4", rendered[:5], 30, blank=range(5))
+    with pytest.raises(FacecleanError, match="no face found in any of its 5 frames"):
+        track_video(blank)
