@@ -1,7 +1,9 @@
 """docs/ARCHITECTURE.md's dependency rules, checked on the import graph of src/faceclean.
 
 Read from the source with ``ast`` (nothing is imported): every ``import`` and
-``from ... import`` of every module, at module level and inside functions.
+``from ... import`` of every module, at module level and inside functions, and every
+import by name (a string that names one of our modules, ``"faceclean.learned.cleaner"``
+or ``"faceclean.learned.cleaner:Learned"``: what ``importlib`` will load).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
+DOC = SRC.parent / "docs" / "ARCHITECTURE.md"
 ROOT = SRC / "faceclean"
 
 CORE = {
@@ -24,7 +27,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     **{c: set() for c in CORE},
     "io": {"face"},  # gltf_take.py writes a face (stream.py takes a plain step callable)
     "face": {"io"},  # atomic writes
-    "filters": {"io", "evaluation"},  # presets write atomically; tune scores with metrics
+    # presets write atomically; tune scores with metrics; METHODS names the learned classes
+    "filters": {"io", "evaluation", "learned"},
     "adjust": {"filters", "io"},
     "learned": {"filters", "io"},
     "resolve": {"filters", "learned", "adjust"},
@@ -52,6 +56,7 @@ ONLY_FROM: dict[tuple[str, str], set[str]] = {
     ("io", "face"): {"faceclean.io.gltf_take"},  # a take written as an animated face
     ("filters", "evaluation"): {"faceclean.filters.tune"},  # tuning scores with metrics
     ("filters", "io"): {"faceclean.filters.presets"},  # presets written atomically
+    ("filters", "learned"): {"faceclean.filters"},  # METHODS: every cleaner class by name
     ("calibration", "relay"): {"faceclean.calibration"},  # warms up as the relay does
 }
 
@@ -90,6 +95,11 @@ def _imports() -> list[tuple[str, str, str | None, bool]]:
                         out.append((me, sub, None, id(node) in top))
                     else:
                         out.append((me, node.module, a.name, id(node) in top))
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                name, _, attr = node.value.partition(":")
+                dotted = all(p.isidentifier() for p in name.split("."))
+                if name.startswith("faceclean.") and dotted and _is_module(name):
+                    out.append((me, name, attr or None, False))  # loaded when called
     return out
 
 
@@ -165,3 +175,11 @@ def test_no_import_cycle_at_module_level():
         if m not in state:
             visit(m, [m])
     assert not cycles, cycles
+
+
+def test_a_repeated_file_name_says_why():
+    """Two modules with one file name only where ARCHITECTURE.md's table says why."""
+    names = [p.name for p in ROOT.rglob("*.py") if p.stem not in ("__init__", "__main__")]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    section = DOC.read_text(encoding="utf-8").split("## Repeated file names")[1].split("\n## ")[0]
+    assert repeated and not [n for n in repeated if f"`{n}`" not in section]
