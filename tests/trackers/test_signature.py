@@ -132,3 +132,38 @@ def test_watch_warns_once_forgets_warm_up_and_steps_as_its_cleaner():
         watch.step(row, 10 + i / 30.0)
     assert len(said) == 1 and "tongueOut" in said[0]
     assert watch.name == "echo"  # the inner cleaner's attributes show through
+
+
+def test_relay_tracker_mediapipe_warns_once_on_a_stream_that_is_not_raw():
+    """The relay process, a VMC stream whose tongueOut moves (MediaPipe has none)."""
+    import select
+    import subprocess
+    import sys
+    import time
+
+    from helpers import REPO, interrupt, reaped
+    from pythonosc.udp_client import UDPClient
+
+    sys.path.insert(0, str(REPO / "tests" / "relay"))
+    from test_relay_loopback import raw_receiver, vmc_bundle
+
+    names = ["jawOpen", "eyeBlinkLeft", "tongueOut"]
+    with raw_receiver() as rx:
+        send = f"vmc://127.0.0.1:{rx.getsockname()[1]}"
+        cmd = [sys.executable, "-m", "faceclean", "relay", "--listen", "vmc://127.0.0.1:0"]
+        cmd += ["--send", send, "--tracker", "mediapipe"]
+        pipe = subprocess.PIPE
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=pipe, stderr=pipe, text=True)
+        with reaped(proc):
+            ready, _, _ = select.select([proc.stdout], [], [], 60.0)
+            assert ready, "relay did not start"
+            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            client = UDPClient("127.0.0.1", port)
+            rx.settimeout(2.0)
+            for i in range(3 * MIN_FRAMES):
+                client.send(vmc_bundle(names, [0.3 + 0.2 * np.sin(i / 5), 0.1, 0.6]))
+                rx.recv(65536)  # one frame through before the next: none is stale
+                time.sleep(0.002)
+            out, err = interrupt(proc)
+    assert proc.returncode == 0, err
+    assert err.count("does not look like raw MediaPipe") == 1 and "tongueOut" in err
