@@ -4,7 +4,8 @@ One parametrised suite over the table of tests/contract_backends.py (each method
 LSTM's numpy and numba kernels, ONNX Runtime, the ``faceclean.Cleaner`` facade): causal,
 reset forgets, constant in gives constant out, batch equals reset-then-step, the same
 curve at 30/60/120 fps agrees, no NaN for any dt, t = 0.0 is a valid first time, (S, M)
-streams equal S cleaners, the base time rules, names and channel order kept. Each test
+streams equal S cleaners, the base time rules, names and channel order kept, a long
+take's compiled whole-take clean equals reset-then-step. Each test
 names its clause (``@pytest.mark.clause``); a backend that declares the clause
 unsupported skips it, with its reason. Then the LSTM's runtimes agree on a real take.
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from contract_backends import BACKENDS, CLAUSES, Backend, Files
+from contract_backends import BACKENDS, CLAUSES, COMPILED, Backend, Files
 from helpers import steps
 
 from faceclean import Animation
@@ -340,6 +341,35 @@ def test_time_rules(build):
     assert np.isfinite(cleaner.step(part, t[21])).all()
     # A pause longer than max_gap restarts from the input.
     np.testing.assert_array_equal(cleaner.step(x[22], t[21] + 10.0), x[22])
+
+
+@pytest.mark.clause("whole_take")
+def test_whole_take_equals_reset_then_step(backend, build, monkeypatch):
+    """A take long enough for the compiled whole-take path (filters/compiled.py
+    ``for_take``, its threshold lowered to this take), with every kind of frame the time
+    rules know, one of them on a block's edge (filters/base.py BLOCK)."""
+    from faceclean.filters import base, compiled
+
+    if not compiled.enable(warm=False):
+        pytest.skip("numba not installed: the numpy path is the batch clause's")
+    monkeypatch.setattr(compiled, "WHOLE_TAKE_FRAMES", 0)
+    asked = []
+    kernel = compiled._kernel
+    monkeypatch.setattr(compiled, "_kernel", lambda name: asked.append(name) or kernel(name))
+    n = base.BLOCK + 300
+    t, x = _noisy(n, seed=8)
+    x[40] = np.nan  # a missing frame
+    x[60, 4], x[61, 9] = np.nan, 1e9  # a lost and an absurd value
+    t[80] = t[79]  # a repeated time
+    t[90] = t[89] - 0.01  # a step back
+    t[base.BLOCK] = t[base.BLOCK - 1]  # a repeat on the block's edge
+    t[base.BLOCK + 100 :] += 1.0  # a pause past max_gap
+    whole = build().clean(Animation(t, x, ARKIT52)).values
+    streamed = steps(build(), t, x)
+    streamed[40] = np.nan  # clean() leaves missing frames NaN; step() holds
+    assert np.array_equal(np.isnan(whole), np.isnan(streamed))
+    np.testing.assert_allclose(whole, streamed, rtol=0, atol=backend.whole_tol)
+    assert bool(asked) == (backend.method in COMPILED), asked
 
 
 # --- the LSTM's runtimes agree -----------------------------------------------------------

@@ -40,6 +40,7 @@ State = tuple[np.ndarray, ...]  # each (S, M)
 MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
 MAX_GAP = 0.5  # s; the default max_gap: a longer pause restarts the state (rule 3)
 PROGRESS_EVERY = 1000  # frames between two reports to StreamCleaner.clean's progress
+BLOCK = 4096  # frames a whole-take clean holds at once beside its input and output
 
 
 def gap_seconds(max_gap: float) -> float:
@@ -108,9 +109,13 @@ class Stepper(ABC):
 
     @property
     def stepwise(self) -> bool:
-        """Whether ``clean`` is the base's reset-then-step: stepping the frames one by one
-        gives its numbers, so a file may go through in blocks (io/stream.py)."""
-        return not self.offline and type(self).clean in (Stepper.clean, StreamCleaner.clean)
+        """Whether ``clean`` is the base's reset-then-step (or a class's own, marked
+        ``reset_then_step``, that a test proves equal to it): stepping the frames one by
+        one gives its numbers, so a file may go through in blocks (io/stream.py)."""
+        own = type(self).clean
+        return not self.offline and (
+            own in (Stepper.clean, StreamCleaner.clean) or getattr(own, "reset_then_step", False)
+        )
 
     @abstractmethod
     def reset(self) -> None: ...
@@ -134,13 +139,16 @@ class Stepper(ABC):
 def check_finite(inp: np.ndarray, out: np.ndarray, name: str) -> None:
     """FacecleanError when ``out`` is not finite in a cell where ``inp`` (same shape) is
     finite and within MAX_ABS: a cleaner that erases data must not write a file."""
-    with np.errstate(invalid="ignore"):
-        lost = (np.abs(inp) <= MAX_ABS) & ~np.isfinite(out)
-    if lost.any():
+    lost = kept = 0
+    for a in range(0, max(len(inp), 1), BLOCK):  # in blocks: no temporary as large as a take
+        with np.errstate(invalid="ignore"):
+            sane = np.abs(inp[a : a + BLOCK]) <= MAX_ABS
+        lost += int((sane & ~np.isfinite(out[a : a + BLOCK])).sum())
+        kept += int(sane.sum())
+    if lost:
         raise FacecleanError(
-            f"{name}: the output is not finite in {int(lost.sum())} of "
-            f"{int((np.abs(inp) <= MAX_ABS).sum())} cells where the input is finite; "
-            "check its parameters or model (nothing written)"
+            f"{name}: the output is not finite in {lost} of {kept} cells where the input "
+            "is finite; check its parameters or model (nothing written)"
         )
 
 
@@ -186,38 +194,56 @@ class StreamCleaner(Stepper):
         value good, more than MIN_DT and at most max_gap after the last accepted one) goes
         to ``_advance`` at once, as ``step`` sends it, without step's conversions and
         checks of its arguments: the same numbers, some 15 us a frame less; a run of them,
-        to the compiled loop where one is enabled (``_compiled``). ``progress`` (a
-        progress bar's ``update``) is told every PROGRESS_EVERY frames how many more are
-        done."""
+        to the compiled loop where one is enabled (``_compiled``; a long take enables it,
+        filters/compiled.py ``for_take``). The take goes through in blocks of BLOCK
+        frames, so nothing but the output is as large as the input. ``progress`` (a
+        progress bar's ``update``) is told, every PROGRESS_EVERY frames or more, how many
+        more are done."""
         if type(self).step is not StreamCleaner.step:  # a subclass's own step decides
             return Stepper.clean(self, anim)
+        from faceclean.filters import compiled
+
         self.reset()
         out = np.full_like(anim.values, np.nan)
         idx = np.flatnonzero(anim.valid)
-        x = np.array(anim.values[idx], dtype=np.float64)  # ours: _advance may write in it
+        t64 = anim.times[idx].astype(np.float64)  # (V,) s
+        run = self._compiled() if compiled.for_take(len(idx)) else None
+        told = 0
+        for a in range(0, len(idx), BLOCK):
+            rows = idx[a : a + BLOCK]
+            x = np.array(anim.values[rows], dtype=np.float64)  # ours: _advance may write in it
+            self._block(x, t64[a : a + BLOCK], out, rows, run)
+            if progress is not None and a + len(rows) - told >= PROGRESS_EVERY:
+                progress(a + len(rows) - told)
+                told = a + len(rows)
+        if progress is not None and len(idx) > told:
+            progress(len(idx) - told)
+        check_finite(anim.values, out, self.name)
+        return anim.with_values(out)
+
+    def _block(self, x: np.ndarray, t64: np.ndarray, out: np.ndarray, rows, run) -> None:
+        """``clean`` over one block: x (B, M) the valid frames at t64 (B,) s, written to
+        ``out`` at ``rows`` (B,); ``run`` the compiled run, or None."""
         with np.errstate(invalid="ignore"):
             ok = (np.abs(x) <= MAX_ABS).all(axis=1)
         good = ok.tolist()
-        t64 = anim.times[idx].astype(np.float64)
         times = t64.tolist()
-        run = self._compiled() if progress is None and x.ndim == 2 else None
         if run is not None:  # frame k + 1 chains on an accepted frame k: a usual frame
             d = np.diff(t64)
             chain = np.concatenate([[False], ok[1:] & (d > MIN_DT) & (d <= self.max_gap)])
-            breaks = np.append(np.flatnonzero(~chain), len(idx))  # runs end before these
-        k, n = 0, len(idx)
+            breaks = np.append(np.flatnonzero(~chain), len(x))  # runs end before these
+        k, n = 0, len(x)
         while k < n:
-            i = int(idx[k])
-            if progress is not None and k % PROGRESS_EVERY == 0 and k:
-                progress(PROGRESS_EVERY)
+            i = int(rows[k])
             if good[k] and self._state is not None:
                 dt = times[k] - float(self._t[0])
                 if run is not None and MIN_DT < dt <= self.max_gap:
                     end = int(breaks[np.searchsorted(breaks, k, side="right")])
-                    dts = np.diff(t64[k - 1 : end])
+                    dts = np.empty(end - k)  # (end - k,) s
                     dts[0] = dt  # from the last accepted frame
+                    dts[1:] = np.diff(t64[k:end])
                     self._state, ys = run(self._state, x[k:end], dts)
-                    out[idx[k:end]] = ys
+                    out[rows[k:end]] = ys
                     self._t[0], self._y = times[end - 1], ys[-1:].copy()
                     k = end
                     continue
@@ -229,10 +255,6 @@ class StreamCleaner(Stepper):
                     continue
             out[i] = self.step(x[k], times[k])
             k += 1
-        if progress is not None and len(idx):
-            progress(len(idx) - (len(idx) - 1) // PROGRESS_EVERY * PROGRESS_EVERY)
-        check_finite(anim.values, out, self.name)
-        return anim.with_values(out)
 
     clean._finite_checked = True  # type: ignore[attr-defined]
 

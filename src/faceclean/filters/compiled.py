@@ -10,13 +10,17 @@ order, with no fast-math, and takes what needs a numpy function (EMA's expm1, Ka
 powers of dt) from numpy, so the numbers are the same bit for bit
 (tests/filters/test_compiled.py).
 
-Off until a process asks (``enable()``): loading numba costs ~1.8 s, which a one-off
-``faceclean clean`` would pay to save ~30 ms. Without numba it stays off, and every
-cleaner runs as before.
+Off until a process asks (``enable()``), or a take is long enough to pay for it
+(``for_take``: from WHOLE_TAKE_FRAMES frames, where ``clean`` loads numba and only the
+kernel it runs, each cached on disk by numba, so no process compiles twice): loading
+numba costs ~0.4 s, which a one-off ``faceclean clean`` of a short take would pay to save
+~30 ms. Without numba, or with FACECLEAN_NUMBA=0, it stays off and every cleaner steps
+in numpy as before, slower (``status()`` says which, for ``info`` and ``bench``).
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 import numpy as np
@@ -24,40 +28,93 @@ import numpy as np
 # A run: (state, x (N, M) frames, dt (N,) s) -> (state, y (N, M)), one stream.
 Run = Callable[[tuple[np.ndarray, ...], np.ndarray, np.ndarray], tuple]
 
+# From this many frames a clean loads numba for its whole take: numba's import and one
+# cached kernel (~0.45 s) against numpy's ~15 us a frame (docs/BENCHMARKS.md, issue 38).
+WHOLE_TAKE_FRAMES = 30_000
+OFF = "FACECLEAN_NUMBA"  # set to 0: never load numba (the numpy path, as without it)
+
 _kernels: dict[str, Callable] = {}
+_jit: Callable | None = None  # numba's njit with our options, once numba is loaded
 
 
-def enable() -> bool:
-    """Load and compile the kernels (cached by numba between processes); False without numba."""
-    if _kernels:
-        return True
-    try:
-        from numba import njit
-    except ImportError:  # the optional ``fast`` extra
-        return False
-    # error_model="numpy": a division by zero gives inf as numpy's does, never an exception
-    jit = njit(boundscheck=False, nogil=True, cache=True, error_model="numpy")
-    found = {"one_euro": jit(_one_euro), "inert": jit(_inert), "ema": jit(_ema),
-             "kalman": jit(_kalman), "deadband": jit(_deadband)}  # fmt: skip
-    one, x = np.ones(1), np.zeros((1, 1))  # compile now, not at the first change
-    try:
-        found["one_euro"](one.copy(), one.copy(), x, one, one, one, one, x.copy())
-        found["inert"](one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy())
-        found["ema"](one.copy(), x, x + 0.5, x.copy())
-        found["deadband"](x, one, x.copy())
-        found["kalman"](*(one.copy() for _ in range(5)), x, one, x, x, x, one, x.copy())
-    except Exception:  # noqa: BLE001 - e.g. no writable cache folder: numpy steps as before
-        return False
-    _kernels.update(found)
+def _warm_args() -> dict[str, tuple]:
+    """Per kernel: arguments of a one-frame call that compiles (or loads) it."""
+    one, x = np.ones(1), np.zeros((1, 1))
+    return {
+        "one_euro": (one.copy(), one.copy(), x, one, one, one, one, x.copy()),
+        "inert": (one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy()),
+        "ema": (one.copy(), x, x + 0.5, x.copy()),
+        "deadband": (x, one, x.copy()),
+        "kalman": (*(one.copy() for _ in range(5)), x, one, x, x, x, one, x.copy()),
+        "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one,
+                          x.copy(), x.copy()),
+        "affine": (x, x, x.copy()),
+    }  # fmt: skip
+
+
+def enable(warm: bool = True) -> bool:
+    """Load numba (False without it, or with FACECLEAN_NUMBA=0); ``warm``: compile every
+    kernel now (cached by numba between processes), not at its first run."""
+    global _jit
+    if _jit is None:
+        if os.environ.get(OFF, "").strip() == "0":
+            return False
+        try:
+            from numba import njit
+        except ImportError:  # the optional ``fast`` extra
+            return False
+        # error_model="numpy": a division by zero gives inf as numpy's does, never an exception
+        _jit = njit(boundscheck=False, nogil=True, cache=True, error_model="numpy")
+    if warm:
+        return all(_kernel(name) is not None for name in _SOURCES)
     return True
 
 
+def for_take(frames: int) -> bool:
+    """Whether a clean of ``frames`` frames runs compiled: on already, or long enough
+    (WHOLE_TAKE_FRAMES) to pay for loading numba, which it then loads."""
+    if _jit is not None:
+        return True
+    return frames >= WHOLE_TAKE_FRAMES and enable(warm=False)
+
+
 def enabled() -> bool:
-    return bool(_kernels)
+    return _jit is not None
 
 
 def disable() -> None:
+    global _jit
+    _jit = None
     _kernels.clear()
+
+
+def status() -> str:
+    """One line for ``info`` and ``bench``: how a long take is cleaned here."""
+    try:
+        from importlib.metadata import version
+
+        have = version("numba")
+    except Exception:  # noqa: BLE001 - not installed (PackageNotFoundError), or broken
+        have = None
+    if os.environ.get(OFF, "").strip() == "0":
+        return f"numpy (slower: {OFF}=0 keeps numba off)"
+    if have is None:
+        return "numpy (slower: numba not installed; pip install 'faceclean[fast]')"
+    return f"compiled from {WHOLE_TAKE_FRAMES} frames (numba {have}, kernels cached)"
+
+
+def _kernel(name: str) -> Callable | None:
+    """The compiled kernel ``name``, compiled (or loaded from numba's cache) at its first
+    use; None while off, or where it cannot compile (e.g. no writable cache folder)."""
+    k = _kernels.get(name)
+    if k is None and _jit is not None:
+        try:
+            k = _jit(_SOURCES[name])
+            k(*_warm_args()[name])
+        except Exception:  # noqa: BLE001 - numpy steps as before
+            return None
+        _kernels[name] = k
+    return k
 
 
 def _per_channel(m: int, values) -> list[np.ndarray]:
@@ -80,14 +137,14 @@ def _run(kernel: Callable, *consts: np.ndarray) -> Run:
 def one_euro(m: int, min_cutoff, beta, d_cutoff) -> Run | None:
     """One Euro's run (filters/one_euro.py) for M channels' settings (scalars or (M,)), or
     None when off."""
-    kernel = _kernels.get("one_euro")
+    kernel = _kernel("one_euro")
     return None if kernel is None else _run(kernel, *_per_channel(m, (min_cutoff, beta, d_cutoff)))
 
 
 def inert(m: int, min_cutoff, beta, w_d, ea, k) -> Run | None:
     """The inert adaptive default's run (learned/adaptive.py ``_advance_inert``, without a
     transient gain) for M channels' constants, or None when off."""
-    kernel = _kernels.get("inert")
+    kernel = _kernel("inert")
     return (
         None if kernel is None else _run(kernel, *_per_channel(m, (min_cutoff, beta, w_d, ea, k)))
     )
@@ -97,7 +154,7 @@ def ema(m: int, gamma, tau) -> Run | None:
     """Exponential smoothing's run (filters/ema.py): per-frame ``gamma``, or ``tau`` s
     (M channels' settings, the other None), or None when off. The gains are computed by
     numpy, as ``_advance`` computes them, for every frame of the run at once."""
-    kernel = _kernels.get("ema")
+    kernel = _kernel("ema")
     if kernel is None:
         return None
     gamma = None if gamma is None else _per_channel(m, (gamma,))[0]
@@ -117,7 +174,7 @@ def ema(m: int, gamma, tau) -> Run | None:
 def kalman(m: int, q, r) -> Run | None:
     """The Kalman filter's run (filters/kalman.py) for M channels' ``q`` and ``r``, or
     None when off; the process noise of every frame computed by numpy as ``_advance`` does."""
-    kernel = _kernels.get("kalman")
+    kernel = _kernel("kalman")
     if kernel is None:
         return None
     q = np.asarray(q, np.float64)
@@ -135,7 +192,7 @@ def kalman(m: int, q, r) -> Run | None:
 def deadband(m: np.ndarray, band: np.ndarray) -> np.ndarray | None:
     """y[n] = m[n] - clip(m[n] - y[n-1], -band, band), y[0] = m[0], over (N, M) outputs m
     (a tracker map's deadband, learned/tracker_map.py, as its fit scores it); None when off."""
-    kernel = _kernels.get("deadband")
+    kernel = _kernel("deadband")
     if kernel is None:
         return None
     y = np.array(m, dtype=np.float64, order="C")
@@ -210,3 +267,59 @@ def _inert(y, edx, x, dt, mc, beta, w_d, ea, k, out):
             y[m] = min(max(v, min(xm, 0.0)), max(xm, 1.0))
             edx[m] = e
             out[n, m] = y[m]
+
+
+def map_prefilter(u, edx, r, xi: np.ndarray, h: np.ndarray, tau_d, mc2pi, beta2pi):
+    """A tracker map's pre-filter over a run of usual frames (learned/tracker_map.py
+    ``_usual``, one stream): state u, edx, r (K,) updated in place; xi (N, K) the inputs,
+    h (N,) s the steps; tau_d, mc2pi, beta2pi (K,). Returns (U, R) (N, K): the filtered
+    inputs and their running minimum after each frame; None when off."""
+    kernel = _kernel("map_prefilter")
+    if kernel is None:
+        return None
+    U, R = np.empty_like(xi), np.empty_like(xi)
+    kernel(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, U, R)
+    return U, R
+
+
+def _map_prefilter(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, U, R):
+    """In place: ``_usual``'s One Euro in its arithmetic order, a = h / (h + tau) and
+    2 pi f h / (1 + 2 pi f h), then the rest level r = min(r, u)."""
+    for n in range(xi.shape[0]):
+        hn = h[n]
+        for j in range(xi.shape[1]):
+            e = xi[n, j] - u[j]
+            edx[j] = edx[j] + (hn / (hn + tau_d[j])) * (e / hn - edx[j])
+            g = hn * (mc2pi[j] + beta2pi[j] * abs(edx[j]))
+            u[j] = u[j] + (g / (1.0 + g)) * e
+            r[j] = min(r[j], u[j])
+            U[n, j] = u[j]
+            R[n, j] = r[j]
+
+
+def affine(c: np.ndarray, *pairs: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+    """y = c + sum of a @ w over ``pairs`` of a (N, K) and w (K, P), c (P,): (N, P); each
+    product summed over K in order, one row at a time, in one thread (BLAS would start
+    threads for a long run, and on a busy machine wait for them); None when off."""
+    kernel = _kernel("affine")
+    if kernel is None:
+        return None
+    y = np.empty((len(pairs[0][0]), len(c)))
+    y[:] = c
+    for a, w in pairs:
+        kernel(np.ascontiguousarray(a, np.float64), np.ascontiguousarray(w, np.float64), y)
+    return y
+
+
+def _affine(a, w, y):
+    """In place: y (N, P) += a (N, K) @ w (K, P), k ascending, vectorised over P."""
+    for n in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            v = a[n, k]
+            for j in range(w.shape[1]):
+                y[n, j] += v * w[k, j]
+
+
+_SOURCES = {"one_euro": _one_euro, "inert": _inert, "ema": _ema, "kalman": _kalman,
+            "deadband": _deadband, "map_prefilter": _map_prefilter,
+            "affine": _affine}  # fmt: skip

@@ -33,6 +33,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import (
+    BLOCK,
     MAX_ABS,
     MAX_GAP,
     State,
@@ -208,21 +209,26 @@ class Learned(StreamCleaner):
         self.reset()
         out = np.full_like(anim.values, np.nan)
         idx = np.flatnonzero(anim.valid)
-        x, t = anim.values[idx], anim.times[idx]
-        bad = ~(np.abs(x) <= MAX_ABS)  # (V, M) rule 2's cells
-        _, advance, dt = time_rules(t[None], bad.all(axis=1)[None], self.max_gap)
-        ok = advance[0] & ~bad.any(axis=1)  # the rest: the generic step's rules 1-4
+        t = anim.times[idx]
+        sane = np.zeros((2, len(idx)), bool)  # (2, V): some value sane, every value sane
+        for a in range(0, len(idx), BLOCK):  # in blocks: no temporary as large as the take
+            with np.errstate(invalid="ignore"):
+                cells = np.abs(anim.values[idx[a : a + BLOCK]]) <= MAX_ABS  # rule 2's cells
+            sane[0, a : a + BLOCK], sane[1, a : a + BLOCK] = cells.any(axis=1), cells.all(axis=1)
+        _, advance, dt = time_rules(t[None], ~sane[:1], self.max_gap)
+        ok = advance[0] & sane[1]  # the rest: the generic step's rules 1-4
         dt = dt[0]  # s, since the last accepted frame
-        k = 0
-        while k < len(idx):
-            if ok[k]:
-                j = k + int(np.argmin(ok[k:])) if not ok[k:].all() else len(idx)
-                out[idx[k:j]] = self._run_many(x[k:j], dt[k:j])
-                self._t[0], self._y[0] = t[j - 1], out[idx[j - 1]]
-                k = j
-            else:
-                out[idx[k]] = self.step(x[k], t[k])
-                k += 1
+        for a in range(0, len(idx), BLOCK):
+            x, k, end = anim.values[idx[a : a + BLOCK]], a, min(a + BLOCK, len(idx))
+            while k < end:
+                if ok[k]:
+                    j = k + int(np.argmin(ok[k:end])) if not ok[k:end].all() else end
+                    out[idx[k:j]] = self._run_many(x[k - a : j - a], dt[k:j])
+                    self._t[0], self._y[0] = t[j - 1], out[idx[j - 1]]
+                    k = j
+                else:
+                    out[idx[k]] = self.step(x[k - a], t[k])
+                    k += 1
         return anim.with_values(out)
 
     def _run_many(self, xs: np.ndarray, dts: np.ndarray) -> np.ndarray:
