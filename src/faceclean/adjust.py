@@ -28,9 +28,12 @@ The file format (what ``faceclean calibrate`` writes and ``--calibration`` reads
      "channels": {"eyeBlink*": {"gain": 1.2},
                   "jawOpen": {"offset": 0.04, "gain": 1.6, "curve": 1.0, "clamp": [0, 1]},
                   "tongueOut": {"off": true}},
-     "calibration": {...facts, optional, shown by describe()}}
+     "calibration": {...facts, optional, shown by describe()},
+     "adaptation": {...}}   # optional: a per-face correction AFTER the cleaner
 
-"channels" maps a pattern to its keys, in order (later entries win).
+"channels" maps a pattern to its keys, in order (later entries win). "adaptation" (written
+by ``calibrate --guided --tracker mediapipe``) is ``faceclean.adaptation``'s section: not a
+level, it corrects the cleaner's output; ``Adjusted`` and ``Adjust.adapt`` apply it.
 """
 
 from __future__ import annotations
@@ -79,6 +82,7 @@ class Adjust:
     rules: tuple[Rule, ...] = ()
     facts: dict[str, Any] = field(default_factory=dict)  # calibration facts, for describe()
     scale: float = 1.0  # every value times this first (--scale; not part of the file)
+    adaptation: Any = None  # faceclean.adaptation.Adaptation: after the cleaner, or None
 
     # -- building ---------------------------------------------------------------------------
     @classmethod
@@ -121,7 +125,12 @@ class Adjust:
             rules = cls.from_overrides(items).rules
         except FacecleanError as e:
             raise FacecleanError(f"{label}: {e}") from None
-        return cls(rules, _facts(data.get("calibration", {}), label))
+        adaptation = None
+        if data.get("adaptation") is not None:
+            from faceclean.adaptation import Adaptation
+
+            adaptation = Adaptation.from_dict(data["adaptation"], label)
+        return cls(rules, _facts(data.get("calibration", {}), label), adaptation=adaptation)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Adjust:
@@ -141,6 +150,8 @@ class Adjust:
         out: dict[str, Any] = {"format": FORMAT, "channels": chans}
         if self.facts:
             out["calibration"] = self.facts
+        if self.adaptation is not None:
+            out["adaptation"] = self.adaptation.to_dict()
         return out
 
     def save(self, path: str | os.PathLike) -> None:
@@ -151,18 +162,25 @@ class Adjust:
     def merged(self, other: Adjust) -> Adjust:
         """This mapping with ``other``'s rules on top (other wins where both set a key)."""
         scale = other.scale if other.scale != 1.0 else self.scale
-        return Adjust(self.rules + other.rules, {**self.facts, **other.facts}, scale)
+        after = other.adaptation if other.adaptation is not None else self.adaptation
+        return Adjust(self.rules + other.rules, {**self.facts, **other.facts}, scale, after)
 
     def scaled(self, scale: float) -> Adjust:
         """This mapping after every value is multiplied by ``scale`` (``--scale``)."""
         if not math.isfinite(scale) or scale <= 0:
             raise FacecleanError(f"--scale must be a finite number > 0 (got {scale:g})")
-        return Adjust(self.rules, self.facts, float(scale))
+        return Adjust(self.rules, self.facts, float(scale), self.adaptation)
 
     # -- using ------------------------------------------------------------------------------
     @property
     def is_identity(self) -> bool:
-        return not self.rules and self.scale == 1.0
+        return not self.rules and self.scale == 1.0 and self.adaptation is None
+
+    def adapt(self, values: np.ndarray, names: Sequence[str]) -> np.ndarray:
+        """The cleaner's output ``values`` (N, M) with the adaptation applied (a copy)."""
+        if self.adaptation is None:
+            return np.array(values, dtype=np.float64)
+        return self.adaptation.apply(values, names)
 
     def levels(self, names: Sequence[str]) -> Levels:
         """The mapping for columns ``names`` (M,)."""
@@ -392,12 +410,18 @@ def _show(key: str, value: Any) -> str:
 
 
 class Adjusted(Stepper):
-    """A stream cleaner whose input goes through a level mapping first (fixed columns)."""
+    """A stream cleaner whose input goes through a level mapping first (fixed columns),
+    and whose output through the mapping's adaptation, if it has one."""
 
     def __init__(self, inner: Any, adjust: Adjust, names: Sequence[str]) -> None:
         self.inner, self.adjust, self.names = inner, adjust, tuple(names)
         self.name = getattr(inner, "name", "cleaner")
         self._levels = adjust.levels(self.names)
+        self._after = None
+        if adjust.adaptation is not None:
+            from faceclean.adaptation import Applier
+
+            self._after = Applier(adjust.adaptation, self.names)
         self.reset()
 
     def reset(self) -> None:
@@ -405,4 +429,5 @@ class Adjusted(Stepper):
 
     def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray:
         x = np.asarray(frame, dtype=np.float64)
-        return self.inner.step(apply_levels(self._levels, x), t)
+        y = self.inner.step(apply_levels(self._levels, x), t)
+        return y if self._after is None else self._after(y)

@@ -210,6 +210,11 @@ class LiveCalibration(Stepper):
         self.base, self.overrides = base or Adjust(), overrides or Adjust()
         self._before = self.base.merged(self.overrides).levels(names)
         self._tops = tops_of(self.base)
+        self._after = None  # a guided calibration's adaptation, after the cleaner
+        if self.base.adaptation is not None:
+            from faceclean.adaptation import Applier
+
+            self._after = Applier(self.base.adaptation, names)
         self.reset()
 
     def reset(self) -> None:
@@ -229,7 +234,8 @@ class LiveCalibration(Stepper):
         x = np.asarray(frame, dtype=np.float64)
         if self.adjust is None and np.isfinite(t):
             self._collect(x, float(t))
-        return self.inner.step(apply_levels(self._levels, x), t)
+        y = self.inner.step(apply_levels(self._levels, x), t)
+        return y if self._after is None else self._after(y)
 
     def _collect(self, x: np.ndarray, t: float) -> None:
         self._t.append(t)

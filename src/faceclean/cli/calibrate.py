@@ -9,6 +9,14 @@ that tracker under-reads: eyeWide, cheekSquint, noseSneer). Eyelids stay blink-a
 Gains are capped (calibration.MAX_GAIN) and every gain above 2 is printed. Use the file
 with ``clean --calibration``, ``relay --calibration`` and ``info --calibration``; the
 equations are in faceclean.calibration.
+
+Guided (faceclean.guided): ``--print-script`` shows the script (about 34 s of prompts);
+``--guided TAKE`` finds each prompt in a take of it (robust to a late, slow, uneven
+person) and fits a per-face adaptation of the shipped cleaner: for ``--tracker mediapipe``
+a linear correction after the shipped map, cross-channel within a channel group and shrunk
+toward the map alone; for ``arkit`` per-channel levels. ``--guided --live URL`` prompts in
+the terminal and records the stream (cli/calibrate_live.py). Any prompt not seen stops
+it, nothing written, unless ``--partial``.
 """
 
 from __future__ import annotations
@@ -28,6 +36,10 @@ optionally, move through each expression as far as it goes. Then:
   faceclean clean take.csv -o out.csv --calibration calib.json
   faceclean info take.csv --calibration calib.json    (its effect; 'info calib.json': the file)
   faceclean relay ... --calibration calib.json
+guided (a script of prompts; its take adapts the cleaner to one face):
+  faceclean calibrate --print-script                 the prompts, their times and aims
+  faceclean calibrate --guided guided.csv -o calib.json --tracker mediapipe
+  faceclean calibrate --guided --live vmc://:39540 -o calib.json --tracker mediapipe
 neutral maps to 0; with --rom (or for a tracker's weak channels) each channel's observed
 top (99.5th percentile) maps to 1, the gain capped; eyelids stay blink-aware (blinks still
 close fully); every channel whose gain exceeds 2 is printed.
@@ -35,8 +47,31 @@ close fully); every channel whose gain exceeds 2 is printed.
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("take", metavar="TAKE", help="a neutral hold, then optionally a range of motion")
-    p.add_argument("-o", "--output", metavar="FILE", required=True, help="calibration .json")
+    p.add_argument(
+        "take",
+        metavar="TAKE",
+        nargs="?",
+        help="a neutral hold, then optionally a range of motion (with --guided: the script)",
+    )
+    p.add_argument("-o", "--output", metavar="FILE", help="calibration .json")
+    p.add_argument("--print-script", action="store_true", help="print the guided script")
+    p.add_argument(
+        "--guided",
+        action="store_true",
+        help="TAKE is a performance of the guided script (--print-script): fit a per-face "
+        "adaptation of the shipped cleaner",
+    )
+    p.add_argument(
+        "--live",
+        metavar="URL",
+        help="with --guided: prompt here and record the script from a stream (vmc://:PORT, "
+        "livelink://:PORT)",
+    )
+    p.add_argument(
+        "--partial",
+        action="store_true",
+        help="with --guided: write the calibration from the prompts seen even when some were not",
+    )
     p.add_argument(
         "--neutral",
         type=float,
@@ -60,6 +95,21 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.calibration import MAX_GAIN, REPORT_GAIN, calibrate, high_gains
     from faceclean.errors import FacecleanError
 
+    if args.print_script:
+        from faceclean.guided.script import load
+
+        print("\n".join(load().lines()))
+        return 0
+    if not args.output:
+        raise FacecleanError("calibrate: give -o FILE.json (or --print-script)")
+    if args.live and not args.guided:
+        raise FacecleanError("--live records the guided script: give --guided --live URL")
+    if args.guided:
+        from faceclean.cli.calibrate_guided import run_guided
+
+        return run_guided(args)
+    if not args.take:
+        raise FacecleanError("calibrate: give the TAKE")
     out = Path(args.output)
     if out.suffix.lower() != ".json":
         raise FacecleanError(f"-o {out.name}: a calibration is a .json file")

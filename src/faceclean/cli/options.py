@@ -80,7 +80,19 @@ def calibration(args: argparse.Namespace):
     from faceclean.adjust import Adjust
 
     path = getattr(args, "calibration", None)
-    return Adjust.load(path) if path else None
+    if not path:
+        return None
+    adjust = Adjust.load(path)
+    made_for = getattr(adjust.adaptation, "tracker", None)
+    tracker = getattr(args, "tracker", None)
+    if made_for is not None and tracker is not None and tracker != made_for:
+        from faceclean.errors import FacecleanError
+
+        raise FacecleanError(
+            f"--calibration {path}: a guided calibration for tracker {made_for}, not "
+            f"{tracker}: give --tracker {made_for}, or calibrate again with --tracker {tracker}"
+        )
+    return adjust
 
 
 def pose_preset(args: argparse.Namespace) -> str | None:

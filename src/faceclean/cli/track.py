@@ -147,6 +147,8 @@ def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = F
     adjust = build_levels(args, choice, anim.names)
     mapped = anim.with_values(adjust.apply(anim.values, anim.names))
     cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
+    if adjust.adaptation is not None:  # a guided calibration's correction, after the cleaner
+        cleaned = cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
     cleaned = rotation.clean_pose(cleaned, choice.build_pose)
     io.save(cleaned, out, fmt=fmt)
     if raw is not None:

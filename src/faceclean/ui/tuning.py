@@ -93,8 +93,12 @@ class Tuning:
     def clean(self, anim: Animation) -> Animation:
         """``anim`` cleaned as ``faceclean clean`` does: levels on the values, then the
         cleaner's ``clean``."""
-        mapped = anim.with_values(self.levels(anim.names).apply(anim.values, anim.names))
-        return self.choice.build(anim.names).clean(mapped)
+        adjust = self.levels(anim.names)
+        mapped = anim.with_values(adjust.apply(anim.values, anim.names))
+        cleaned = self.choice.build(anim.names).clean(mapped)
+        if adjust.adaptation is None:
+            return cleaned
+        return cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
 
     def map_levels(self, values: np.ndarray, names: Sequence[str]) -> np.ndarray:
         return apply_levels(self.levels(names).levels(names), np.asarray(values, np.float64))

@@ -1,0 +1,132 @@
+"""A per-face adaptation: a linear correction applied AFTER the cleaner (guided calibration).
+
+Where ``faceclean.adjust``'s levels map the raw values before the cleaner, the adaptation
+corrects the cleaner's output y (ARKit weights) for one face::
+
+    y' = clip(y + c + D y, 0, 1)        c (M,) offsets, D (M, M) sparse, W = I + D
+
+D is nonzero only within a channel group (``channels.GROUPS``: the tracker mixes channels
+of one region, e.g. MediaPipe's eye squint and blink), and is fitted shrunk toward 0, that
+is W toward the identity: the shipped cleaner alone (``faceclean.guided.fit``). Columns it
+does not name pass through bit for bit; a missing frame (NaN) stays missing.
+
+It is a separate section of the calibration file (``faceclean-adjust/1``), which readers
+older than it ignore::
+
+    "adaptation": {"format": "faceclean-adaptation/1", "tracker": "mediapipe",
+                   "cleaner": "tracker-map (mediapipe.npz ...)",   # what it was fitted after
+                   "offset": {"jawOpen": -0.03, ...},
+                   "matrix": {"eyeBlinkLeft": {"eyeBlinkLeft": 0.21, "eyeSquintLeft": -0.1}, ...}}
+
+``matrix[out][in]`` is D's entry (the change from the identity).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, canonical
+from faceclean.errors import FacecleanError
+
+FORMAT = "faceclean-adaptation/1"
+MAX_OFFSET = 0.5  # weight units
+MAX_COEF = 3.0  # |D| entries
+
+
+@dataclass(frozen=True)
+class Adaptation:
+    """The correction of the module docstring; ``apply`` on (N, M) or (M,) values."""
+
+    offset: dict[str, float]
+    matrix: dict[str, dict[str, float]]
+    tracker: str | None = None
+    facts: dict[str, Any] = field(default_factory=dict)  # other keys, kept as they are
+
+    @classmethod
+    def from_dict(cls, data: Any, label: str = "adaptation") -> Adaptation:
+        where = f"{label}: adaptation"
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise FacecleanError(f"{where}: not of format {FORMAT!r}")
+        offset = data.get("offset", {})
+        matrix = data.get("matrix", {})
+        if not isinstance(offset, dict) or not isinstance(matrix, dict):
+            raise FacecleanError(f"{where}: offset and matrix must be objects")
+        if not all(isinstance(row, dict) for row in matrix.values()):
+            raise FacecleanError(f"{where}: matrix must map a channel to {{channel: number}}")
+        names = [*offset, *matrix, *(n for row in matrix.values() for n in row)]
+        bad = [n for n in names if canonical(n) != n]
+        if bad:
+            raise FacecleanError(f"{where}: {bad[0]!r} is not an ARKit channel name")
+        for n, v in offset.items():
+            _bounded(v, MAX_OFFSET, f"{where} offset {n}")
+        for o, row in matrix.items():
+            for i, v in row.items():
+                _bounded(v, MAX_COEF, f"{where} matrix {o}.{i}")
+        tracker = data.get("tracker")
+        if tracker is not None and not isinstance(tracker, str):
+            raise FacecleanError(f"{where}: tracker must be a name")
+        rest = {k: v for k, v in data.items() if k not in ("format", "offset", "matrix", "tracker")}
+        offset = {n: float(v) for n, v in offset.items()}
+        matrix = {o: {i: float(v) for i, v in row.items()} for o, row in matrix.items()}
+        return cls(offset, matrix, tracker, rest)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"format": FORMAT, "tracker": self.tracker, **self.facts}
+        out["offset"] = {n: round(v, 6) for n, v in self.offset.items()}
+        out["matrix"] = {
+            o: {i: round(v, 6) for i, v in row.items()} for o, row in self.matrix.items()
+        }
+        return out
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The output channels it changes, in ARKit order."""
+        touched = {n for n, v in self.offset.items() if v} | {
+            o for o, row in self.matrix.items() if any(row.values())
+        }
+        return tuple(n for n in ARKIT52 if n in touched)
+
+    def operator(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(cols (K,) the columns it writes, c (K,), D (K, M)) for columns ``names``."""
+        col = {n: j for j, n in enumerate(names)}
+        cols = np.array([col[n] for n in self.channels if n in col], dtype=np.intp)
+        c = np.array([self.offset.get(names[j], 0.0) for j in cols])
+        d = np.zeros((len(cols), len(names)))
+        for k, j in enumerate(cols):
+            for i, v in self.matrix.get(names[j], {}).items():
+                if i in col:
+                    d[k, col[i]] = v
+        return cols, c, d
+
+    def apply(self, values: np.ndarray, names: Sequence[str]) -> np.ndarray:
+        """Corrected values, same shape as ``values``; NaN rows stay NaN."""
+        return Applier(self, names)(values)
+
+
+class Applier:
+    """An adaptation resolved for fixed columns (the streaming path's per-frame cost)."""
+
+    def __init__(self, adaptation: Adaptation, names: Sequence[str]) -> None:
+        self.cols, self.c, self.d = adaptation.operator(tuple(names))
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        y = np.array(values, dtype=np.float64)
+        if not len(self.cols):
+            return y
+        with np.errstate(invalid="ignore"):
+            z = y[..., self.cols] + self.c + np.nan_to_num(y) @ self.d.T  # (..., K)
+            z = np.where(np.isnan(y[..., self.cols]), np.nan, np.clip(z, 0.0, 1.0))
+        y[..., self.cols] = z
+        return y
+
+
+def _bounded(v: Any, limit: float, where: str) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise FacecleanError(f"{where}: expected a finite number, got {v!r}")
+    if abs(v) > limit:
+        raise FacecleanError(f"{where}: must be within +-{limit:g}")

@@ -1,0 +1,213 @@
+"""Where each prompt of the guided script is in a take: dynamic time warping.
+
+A person is late, slow and uneven, so the script's timetable is not the take's. The take's
+response r (N, 52) ARKit weights (the shipped cleaner's output for MediaPipe, the values
+themselves for ARKit) and the script's weights w are both resampled at ``RATE`` Hz and
+each channel the script moves is scaled to its own range (the take's: its robust rest
+``base`` = median and top = HIGH-th percentile, the range at least ``FLOOR``, so a face
+that reads a channel weakly still aligns, and a still face's noise is not blown up):
+
+    C[i, j] = 1 - cos([w(i), REST (1 - max w(i))], [r(j)+, REST (1 - max r(j)+)])   script i, take j
+    D[i, j] = C[i, j] + min(D[i-1, j-1], D[i-1, j-2], D[i-1, j-3], D[i-2, j-1] + C[i-1, j])
+
+Every script frame is matched once; the take may run from half to three times the
+script's speed, varying along it. The path starts anywhere in the take (a late start)
+and ends anywhere (the take runs on). A prompt's segment is the take time its start and
+end map to. It was **seen** when, in its segment (padded by ``PAD`` s), the take's
+channels it names rise at least ``RISE`` above rest and follow its envelope (correlation
+at least ``CORR``); the speech line, whose shapes are a guess, needs only mouth movement.
+The take **follows** the script when at least ``FOLLOW`` of the prompts were seen.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceclean.channels import ARKIT52, GROUPS
+from faceclean.errors import FacecleanError
+from faceclean.guided.script import Prompt, Script
+
+RATE = 10.0  # Hz, the alignment's grid
+REST = 1.0  # weight of the rest component in the cost's vectors
+FLOOR = 0.1  # weight units: the least range a channel is scaled by
+HIGH = 99.5  # percentile, a channel's top in the take
+PAD = 0.3  # s either side of a prompt's segment, for the seen test
+RISE = 0.03  # weight units above rest
+CORR = 0.5
+FOLLOW = 0.6  # fraction of prompts seen for the take to follow the script
+MIN_SPEED, MAX_SPEED = 1 / 3, 2.0  # the take's speed against the script's (the steps')
+MAX_LOST = 0.3  # a prompt whose segment lost more of its frames than this is "face lost"
+_MOUTH = tuple(ARKIT52.index(n) for n in (*GROUPS["mouth"], *GROUPS["jaw"]))
+
+
+@dataclass(frozen=True)
+class Segment:
+    prompt: Prompt
+    t0: float  # s, take time of the prompt's start
+    t1: float  # s, ... and of its end
+    seen: bool
+    why: str  # "seen", "not performed", "face lost"
+    rise: float  # weight units, the take's rise over rest on the prompt's channels
+    corr: float  # with the prompt's envelope
+
+
+@dataclass(frozen=True)
+class Alignment:
+    script_s: np.ndarray  # (P,) s, script times along the path ...
+    take_s: np.ndarray  # (P,) s, ... and the take times they map to (both increasing)
+    segments: tuple[Segment, ...]
+    cost: float  # mean C along the path
+
+    @property
+    def seen(self) -> int:
+        return sum(s.seen for s in self.segments)
+
+    @property
+    def follows(self) -> bool:
+        return self.seen >= FOLLOW * len(self.segments)
+
+    def script_time(self, t: np.ndarray) -> np.ndarray:
+        """Script time (s) of take times ``t`` (NaN outside the aligned span)."""
+        t = np.asarray(t, dtype=np.float64)
+        s = np.interp(t, self.take_s, self.script_s)
+        return np.where((t < self.take_s[0]) | (t > self.take_s[-1]), np.nan, s)
+
+
+def align(times: np.ndarray, response: np.ndarray, script: Script) -> Alignment:
+    """Align a take (times (N,) s, response (N, 52), NaN rows: no face) to ``script``."""
+    times = np.asarray(times, dtype=np.float64)
+    response = np.asarray(response, dtype=np.float64)
+    ok = np.isfinite(times) & np.isfinite(response).any(axis=1)
+    if ok.sum() < 2:
+        raise FacecleanError("guided calibration: the take has no frames with a face")
+    if np.any(np.diff(times[np.isfinite(times)]) <= 0):
+        raise FacecleanError("guided calibration: the take's times do not increase")
+    span = times[ok][-1] - times[ok][0]
+    if span < 0.9 * script.seconds:
+        raise FacecleanError(
+            f"guided calibration: the take ({span:.1f} s of face) is shorter than the script "
+            f"({script.seconds:.1f} s): record the whole script"
+        )
+    grid = np.arange(times[ok][0], times[ok][-1] + 1e-9, 1.0 / RATE)  # (J,) s
+    x = np.nan_to_num(response[ok])
+    r = np.stack([np.interp(grid, times[ok], x[:, c]) for c in range(x.shape[1])], axis=1)
+    lost = _lost(grid, times[ok])  # (J,) bool: no face within a frame's reach
+    st = np.arange(int(script.seconds * RATE) + 1) / RATE  # (I,) s
+    w = script.weights(st)
+    moved = np.flatnonzero(w.max(axis=0) > 0)
+    base, scale = _levels(r)
+    rn = (r[:, moved] - base[moved]) / scale[moved]
+    wn = w[:, moved] / w[:, moved].max(axis=0)
+    cost = _cost(wn, np.clip(rn, -0.5, 1.5))  # (I, J)
+    path_i, path_j = _dtw(cost)
+    script_s, take_s = st[path_i], grid[path_j]
+    keep = np.r_[True, np.diff(take_s) > 0]  # one script time per take time: increasing
+    segs = []
+    for p in script.prompts:
+        t0, t1 = np.interp([p.start, p.end], script_s, take_s)
+        segs.append(_judge(p, float(t0), float(t1), grid, r, base, lost))
+    return Alignment(script_s[keep], take_s[keep], tuple(segs), float(cost[path_i, path_j].mean()))
+
+
+def _levels(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(base, scale) (52,): each channel's rest (median) and range (at least FLOOR)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        base = np.median(r, axis=0)
+        top = np.percentile(r, HIGH, axis=0)
+    return base, np.maximum(top - base, FLOOR)
+
+
+def _lost(grid: np.ndarray, t_ok: np.ndarray) -> np.ndarray:
+    """(J,) bool: the nearest frame with a face is farther than 2 of the take's frames."""
+    dt = float(np.median(np.diff(t_ok))) if len(t_ok) > 1 else 1.0
+    k = np.clip(np.searchsorted(t_ok, grid), 1, len(t_ok) - 1)
+    near = np.minimum(np.abs(grid - t_ok[k - 1]), np.abs(t_ok[k] - grid))
+    return near > 2.5 * dt
+
+
+def _cost(wn: np.ndarray, rn: np.ndarray) -> np.ndarray:
+    """(I, J) cosine distances between script rows and take rows, each with a rest
+    component (``REST`` times how far the row is from any movement): scale-free, so a
+    face that reads weakly aligns, and a neighbour the tracker moves along costs little."""
+    rp = np.clip(rn, 0.0, 1.5)
+    w = np.c_[wn, REST * (1.0 - np.clip(wn.max(axis=1), 0.0, 1.0))]
+    r = np.c_[rp, REST * (1.0 - np.clip(rp.max(axis=1), 0.0, 1.0))]
+    w /= np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-9)
+    r /= np.maximum(np.linalg.norm(r, axis=1, keepdims=True), 1e-9)
+    return 1.0 - w @ r.T
+
+
+def _dtw(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The module's recurrence over cost (I, J): the path as (I,) script and take indices."""
+    n_i, n_j = c.shape
+    inf = np.inf
+    d = np.full((n_i, n_j), inf)
+    step = np.zeros((n_i, n_j), dtype=np.int8)  # 0..2: (1, 1..3); 3: (2, 1)
+    d[0] = c[0]  # open begin: the script may start at any take frame
+    for i in range(1, n_i):
+        prev = d[i - 1]
+        opts = np.full((4, n_j), inf)
+        for k in (1, 2, 3):
+            opts[k - 1, k:] = prev[:-k]
+        if i >= 2:
+            opts[3, 1:] = d[i - 2, :-1] + c[i - 1, 1:]
+        step[i] = np.argmin(opts, axis=0)
+        d[i] = c[i] + opts[step[i], np.arange(n_j)]
+    j = int(np.argmin(d[-1]))  # open end
+    if not np.isfinite(d[-1, j]):
+        raise FacecleanError(
+            "guided calibration: the take is too short to hold the script even at "
+            f"{MAX_SPEED:g}x its speed"
+        )
+    ii, jj = [n_i - 1], [j]
+    i = n_i - 1
+    while i > 0:
+        s = int(step[i, j])
+        if s < 3:
+            i, j = i - 1, j - (s + 1)
+            ii.append(i)
+            jj.append(j)
+        else:
+            ii += [i - 1, i - 2]
+            jj += [j, j - 1]
+            i, j = i - 2, j - 1
+    return np.array(ii[::-1]), np.array(jj[::-1])
+
+
+def _judge(
+    p: Prompt, t0: float, t1: float, grid: np.ndarray, r: np.ndarray, base: np.ndarray,
+    lost: np.ndarray,
+) -> Segment:  # fmt: skip
+    """The prompt's segment, and whether the take shows it there (module docstring)."""
+    inside = (grid >= t0 - PAD) & (grid <= t1 + PAD)
+    if not inside.any():
+        return Segment(p, t0, t1, False, "not performed", 0.0, 0.0)
+    if lost[inside].mean() > MAX_LOST:
+        return Segment(p, t0, t1, False, "face lost", 0.0, 0.0)
+    if not p.channels:  # a neutral hold: seen unless the face is lost
+        return Segment(p, t0, t1, True, "seen", 0.0, 1.0)
+    cols = [ARKIT52.index(n) for n in p.channels]
+    # the script's time of each grid point in the segment, linear in the take
+    u = (grid[inside] - t0) / max(t1 - t0, 1e-9) * p.duration
+    env = p.weights(u)[:, cols]  # (K, C)
+    rise = r[inside][:, cols] - base[cols]  # (K, C)
+    if p.keys:  # speech: mouth movement is enough (its shapes are a guess)
+        moves = float(np.std(r[inside][:, list(_MOUTH)], axis=0).max())
+        seen = moves >= RISE
+        return Segment(p, t0, t1, seen, "seen" if seen else "not performed", moves, 0.0)
+    wsum = env.sum(axis=1)  # (K,) the envelope
+    rsum = (rise * (env.max(axis=0) > 0)).sum(axis=1) / len(cols)  # (K,) mean rise
+    top = float(np.percentile(rsum, 90))
+    corr = _corr(wsum, rsum)
+    seen = top >= RISE and corr >= CORR
+    return Segment(p, t0, t1, seen, "seen" if seen else "not performed", top, corr)
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a - a.mean(), b - b.mean()
+    den = float(np.sqrt((a * a).sum() * (b * b).sum()))
+    return float((a * b).sum() / den) if den > 0 else 0.0

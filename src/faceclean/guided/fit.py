@@ -1,0 +1,255 @@
+"""Guided calibration: fit a per-face adaptation of the cleaner from the script's take.
+
+``guided(anim, tracker)`` aligns the take to the script (guided/align.py) and fits:
+
+- ``mediapipe``: the shipped MediaPipe cleaner runs on the take (its output y, (N, 52)).
+  The aligned frames of the prompts seen give targets T = the script's weights at each
+  frame's script time (the speech line, whose shapes are a guess, has weight 0). Per
+  channel group G (``channels.GROUPS``: where the tracker mixes channels), the change is
+  pivoted on the face's rest reading r (the median of y where the script rests), so a
+  face at rest reads as the shipped cleaner says (which is its best guess there: the
+  tracker barely tells a rest from a low level), and only excursions are rescaled::
+
+      y' = y + D_G (y_G - r_G)
+      D_G[k] = argmin sum_n v_n (T_nk - y_nk + r_k - D_G[k] (y_nG - r_G))^2
+                      + LAMBDA * n * sum_i (var_i + V_i) D_G[k, i]^2
+
+  a ridge toward the identity (D = 0: the shipped model alone) scaled by each input's
+  own variance, V_i = V0 for the channel's own input and V_CROSS for a neighbour (a
+  neighbour must move clearly to correct a channel). A channel no seen prompt aims at
+  is not touched; a channel that did not move (a still face) keeps D near 0. The result
+  is ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
+- ``arkit``: per-channel levels before the cleaner (faceclean.adjust, as ``calibrate``
+  writes): neutral = median over the neutral holds; a channel that a seen prompt aims at
+  (target v) and that rose there maps the HOLD_Q-th percentile of its hold onto v (gain
+  capped at calibration.MAX_GAIN); any other channel keeps its range ([neutral, 1] onto
+  [0, 1]). Blinks: their prompts are blinks, so a blink seen reaches full closure.
+
+Nothing here prints; the command (cli/calibrate.py) reports per prompt.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from faceclean.adaptation import Adaptation
+from faceclean.adjust import Adjust
+from faceclean.animation import Animation
+from faceclean.calibration import MAX_GAIN, MOVE_MIN
+from faceclean.channels import ARKIT52, GROUPS, TRACKERS
+from faceclean.errors import FacecleanError
+from faceclean.guided import align as al
+from faceclean.guided.script import Script, load
+
+LAMBDA = 0.03  # ridge on D relative to each input's own variance (+ V0): scale-free, so
+# a channel one prompt moves a little is fitted as surely as one that moves much
+V0 = 1e-4  # weight units^2: the tracker's noise floor, so a still channel is not trusted
+V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a channel
+MAX_OFFSET = 0.3
+MAX_COEF = 2.0
+HOLD = 0.8  # the part of a prompt whose envelope is above this is its hold
+HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it reached
+
+
+@dataclass(frozen=True)
+class Guided:
+    """What a guided calibration found and fitted."""
+
+    adjust: Adjust  # the calibration file's content (levels and/or adaptation)
+    alignment: al.Alignment
+    before: dict[str, float]  # prompt id -> mean peak of its channels, uncalibrated
+    after: dict[str, float]  # ... calibrated (the same frames)
+    target: dict[str, float]  # ... the script's aim
+    tracker: str
+
+
+def shipped_cleaner(tracker: str, names: tuple[str, ...]):
+    """(a fresh shipped cleaner for ``tracker`` over ``names``, its description)."""
+    from faceclean.resolve import resolve, tracker_words
+
+    words = tracker_words(tracker)
+    choice = resolve(words)
+    label = choice.source
+    if words is not None:
+        digest = hashlib.sha256(Path(words).read_bytes()).hexdigest()[:12]
+        label = f"{Path(words).name} sha256:{digest}"
+    return choice.build(names), label
+
+
+def response(anim: Animation, tracker: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """(y (N, 52) ARKit weights NaN where absent, present (52,) bool, cleaner label): what
+    the guided fit sees: the shipped cleaner's output for MediaPipe, the values for ARKit."""
+    if tracker == "mediapipe":
+        cleaner, label = shipped_cleaner(tracker, anim.names)
+        cleaned = cleaner.clean(anim)
+        y, present = cleaned.arkit()
+        y = np.where(anim.valid[:, None], y, np.nan)  # a lost face is no response
+        return y, present, label
+    y, present = anim.arkit()
+    return y, present, "levels"
+
+
+def guided(
+    anim: Animation, tracker: str = "mediapipe", script: Script | None = None,
+    take: str | None = None,
+) -> Guided:  # fmt: skip
+    """The guided calibration of ``anim`` (module docstring)."""
+    if tracker not in TRACKERS:
+        raise FacecleanError(f"guided calibration: unknown tracker {tracker!r}")
+    script = script or load()
+    x, present = anim.arkit()
+    if not present.any():
+        raise FacecleanError("guided calibration: the take has no ARKit blendshape channels")
+    y, present, label = response(anim, tracker)
+    alignment = al.align(anim.times, y, script)
+    t = anim.times
+    s = alignment.script_time(t)  # (N,) s, NaN outside the aligned span
+    target = script.weights(np.nan_to_num(s))  # (N, 52)
+    weight = _frame_weights(alignment, t, s) * np.isfinite(y).all(axis=1, where=present)
+    facts = {
+        "take": take or "take",
+        "frames": int(anim.valid.sum()),
+        "tracker": tracker,
+        "guided": {
+            "script": script.title,
+            "seen": [g.prompt.id for g in alignment.segments if g.seen],
+            "not_seen": [g.prompt.id for g in alignment.segments if not g.seen],
+            "follows": bool(alignment.follows),
+        },
+    }
+    if tracker == "mediapipe":
+        adaptation = fit_adaptation(y, target, weight, present)
+        adaptation = Adaptation(adaptation.offset, adaptation.matrix, tracker, {"cleaner": label})
+        adjust = Adjust((), facts, adaptation=adaptation)
+        y_after = adaptation.apply(np.nan_to_num(y), ARKIT52)
+    else:
+        adjust = fit_levels(x, target, weight, alignment, anim.times, facts)
+        from faceclean.adjust import apply_levels
+
+        y_after = apply_levels(adjust.levels(ARKIT52), np.nan_to_num(x))
+        y = x
+    before, after, aims = _peaks(alignment, t, np.nan_to_num(y), y_after, target)
+    return Guided(adjust, alignment, before, after, aims, tracker)
+
+
+def _frame_weights(alignment: al.Alignment, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(N,) each frame's weight in the fit: its prompt's weight if seen, else 0; a rest
+    between two seen prompts counts 1."""
+    w = np.where(np.isfinite(s), 1.0, 0.0)
+    for g in alignment.segments:
+        inside = (t >= g.t0) & (t <= g.t1)
+        w[inside] = g.prompt.weight if g.seen else 0.0
+    return w
+
+
+def fit_adaptation(
+    y: np.ndarray, target: np.ndarray, weight: np.ndarray, present: np.ndarray
+) -> Adaptation:
+    """The ridge fit of the module docstring: y, target (N, 52), weight (N,)."""
+    use = weight > 0
+    v = weight[use][:, None]  # (n, 1)
+    n = float(v.sum())
+    offset: dict[str, float] = {}
+    matrix: dict[str, dict[str, float]] = {}
+    if n < 1:
+        return Adaptation(offset, matrix)
+    aimed = (target[use] > 0).any(axis=0)  # (52,) a seen prompt aims at the channel
+    still = use & (target.max(axis=1) == 0)  # frames at rest: neutral holds, between prompts
+    if not still.any():
+        return Adaptation(offset, matrix)
+    rest = np.median(y[still], axis=0)  # (52,) the shipped cleaner's reading at rest
+    for members in GROUPS.values():
+        cols = [ARKIT52.index(m) for m in members if present[ARKIT52.index(m)]]
+        if not cols:
+            continue
+        yg, eg = y[use][:, cols], (target - y)[use][:, cols]  # (n, G)
+        my, me = rest[cols], -rest[cols]  # the pivot: the face at rest reads as shipped
+        yc, ec = yg - my, eg - me
+        var = (v * yc * yc).sum(0) / n  # (G,) each input's variance over the fit
+        gram, cov = (v * yc).T @ yc, (v * yc).T @ ec  # (G, G), (G in, G out)
+        d = np.zeros((len(cols), len(cols)))  # (G out, G in)
+        for k in range(len(cols)):  # its own input trusted at V0, a neighbour at V_CROSS
+            pen = LAMBDA * n * (var + V_CROSS)
+            pen[k] = LAMBDA * n * (var[k] + V0)
+            d[k] = np.linalg.solve(gram + np.diag(pen), cov[:, k])
+        d = np.clip(d, -MAX_COEF, MAX_COEF)
+        c = np.clip(-d @ my, -MAX_OFFSET, MAX_OFFSET)  # y' = y + D (y - rest)
+        for k, j in enumerate(cols):
+            name = ARKIT52[j]
+            if not aimed[j]:  # no evidence of its level: the shipped model's output
+                continue
+            if abs(c[k]) > 1e-4:
+                offset[name] = float(c[k])
+            row = {
+                ARKIT52[cols[i]]: float(d[k, i]) for i in range(len(cols)) if abs(d[k, i]) > 1e-4
+            }
+            if row:
+                matrix[name] = row
+    return Adaptation(offset, matrix)
+
+
+def fit_levels(
+    x: np.ndarray, target: np.ndarray, weight: np.ndarray, alignment: al.Alignment,
+    t: np.ndarray, facts: dict,
+) -> Adjust:  # fmt: skip
+    """ARKit levels from the aligned prompts (module docstring)."""
+    neutral_rows = np.zeros(len(t), bool)
+    for g in alignment.segments:
+        if g.seen and not g.prompt.channels:
+            neutral_rows |= (t >= g.t0) & (t <= g.t1)
+    if neutral_rows.sum() < 5:
+        raise FacecleanError("guided calibration: no neutral hold seen in the take")
+    hold = x[neutral_rows]
+    neutral = np.nanmedian(hold, axis=0)
+    noise = 1.4826 * np.nanmedian(np.abs(hold - neutral), axis=0)
+    rules, chans, lifted = [], {}, []
+    for i, name in enumerate(ARKIT52):
+        if not np.isfinite(neutral[i]):
+            continue
+        nv = float(neutral[i])
+        reached, aim = [], []
+        for g in alignment.segments:
+            if g.seen and name in g.prompt.targets:
+                rows = (t >= g.t0) & (t <= g.t1) & (target[:, i] >= HOLD * g.prompt.targets[name])
+                if rows.any():
+                    reached.append(float(np.nanpercentile(x[rows, i], HOLD_Q)))
+                    aim.append(g.prompt.targets[name])
+        top = float(np.median(reached)) if reached else None
+        if top is not None and top - nv > max(MOVE_MIN, 6 * float(noise[i])):
+            gain = min(float(np.median(aim)) / (top - nv), MAX_GAIN)
+            lifted.append(name)
+        elif nv < 0.5:
+            gain, top = 1.0 / (1.0 - nv), None
+        else:
+            nv, gain, top = 0.0, 1.0, None
+        rules += [(name, "offset", nv), (name, "gain", gain)]
+        rules += [(name, "curve", 1.0), (name, "clamp", (0.0, 1.0))]
+        chans[name] = {
+            "neutral": round(nv, 6),
+            "noise": round(float(noise[i]), 6),
+            "top": None if top is None else round(top, 6),
+            "gain": round(gain, 6),
+        }
+    facts = {**facts, "lifted": lifted, "channels": chans}
+    return Adjust(tuple(rules), facts)
+
+
+def _peaks(alignment, t, y, y_after, target):
+    """Per prompt with targets: the mean over its channels of the 90th percentile in its
+    segment, before, after, and the aim."""
+    before, after, aims = {}, {}, {}
+    for g in alignment.segments:
+        if not g.prompt.targets:
+            continue
+        rows = (t >= g.t0) & (t <= g.t1)
+        if not rows.any():
+            continue
+        cols = [ARKIT52.index(n) for n in g.prompt.targets]
+        before[g.prompt.id] = float(np.percentile(y[rows][:, cols], 90, axis=0).mean())
+        after[g.prompt.id] = float(np.percentile(y_after[rows][:, cols], 90, axis=0).mean())
+        aims[g.prompt.id] = float(np.mean(list(g.prompt.targets.values())))
+    return before, after, aims
