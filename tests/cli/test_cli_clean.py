@@ -242,3 +242,23 @@ def test_progress_path_equals_batch_clean():
     again = cleaner.clean(anim, progress=done.append)
     assert np.array_equal(again.values, batch.values, equal_nan=True)
     assert sum(done) == n - 10 and len(done) > 1
+
+
+def test_clean_compress_deflates_npz_and_refuses_other_outputs(tmp_path, capsys):
+    import zipfile
+
+    from faceclean import Animation, load, save
+    from faceclean.channels import ARKIT52
+
+    src = tmp_path / "in.npz"
+    rng = np.random.default_rng(0)
+    save(Animation(np.arange(30) / 60.0, rng.random((30, 52)), ARKIT52), src)
+    assert main(["clean", str(src), "-o", str(tmp_path / "o.npz"), "--compress"]) == 0
+    with zipfile.ZipFile(tmp_path / "o.npz") as z:
+        assert {m.compress_type for m in z.infolist()} == {zipfile.ZIP_DEFLATED}
+    assert main(["clean", str(src), "-o", str(tmp_path / "p.npz")]) == 0
+    np.testing.assert_array_equal(load(tmp_path / "o.npz").values, load(tmp_path / "p.npz").values)
+    capsys.readouterr()
+    assert main(["clean", str(src), "-o", str(tmp_path / "o.csv"), "--compress"]) == 2
+    assert capsys.readouterr().err == "faceclean: o.csv: --compress is for npz output, not csv\n"
+    assert not (tmp_path / "o.csv").exists()

@@ -99,3 +99,91 @@ def test_the_deadband_run_is_the_loops_numbers(on):
     assert not np.array_equal(want[:, 3], m[:, 3])  # the band holds
     compiled.disable()
     assert compiled.deadband(m, band) is None
+
+
+# --- the whole-take path (issue 38) ------------------------------------------------------
+
+_ONE_FILE = """
+import sys
+from faceclean.cli import main
+rc = main(["clean", sys.argv[1], "-o", sys.argv[2]])
+print(rc, "numba" in sys.modules)
+"""
+
+
+def _take_file(tmp_path, frames: int):
+    from faceclean import Animation, save
+    from faceclean.channels import ARKIT52
+
+    rng = np.random.default_rng(0)
+    path = tmp_path / f"take{frames}.npz"
+    save(Animation(np.arange(frames) / 60.0, rng.random((frames, 52)), ARKIT52), path)
+    return path
+
+
+@pytest.mark.parametrize("frames", [1, 2_000])
+def test_a_short_take_never_loads_numba(tmp_path, frames):
+    """Its process start pays nothing for the compiled path: numba stays unimported."""
+    import subprocess
+    import sys
+
+    src = _take_file(tmp_path, frames)
+    done = subprocess.run([sys.executable, "-c", _ONE_FILE, str(src), str(tmp_path / "o.npz")],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    assert done.stdout.splitlines()[-1] == "0 False"
+
+
+def test_a_long_take_turns_the_kernels_on_and_loads_only_its_own(monkeypatch):
+    compiled.disable()
+    take = hostile(4)
+    assert not compiled.for_take(len(take.times))  # short: off, numba not asked
+    assert not compiled.enabled()
+    valid = int(take.valid.sum())
+    monkeypatch.setattr(compiled, "WHOLE_TAKE_FRAMES", valid)
+    try:
+        y = OneEuro(names=take.names).clean(take).values
+        assert compiled.enabled() and set(compiled._kernels) == {"one_euro"}
+        compiled.disable()
+        monkeypatch.setattr(compiled, "WHOLE_TAKE_FRAMES", valid + 1)
+        np.testing.assert_array_equal(y, OneEuro(names=take.names).clean(take).values)
+        assert not compiled.enabled()
+    finally:
+        compiled.disable()
+
+
+def test_the_switch_keeps_numba_off_and_says_so(monkeypatch):
+    compiled.disable()
+    monkeypatch.setenv(compiled.OFF, "0")
+    assert not compiled.enable() and not compiled.for_take(10**7)
+    assert compiled.status().startswith("numpy (slower")
+    monkeypatch.delenv(compiled.OFF)
+    assert compiled.status().startswith("compiled from")
+    assert compiled.status(frames=10).startswith("numpy steps")
+
+
+def test_without_numba_the_status_says_numpy(monkeypatch):
+    import importlib.metadata
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", missing)
+    assert "numba not installed" in compiled.status()
+
+
+def test_info_and_bench_say_how_a_long_take_is_cleaned(tmp_path, capsys):
+    from faceclean.cli import main
+    from faceclean.evaluation.bench import machine
+
+    assert main(["info", str(_take_file(tmp_path, 10))]) == 0
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("cleaning")]
+    assert line == [f"cleaning    {compiled.status(10)}"]
+    assert machine()["whole_take"] == compiled.status()
+
+
+def test_the_tracker_maps_affine_kernel_is_the_product(on):
+    rng = np.random.default_rng(1)
+    a, w, b, v, c = rng.random((70, 5)), rng.random((5, 3)), rng.random((70, 4)), \
+        rng.random((4, 3)), rng.random(3)  # fmt: skip
+    np.testing.assert_allclose(compiled.affine(c, (a, w), (b, v)), a @ w + b @ v + c,
+                               rtol=1e-14, atol=0)  # fmt: skip

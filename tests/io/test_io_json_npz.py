@@ -113,3 +113,26 @@ def test_npz_whose_header_claims_more_than_it_holds_is_refused_unallocated(tmp_p
         z.writestr("times.npy", npy + bytes(held))
     with pytest.raises(FacecleanError, match=r"times.npy claims \(300000000,\) float64"):
         load(path)
+
+
+def test_npz_is_written_stored_unless_compress_is_asked(tmp_path):
+    """No time on zlib that saves nothing (issue 38): stored members by default, deflated
+    with ``compress``; both read back the same numbers."""
+    import zipfile
+
+    from faceclean import Animation, load, save
+    from faceclean.errors import FacecleanError
+
+    rng = np.random.default_rng(0)
+    anim = Animation(np.arange(50) / 60.0, rng.random((50, 3)), ("a", "b", "c"))
+    save(anim, tmp_path / "plain.npz")
+    save(anim, tmp_path / "small.npz", compress=True)
+    for name, kind in (("plain.npz", zipfile.ZIP_STORED), ("small.npz", zipfile.ZIP_DEFLATED)):
+        with zipfile.ZipFile(tmp_path / name) as z:
+            assert {m.compress_type for m in z.infolist()} == {kind}
+        back = load(tmp_path / name)
+        np.testing.assert_array_equal(back.values, anim.values)
+        assert back.values.dtype == np.float64
+    with pytest.raises(FacecleanError, match="--compress is for npz output, not csv"):
+        save(anim, tmp_path / "x.csv", compress=True)
+    assert not (tmp_path / "x.csv").exists()

@@ -163,6 +163,7 @@ def markdown(result: dict[str, Any]) -> str:
         f"load average {', '.join(f'{v:.2f}' for v in m['load_average'] or ())} at the end; "
         f"Python {m['python']}, numpy {m['numpy']} ({m['blas']}), numba {m['numba']}, "
         f"onnxruntime {m['onnxruntime']}, torch {m['torch']}; "
+        f"a long take's clean: {m.get('whole_take', 'unknown')}; "
         f"environment {m['env']}.",
         f"Model: {result['model']['layers']} x {result['model']['hidden']} LSTM, "
         f"{result['model']['source']}. (x) = our time / the reference's (< 1 is faster). "

@@ -64,6 +64,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     options.add_arguments(p)
     p.add_argument("--format", dest="fmt", help="output format (livelink, csv, json, npz, gltf)")
     p.add_argument(
+        "--compress",
+        action="store_true",
+        help="npz output: deflate it (slower; a take's float64 values hardly shrink)",
+    )
+    p.add_argument(
         "--scale",
         type=float,
         metavar="FACTOR",

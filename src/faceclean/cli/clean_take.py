@@ -37,6 +37,8 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     in_place = getattr(args, "in_place", False)
     io.paths.onto_input(input, output, in_place, "a raw take is never overwritten")
     fmt_in = io.detect(src) if src.is_file() else None
+    if getattr(args, "compress", False):  # refused before any work, the streamed path too
+        io.save_options(output, fmt_in, args.fmt, compress=True)
     fmt_out = io.output_format(output, fmt_in, args.fmt) if fmt_in in stream.FORMATS else None
     if stream.can_stream(fmt_in, fmt_out):
         names = stream.channel_names(src, fmt_in)
@@ -59,12 +61,13 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     _signature(args, anim, input)
     cleaner, what = build_cleaner(choice, anim.names)
     adjust = build_levels(args, choice, anim.names)
-    mapped = anim.with_values(adjust.apply(anim.values, anim.names))
+    # no level mapping: the take itself, not a copy (an hour is 92 MB; issue 38)
+    mapped = anim if adjust.is_identity else anim.with_values(adjust.apply(anim.values, anim.names))
     cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
     if adjust.adaptation is not None:  # a guided calibration's correction, after the cleaner
         cleaned = cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
     cleaned = rotation.clean_pose(cleaned, choice.build_pose)
-    io.save(cleaned, output, fmt=args.fmt)
+    io.save(cleaned, output, fmt=args.fmt, compress=getattr(args, "compress", False))
     angles = rotation.pose_columns(anim)[1]
     missing = int((~anim.valid).sum())
     return _line(output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)

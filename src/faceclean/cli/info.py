@@ -89,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
 
     if is_model_file(args.file):
         return _model_file(args)
+    from faceclean.filters import compiled
+
     anim = io.load(args.file)
     facts = describe(anim)
     adjust = Adjust.load(args.calibration) if args.calibration else None
@@ -111,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         ("duration", f"{facts['duration_s']:.3f} s"),
         ("gaps", _gaps(facts)),
         ("range", _range(facts)),
+        ("cleaning", compiled.status(facts["frames"])),
     ]
     if facts["pose_channels"]:
         lines += _pose_lines(facts["pose_channels"])

@@ -330,4 +330,7 @@ def machine() -> dict[str, Any]:
             info[mod] = __import__(mod).__version__
         except ImportError:
             info[mod] = None
+    from faceclean.filters import compiled
+
+    info["whole_take"] = compiled.status()  # a long take's clean: compiled, or numpy (slower)
     return info

@@ -88,8 +88,9 @@ def disable() -> None:
     _kernels.clear()
 
 
-def status() -> str:
-    """One line for ``info`` and ``bench``: how a long take is cleaned here."""
+def status(frames: int | None = None) -> str:
+    """One line for ``info`` and ``bench``: how a long take (or one of ``frames`` frames)
+    is cleaned here."""
     try:
         from importlib.metadata import version
 
@@ -100,6 +101,8 @@ def status() -> str:
         return f"numpy (slower: {OFF}=0 keeps numba off)"
     if have is None:
         return "numpy (slower: numba not installed; pip install 'faceclean[fast]')"
+    if frames is not None and frames < WHOLE_TAKE_FRAMES:
+        return f"numpy steps (compiled from {WHOLE_TAKE_FRAMES} frames: numba {have})"
     return f"compiled from {WHOLE_TAKE_FRAMES} frames (numba {have}, kernels cached)"
 
 

@@ -160,12 +160,29 @@ def check_output(
     _module(output_format(Path(path), source, fmt))
 
 
-def save(anim: Animation, path: str | os.PathLike, fmt: str | None = None) -> None:
-    """Write atomically; the format comes from ``fmt``, the extension, or the source format."""
+def save_options(
+    path: str | os.PathLike, source: str | None, fmt: str | None, compress: bool = False
+) -> dict[str, bool]:
+    """The writer's keywords for these options; ``compress`` on a format that cannot
+    (only npz deflates) is one line."""
+    if not compress:
+        return {}
+    name = output_format(Path(path), source, fmt)
+    if not getattr(_module(name), "COMPRESSES", False):
+        raise FacecleanError(f"{Path(path).name}: --compress is for npz output, not {name}")
+    return {"compress": True}
+
+
+def save(
+    anim: Animation, path: str | os.PathLike, fmt: str | None = None, compress: bool = False
+) -> None:
+    """Write atomically; the format comes from ``fmt``, the extension, or the source format.
+    ``compress``: deflate what the format can (npz); a format that cannot is refused."""
     p = Path(path)
     module = _module(output_format(p, anim.meta.get("format"), fmt))
+    extra = save_options(p, anim.meta.get("format"), fmt, compress)
     with atomic_open(path, "wb") as f:  # the name as given: "out.csv/" is refused
         if getattr(module, "WRITE_NEEDS_PATH", False):  # glTF: .glb or .gltf by the name
             module.write(anim, f, path=p)
         else:
-            module.write(anim, f)
+            module.write(anim, f, **extra)
