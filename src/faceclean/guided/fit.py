@@ -45,7 +45,7 @@ from faceclean.errors import FacecleanError
 from faceclean.guided import align as al
 from faceclean.guided.script import Script, load
 
-LAMBDA = 0.03  # ridge on D relative to each input's own variance (+ V0): scale-free, so
+LAMBDA = 0.1  # ridge on D relative to each input's own variance (+ V0): scale-free, so
 # a channel one prompt moves a little is fitted as surely as one that moves much
 V0 = 1e-4  # weight units^2: the tracker's noise floor, so a still channel is not trusted
 V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a channel

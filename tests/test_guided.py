@@ -1,0 +1,328 @@
+"""Guided calibration: the script, its alignment, the fit, the file and the command.
+
+The fast tests perform the script as ARKit weights with a person's timing (late, slow,
+uneven). The slow ones render it on a face and track it with MediaPipe (24 fps), and
+score the calibration on another clip of the same face.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from faceclean.adaptation import Adaptation
+from faceclean.adjust import Adjust, Adjusted
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.cli import main
+from faceclean.errors import FacecleanError
+from faceclean.guided import align as al
+from faceclean.guided.fit import guided
+from faceclean.guided.script import load
+
+SCRIPT = load()
+RATE = 24.0
+COL = {n: i for i, n in enumerate(ARKIT52)}
+
+
+def performed(late: float = 1.2, speed: float = 0.8, rate: float = RATE):
+    """(take times, script times): late by ``late`` s, then at ``speed`` of the script's
+    pace, uneven (+-0.15 over 7 s)."""
+    tau = np.arange(int((late + SCRIPT.seconds / (speed - 0.15) + 1.0) * rate)) / rate
+    s = np.cumsum(speed + 0.15 * np.sin(2 * np.pi * tau / 7.0)) / rate
+    return tau, np.where(tau < late, 0.0, s - np.interp(late, tau, s))
+
+
+def arkit_face(w: np.ndarray, seed: int = 0) -> np.ndarray:
+    """An ARKit face's readings of weights w (N, 52): its own levels and some noise."""
+    rng = np.random.default_rng(seed)
+    gain = np.full(52, 0.9)
+    gain[[COL["mouthSmileLeft"], COL["mouthSmileRight"]]] = 0.5  # a small smile
+    rest = np.zeros(52)
+    rest[[COL["eyeSquintLeft"], COL["eyeSquintRight"]]] = 0.12  # rests a little squinted
+    return np.clip(rest + gain * w + rng.normal(0, 0.01, w.shape), 0, 1)
+
+
+def test_the_script_ships_as_data_and_covers_the_issue():
+    assert 30 <= SCRIPT.seconds <= 45
+    ids = [p.id for p in SCRIPT.prompts]
+    for want in ("neutral", "blink1", "close_left", "close_right", "look_left", "look_down",
+                 "jaw_open", "jaw_forward", "smile", "pucker", "funnel", "brows_up",
+                 "cheek_puff", "sneer", "squint", "eyes_wide", "speech"):  # fmt: skip
+        assert want in ids
+    t, w = SCRIPT.clip(RATE)
+    assert w.shape == (len(t), 52) and w.min() >= 0 and w.max() <= 1
+    assert np.all(w[t < SCRIPT.prompts[0].end] == 0)  # the neutral hold
+    assert np.abs(np.diff(w, axis=0)).max() < 0.6  # eased, never a jump at 24 fps
+    smile = next(p for p in SCRIPT.prompts if p.id == "smile")
+    assert w[np.argmin(abs(t - (smile.start + smile.duration / 2))), COL["mouthSmileLeft"]] == 1
+
+
+def test_print_script_shows_each_prompt(capsys):
+    assert main(["calibrate", "--print-script"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == len(SCRIPT.prompts) + 1 and "Big smile" in "\n".join(out)
+
+
+def test_alignment_finds_each_prompt_of_a_late_slow_uneven_take():
+    tau, s = performed()
+    x = arkit_face(SCRIPT.weights(s))
+    a = al.align(tau, x, SCRIPT)
+    assert a.follows and a.seen == len(SCRIPT.prompts)
+    for g in a.segments:  # where a movement really started in the take, within 0.25 s
+        if g.prompt.channels:  # (a rest's start is wherever the last movement ended)
+            true = tau[np.searchsorted(s, g.prompt.start)]
+            assert abs(g.t0 - true) < 0.25, g.prompt.id
+
+
+def test_arkit_guided_levels_map_this_faces_rest_to_0_and_its_prompts_to_their_aim(tmp_path):
+    tau, s = performed()
+    x = arkit_face(SCRIPT.weights(s))
+    fit = guided(Animation(tau, x, ARKIT52), "arkit")
+    lv = fit.adjust.levels(ARKIT52)
+    squint, smile = COL["eyeSquintLeft"], COL["mouthSmileLeft"]
+    assert lv.offset[squint] == pytest.approx(0.12, abs=0.02)
+    assert 0.5 * lv.gain[smile] == pytest.approx(1.0, abs=0.1)  # the small smile reaches 1
+    blink = fit.adjust.apply(x, ARKIT52)[:, COL["eyeBlinkLeft"]]
+    assert blink.max() >= 0.95  # a blink still closes fully
+    assert fit.adjust.adaptation is None  # ARKit: levels only, today's file format
+
+
+def test_the_command_writes_a_file_clean_reads_and_today_s_files_still_load(tmp_path, capsys):
+    from faceclean import io
+
+    tau, s = performed()
+    take = tmp_path / "guided.csv"
+    io.save(Animation(tau, arkit_face(SCRIPT.weights(s)), ARKIT52), take, fmt="csv")
+    out = tmp_path / "calib.json"
+    assert main(["calibrate", "--guided", str(take), "-o", str(out)]) == 0
+    lines = capsys.readouterr().out
+    assert "smile" in lines and "seen" in lines and "not performed" not in lines
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "faceclean-adjust/1" and "adaptation" not in doc
+    cleaned = tmp_path / "clean.csv"
+    assert main(["clean", str(take), "-o", str(cleaned), "--calibration", str(out)]) == 0
+    old = tmp_path / "old.json"  # a file as today's calibrate writes it
+    old.write_text(json.dumps({"format": "faceclean-adjust/1",
+                               "channels": {"jawOpen": {"offset": 0.04, "gain": 1.5}},
+                               "calibration": {"take": "x.csv", "rom": True}}))  # fmt: skip
+    assert Adjust.load(old).adaptation is None
+    assert main(["clean", str(take), "-o", str(cleaned), "--calibration", str(old)]) == 0
+
+
+def adaptation() -> Adaptation:
+    return Adaptation(
+        {"eyeBlinkLeft": -0.05},
+        {"eyeBlinkLeft": {"eyeBlinkLeft": 0.5, "eyeSquintLeft": -0.2}},
+        "mediapipe",
+        {"cleaner": "test"},
+    )
+
+
+def test_the_adaptation_section_round_trips_and_runs_after_the_cleaner(tmp_path):
+    from faceclean.filters.one_euro import OneEuro
+
+    adj = Adjust((), {"tracker": "mediapipe"}, adaptation=adaptation())
+    path = tmp_path / "a.json"
+    adj.save(path)
+    back = Adjust.load(path)
+    assert back.adaptation == adj.adaptation and not back.is_identity
+    names = ("eyeBlinkLeft", "eyeSquintLeft", "jawOpen")
+    x = np.array([[0.4, 0.1, 0.3], [np.nan] * 3, [0.8, 0.0, 0.5]])
+    y = back.adapt(x, names)
+    assert y[0, 0] == pytest.approx(0.4 - 0.05 + 0.5 * 0.4 - 0.2 * 0.1)
+    assert np.isnan(y[1]).all() and np.array_equal(y[[0, 2], 1:], x[[0, 2], 1:])  # bit for bit
+    stream = Adjusted(OneEuro(names=names), back, names)  # the streaming path: the same
+    plain = OneEuro(names=names)
+    for k, t in enumerate((0.0, 0.04, 0.08)):
+        got, want = stream.step(x[k], t), back.adapt(plain.step(x[k], t), names)
+        assert np.allclose(got, want, equal_nan=True)
+
+
+def test_a_calibration_from_another_tracker_is_one_line(tmp_path, capsys):
+    path = tmp_path / "mp.json"
+    Adjust((), {}, adaptation=adaptation()).save(path)
+    take = tmp_path / "t.csv"
+    from faceclean import io
+
+    io.save(Animation(np.arange(10) / 30, np.zeros((10, 52)), ARKIT52), take, fmt="csv")
+    assert main(["clean", str(take), "-o", str(tmp_path / "o.csv"), "--calibration",
+                 str(path), "--tracker", "arkit"]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert "tracker mediapipe" in err and len(err.splitlines()) == 1
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
+                               "adaptation": {"format": "faceclean-adaptation/1",
+                                              "offset": {"jawOpen": 9}}}))  # fmt: skip
+    with pytest.raises(FacecleanError, match="offset jawOpen"):
+        Adjust.load(bad)
+
+
+@pytest.mark.parametrize("case", ["short", "lost", "still", "skipped"])
+def test_bad_takes_are_one_line_per_prompt_and_write_nothing(tmp_path, capsys, case):
+    from faceclean import io
+
+    tau, s = performed()
+    x = arkit_face(SCRIPT.weights(s))
+    if case == "short":
+        tau, x = tau[: len(tau) // 2], x[: len(tau) // 2]
+    elif case == "lost":
+        smile = next(p for p in SCRIPT.prompts if p.id == "smile")
+        x[(s > smile.start - 0.5) & (s < smile.end + 0.5)] = np.nan  # the face lost there
+    elif case == "still":
+        x = arkit_face(np.zeros_like(x))
+    else:  # "skipped": the pucker never performed
+        pucker = next(p for p in SCRIPT.prompts if p.id == "pucker")
+        x = arkit_face(SCRIPT.weights(s) * ~((s >= pucker.start) & (s <= pucker.end))[:, None])
+    take, out = tmp_path / "take.csv", tmp_path / "calib.json"
+    io.save(Animation(tau, x, ARKIT52), take, fmt="csv")
+    assert main(["calibrate", "--guided", str(take), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and not out.exists()
+    want = {"short": "shorter than the script", "lost": "smile (face lost)",
+            "still": "did not follow the script", "skipped": "pucker (not performed)"}  # fmt: skip
+    assert want[case] in err
+    if case != "short":  # --partial writes from the prompts seen
+        assert main(["calibrate", "--guided", str(take), "-o", str(out), "--partial"]) == 0
+        assert out.exists()
+
+
+# -- rendered on a face, tracked by MediaPipe ------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def face(request):
+    """(script take, other clip and its truth) of one painted face, rendered and tracked
+    at 24 fps; the renders are kept in pytest's cache (a pure function of the weights)."""
+    pytest.importorskip("mediapipe")
+    from faceclean.settings import mesh_file, tracker_model
+    from faceclean.synthetic.tracker import NAMES
+    from tests.helpers import first_take
+
+    if mesh_file("ict_full.npz") is None or tracker_model() is None:
+        pytest.skip("shared ict_full.npz or face_landmarker.task absent")
+    from faceclean import io
+
+    src = io.load(first_take("alexdjulin"))
+    values, _ = src.arkit()
+    t_other = np.arange(int(10 * RATE)) / RATE  # 10 s of an iPhone take, from its 5th s
+    w_other = np.stack([np.interp(t_other + src.times[0] + 5, src.times,
+                                  np.nan_to_num(values[:, j])) for j in range(52)], 1)  # fmt: skip
+    w_other = np.clip(w_other, 0, 1)
+    tau, s = performed()
+    cache = request.config.cache.mkdir("guided_render")
+    script = _render(cache, tau, SCRIPT.weights(s))
+    other = _render(cache, t_other, w_other)
+    return {"tau": tau, "s": s, "script": Animation(tau, script, NAMES),
+            "other": Animation(t_other, other, NAMES),
+            "truth": w_other[:, [COL[n] for n in NAMES]]}  # fmt: skip
+
+
+def _render(cache, times: np.ndarray, weights: np.ndarray, seed: int = 7) -> np.ndarray:
+    import hashlib
+
+    from faceclean.settings import mesh_file, tracker_model
+    from faceclean.synthetic.head import Head
+    from faceclean.synthetic.render import Renderer
+    from faceclean.synthetic.scene import Scene
+    from faceclean.synthetic.tracker import NAMES, Tracker
+
+    key = hashlib.sha256(times.tobytes() + weights.tobytes()).hexdigest()[:12]
+    path = cache / f"painted{seed}_{key}.npy"
+    if path.is_file():
+        return np.load(path)
+    head = Head.load(mesh_file("ict_full.npz"))
+    renderer = Renderer(head, Scene.draw(seed, "studio", head.n_identity, family="painted"))
+    out = np.full((len(times), len(NAMES)), np.nan)
+    with Tracker(tracker_model()) as tracker:
+        for k, t in enumerate(times):
+            y = tracker.track(renderer.frame(weights[k], np.zeros(3), k), float(t))
+            if y is not None:
+                out[k] = y
+    np.save(path, out)
+    return out
+
+
+def _mse(face, adjust: Adjust | None) -> float:
+    from faceclean.guided.fit import shipped_cleaner
+
+    other = face["other"]
+    cleaner, _ = shipped_cleaner("mediapipe", other.names)
+    y = cleaner.clean(other).values
+    if adjust is not None:
+        y = adjust.adapt(y, other.names)
+    ok = np.isfinite(y).all(axis=1)
+    return float(np.mean((y[ok] - face["truth"][ok]) ** 2))
+
+
+@pytest.mark.slow
+def test_rendered_alignment_finds_the_prompts(face):
+    fit = guided(face["script"], "mediapipe")
+    a = fit.alignment
+    assert a.follows
+    tau, s = face["tau"], face["s"]
+    for g in a.segments:
+        if g.seen and g.prompt.channels:
+            true = tau[np.searchsorted(s, g.prompt.start)]
+            assert abs(g.t0 - true) < 0.5, g.prompt.id
+    seen = {g.prompt.id for g in a.segments if g.seen}
+    assert {"blink1", "close_left", "jaw_open", "smile", "brows_up"} <= seen
+
+
+@pytest.mark.slow
+def test_rendered_guided_calibration_beats_the_shipped_map_on_another_clip(face):
+    fit = guided(face["script"], "mediapipe")
+    shipped, calibrated = _mse(face, None), _mse(face, fit.adjust)
+    assert calibrated < 0.99 * shipped, (calibrated, shipped)
+
+
+@pytest.mark.slow
+def test_rendered_still_face_changes_little(face):
+    # a still face as long as the script: its first 2 s (the neutral hold), looped
+    tau = face["tau"]
+    x = face["script"].values[tau < 2.0]
+    still = np.resize(x, (len(tau), x.shape[1]))
+    fit = guided(Animation(tau, still, face["script"].names), "mediapipe")
+    assert not fit.alignment.follows
+    assert _mse(face, fit.adjust) <= 1.05 * _mse(face, None)
+
+
+def test_live_records_the_script_from_a_vmc_stream_while_prompting():
+    import threading
+    import time
+
+    from faceclean.cli.calibrate_live import record
+    from faceclean.guided.script import from_dict
+    from faceclean.relay import Frame, parse
+    from tests.helpers import free_port
+
+    mini = from_dict({"format": "faceclean-guided-script/1", "prompts": [
+        {"id": "neutral", "start": 0.0, "duration": 0.5, "text": "Relax", "targets": {}},
+        {"id": "smile", "start": 0.6, "duration": 0.8, "text": "Big smile",
+         "targets": {"mouthSmileLeft": 1.0}}]})  # fmt: skip
+    port = free_port()
+    encoder = parse(f"vmc://127.0.0.1:{port}", "send").encoder()
+    stop = threading.Event()
+
+    def send() -> None:
+        out = __import__("socket").socket(__import__("socket").AF_INET, 2)
+        start = time.monotonic()
+        while not stop.is_set():
+            w = mini.weights(np.array([time.monotonic() - start]))[0]
+            out.sendto(encoder.encode(Frame(ARKIT52, w)), ("127.0.0.1", port))
+            time.sleep(1 / 60)
+        out.close()
+
+    lines: list[str] = []
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    try:
+        take = record(f"vmc://127.0.0.1:{port}", mini, countdown=0, out=lines.append)
+    finally:
+        stop.set()
+        thread.join()
+    assert any("Big smile" in line for line in lines)
+    assert take.n_frames > 60 and take.times[-1] > mini.seconds
+    assert np.nanmax(take.values[:, COL["mouthSmileLeft"]]) > 0.9
