@@ -435,3 +435,20 @@ def test_lstm_runtimes_agree_on_three_streams_of_a_real_take(runtime, files, rea
         ref = make("lstm", {"kernel": "numpy"}).clean(part).values
         v = part.valid
         np.testing.assert_allclose(y[v, j], ref[v], rtol=0, atol=AGREE_TOL)
+
+
+def test_numba_off_switch_reaches_the_lstm_kernel_too():
+    """FACECLEAN_NUMBA=0 (filters/compiled.py) keeps learned/jit.py's kernels off as well:
+    the LSTM runs its numpy kernel, and numba is never imported."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from faceclean.filters import make; "
+        "print(make('lstm', {}).kernel, 'numba' in sys.modules)"
+    )
+    env = {**os.environ, "FACECLEAN_NUMBA": "0"}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, check=True)  # fmt: skip
+    assert done.stdout.split() == ["numpy", "False"]

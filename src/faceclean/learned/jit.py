@@ -20,12 +20,16 @@ added one tree after another from 0, which is what the numpy path's sequential s
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from faceclean.filters.base import MAX_ABS
 from faceclean.learned.checkpoint import RATE_A_MAX, RATE_TAU0
 
-try:  # the optional ``fast`` extra
+try:  # the optional ``fast`` extra; FACECLEAN_NUMBA=0 keeps it off (filters/compiled.py)
+    if os.environ.get("FACECLEAN_NUMBA", "").strip() == "0":
+        raise ImportError("FACECLEAN_NUMBA=0")
     from numba import njit
 except ImportError:  # pragma: no cover - exercised where numba is absent
     njit = None

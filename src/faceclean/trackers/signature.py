@@ -39,23 +39,30 @@ FULL_RANGE = 6  # channels spanning [FULL_LO, FULL_HI]; MediaPipe: at most 1
 FULL_LO, FULL_HI = 0.01, 0.99
 MIN_FRAMES = 60  # face frames before signs 2 and 3 are judged
 
+BLOCK = 4096  # rows judged at once (an hour at 60 fps is 216,001)
+
 
 def judge(values: np.ndarray, names: Sequence[str]) -> str | None:
     """Why (N, M) ``values`` over channels ``names`` do not look like raw MediaPipe, in a
     few words, or None when they do (or there is too little to tell)."""
     v = np.asarray(values, np.float64)
-    v = v[np.isfinite(v).any(axis=1)] if v.ndim == 2 else v.reshape(0, len(names))
-    if not len(v):
+    v = v if v.ndim == 2 else v.reshape(0, len(names))
+    frames, hi, lo = 0, np.full(v.shape[1], -np.inf), np.full(v.shape[1], np.inf)
+    for a in range(0, len(v), BLOCK):  # in blocks: no temporary as large as the take
+        part = v[a : a + BLOCK]
+        finite = np.isfinite(part)
+        frames += int(finite.any(axis=1).sum())  # rows with a value (not tracking loss)
+        hi = np.maximum(hi, np.where(finite, part, -np.inf).max(axis=0, initial=-np.inf))
+        lo = np.minimum(lo, np.where(finite, part, np.inf).min(axis=0, initial=np.inf))
+    if not frames:
         return None
     canon = [canonical(str(n)) for n in names]
-    hi = np.nanmax(np.where(np.isfinite(v), v, -np.inf), axis=0)
-    lo = np.nanmin(np.where(np.isfinite(v), v, np.inf), axis=0)
     moving = [canon[j] for j in range(len(canon)) if canon[j] in SILENT and hi[j] > SILENT_MAX]
     if moving:
         j = canon.index(moving[0])
         more = f" (and {len(moving) - 1} more)" if len(moving) > 1 else ""
         return f"{moving[0]} reaches {hi[j]:.2f}{more}, a channel MediaPipe keeps near 0"
-    if len(v) < MIN_FRAMES:
+    if frames < MIN_FRAMES:
         return None
     full = int(np.sum((lo <= FULL_LO) & (hi >= FULL_HI)))
     if full >= FULL_RANGE:
