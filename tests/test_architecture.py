@@ -29,11 +29,13 @@ MAY_IMPORT: dict[str, set[str]] = {
     "face": {"io"},  # atomic writes
     # presets write atomically; tune scores with metrics; METHODS names the learned classes
     "filters": {"io", "evaluation", "learned"},
-    "adjust": {"filters", "io"},
+    "adjust": {"filters", "io", "adaptation"},
+    "adaptation": set(),  # the guided calibration's correction after the cleaner
     "learned": {"filters", "io"},
     "resolve": {"filters", "learned", "adjust"},
     "cleaner": {"filters", "adjust", "resolve"},
-    "calibration": {"adjust", "filters", "relay"},
+    "calibration": {"adjust", "filters", "relay", "adaptation"},
+    "guided": {"adjust", "adaptation", "calibration", "resolve"},  # the shipped cleaner
     "batch": {"io"},
     "relay": {"io", "faceclean", "filters"},
     "evaluation": {
