@@ -230,7 +230,15 @@ class Adjust:
             where = f" ({len(shown)} channel{plural})" if names is not None else ""
             lines.append(f"{pattern}{where}: " + ", ".join(_show(k, v) for k, v in keys.items()))
         facts = self.facts
-        if facts:
+        guided = facts.get("guided")
+        if isinstance(guided, dict):  # calibrate --guided
+            seen, missed = guided.get("seen", []), guided.get("not_seen", [])
+            lines.append(
+                f"guided calibration from {facts.get('take', 'a take')} (tracker "
+                f"{facts.get('tracker', '?')}): {len(seen)} of {len(seen) + len(missed)} "
+                "prompts seen" + (f"; not seen: {', '.join(missed)}" if missed else "")
+            )
+        elif facts:
             src = facts.get("take", "a take")
             lines.append(
                 f"calibrated from {src}: {facts.get('frames', '?')} frames, "
@@ -238,6 +246,13 @@ class Adjust:
                 f"{len(facts.get('moved', []))} channels moved, "
                 f"{len(facts.get('lifted', []))} lifted to their top, "
                 f"{len(facts.get('closed', []))} eyelids scaled to close (their blinks)"
+            )
+        ad = self.adaptation
+        if ad is not None:
+            cross = sum(1 for o, row in ad.matrix.items() for i in row if i != o)
+            lines.append(
+                f"adaptation after the cleaner ({ad.facts.get('cleaner', '?')}): "
+                f"{len(ad.channels)} channels corrected, {cross} cross-channel terms"
             )
         return lines or ["identity (no level mapping)"]
 
