@@ -110,7 +110,7 @@ def choose(w, folds: dict[str, tuple], report: Report | None = None) -> Choice:
     """Per selection group the (kind, lam) of the least mean ratio to raw over ``folds``
     (key -> (x'x, x'y without the fold, its held-out features)) among those within HARM
     in every family (module docstring). Sets ``w``'s linear part while it scores."""
-    from faceclean.neural.tracker_map import _predict, _set_linear
+    from faceclean.neural.tracker_map import _predict, _set_linear, at_rest
 
     report = report or (lambda _e: None)
     names = w.inputs
@@ -133,14 +133,16 @@ def choose(w, folds: dict[str, tuple], report: Report | None = None) -> Choice:
             for feat in held:
                 pred = _predict(w, feat.u, feat.r, feat.e)
                 np.add.at(sse[ci, f], gi, ((pred - feat.y) ** 2).sum(0))
-                if key.endswith("/neutral") or key == "neutral":
+                if at_rest(key):
                     keep = feat.t - feat.t[0] >= SETTLE_S
                     dev += np.abs(pred[keep] - feat.y[keep]).sum(0)
                     frames += int(keep.sum())
         if frames:
             for g in range(n_sel):
                 off[ci, g] = (dev / frames)[gi == g].max(initial=0.0)
-    ok = raw > 1e-9  # (folds, groups) where the group has something to get wrong
+    # performances only: a neutral hold's raw error is MediaPipe's offset alone, and a
+    # ratio to it would outweigh every take (the holds judge the rest, below)
+    ok = (raw > 1e-9) & ~np.array([at_rest(k) for k in keys])[:, None]
     ratio = np.where(ok, sse / np.maximum(raw, 1e-12), np.nan)  # (cands, folds, groups)
     families = sorted({k.rpartition("/")[0] for k in keys})
     fam_of = np.array([families.index(k.rpartition("/")[0]) for k in keys])

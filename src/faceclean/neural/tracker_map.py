@@ -66,6 +66,7 @@ DETAILS = (0.0, 0.25, 0.5, 0.75, 1.0)
 DETAIL_SHRINK = 0.01  # the detail gain's ridge, relative to the detail's own mean square
 LIFT_FROM = 0.5  # the gain is fitted where the truth is over this (an eye closing)
 Report = Callable[[dict[str, Any]], None]
+NEUTRAL = "neutral"  # the neutral holds' source (synthetic/engine.py)
 
 
 def channels(pairs: Sequence[Pair]) -> tuple[str, ...]:
@@ -243,6 +244,13 @@ def fold_key(p: Pair, families: bool) -> str:
     return f"{p.family}/{p.group}" if families else p.group
 
 
+def at_rest(key: str) -> bool:
+    """Whether a fold holds the neutral holds (``pairs --neutral``, source ``neutral``):
+    judged for keeping a face at rest (map_groups.py), never by MSE over raw (raw's error
+    on a face at rest is MediaPipe's offset alone: a ratio to it outweighs the takes)."""
+    return key.rpartition("/")[2] == NEUTRAL
+
+
 def _left_out(p: Pair, key: str) -> bool:
     """Whether ``key``'s fold keeps ``p`` out of its training: the same source, or (a
     family fold) the same look."""
@@ -408,6 +416,8 @@ def _cross_validate(
             w.config["detail_scale"] = kappa  # one fit, its detail scaled
             ratios, jits = [], []
             for g, (_, _, held) in folds.items():
+                if at_rest(g):
+                    continue
                 _set_linear(w, *solved[g, lam])
                 mse, jit = _score(w, held)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
@@ -436,7 +446,9 @@ def _cross_validate(
         for _, _, _, _, lam, kappa, config in [f for f in calm if f[3] == pre]:
             lags = []
             w.config["detail_scale"] = kappa
-            for gram, xty, held in folds.values():
+            for g, (gram, xty, held) in folds.items():
+                if at_rest(g):
+                    continue
                 _set_linear(w, *_solve_detail(gram, xty, lam, own))
                 lags.append(_score(w, held, lag=True)[2])
             lag = float(np.nanmean(lags)) if np.isfinite(lags).any() else 0.0
@@ -537,6 +549,8 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report, tops=TO
         w.config["lift_top"] = top
         ratios, jits, closures = [], [], []
         for g, (_, _, held) in folds.items():
+            if at_rest(g):
+                continue
             _set_linear(w, *coefs[g])
             _set_lift(w, none if knee is None else _lift_gains(w, trains[g], knee), knee or 0.0)
             mse, jit, close = _score(w, held, closure=True)
