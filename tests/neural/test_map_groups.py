@@ -66,7 +66,7 @@ def pairs(look: int, sources: int = 4, per: int = 2) -> list[paired.Pair]:
 def fitted():
     train = pairs(1) + pairs(2)
     test = pairs(3)
-    by_group = fit.fit(train, [], prefilters=PRE, knees=(None,))
+    by_group = fit.fit(train, [], prefilters=PRE, knees=(None,), structured=True)
     every = fit.fit(train, [], prefilters=PRE, knees=(None,), structured=False)
     return by_group, every, test
 

@@ -39,6 +39,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, default=32, help="chunks per batch (per process)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--hidden", type=int, default=None, help="(default: adaptive 32, lstm 128)")
+    p.add_argument(
+        "--by-group",
+        action="store_true",
+        help="with --pairs: fit the tracker map by output group, no offset, chosen leaving a "
+        "look and a source out (docs/MODEL.md, issue 34)",
+    )
     p.add_argument("--layers", type=int, default=2)
     p.add_argument("--K", type=int, default=1, help="derivative orders (paper: 1)")
     p.add_argument(

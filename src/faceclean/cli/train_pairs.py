@@ -113,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
     if arch == "ridge":
         w = tracker_map.fit_ridge(train, val)
     else:
-        w = tracker_map.fit(train, val, hidden=args.hidden or 0, seed=args.seed, report=report)
+        w = tracker_map.fit(train, val, hidden=args.hidden or 0, seed=args.seed, report=report,
+                            structured=bool(getattr(args, "by_group", False)))  # fmt: skip
     if "selected" in w.config:  # chosen leaving each source out: every source trains
         w.config.update(trained_on=sorted({p.group for p in train + val}))
     else:

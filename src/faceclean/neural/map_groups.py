@@ -10,7 +10,6 @@ of tracker_map.py (u the pre-filtered input, r its rest so far, e = x - u the de
     own     y_j = a u_j + b (u_j - r_j) + d e_j               its own input, levelled
     rise    y_j = b (u_j - r_j) + d e_j                       its own rise above rest only
     group   own + sum_k B_jk (u_k - r_k), k in j's group      the neighbours' rises
-    all     own + sum_k B_jk (u_k - r_k), every k
 
 No offset, and other channels enter only by their rise above rest, 0 on a face at rest: a
 face that gives no evidence for a channel gets back its own input (scaled), or 0 for
@@ -24,7 +23,10 @@ with the least mean MSE ratio to raw MediaPipe over the folds (tracker_map.py's 
 several appearance families, a look and a source left out at once), among those that do
 no harm: no worse than raw (``HARM``) averaged over each family's folds, and on the folds'
 neutral holds (source ``neutral``) no channel off the truth's rest by more than
-``NEUTRAL_TOL`` on average. When none is, ``pass`` (or the harmless one nearest neutral).
+``NEUTRAL_TOL`` on average, and on the performances no channel lifted by more than
+``NEUTRAL_TOL`` on average above its own input where that input is quiet (its rise under
+``QUIET``: no evidence, so no level may come from elsewhere). When none is, ``pass`` (or
+the harmless one nearest neutral).
 """
 
 from __future__ import annotations
@@ -37,11 +39,15 @@ import numpy as np
 from faceclean.channels import GROUPS
 from faceclean.learned.tracker_map import MAX_DETAIL
 
-KINDS = ("pass", "own", "rise", "group", "all")
+# (a map over every channel's rise, "all", was a kind too: its gains on the rises of
+# unrelated channels, each >= 0, stood in for a training level of channels the tracker
+# reads as zero, tests/neural/test_map_groups.py; a channel's group is as far as it reads)
+KINDS = ("pass", "own", "rise", "group")
 LAMBDAS = (0.01, 0.1, 1.0, 10.0)  # relative to each column's mean square
 HARM = 1.0  # a group's MSE over raw, mean over one family's folds, may not pass this
 NEUTRAL_TOL = 0.05  # weight units: a channel's mean |output - truth| on a face at rest
 SETTLE_S = 0.5  # s into a neutral hold before it is judged (the pre-filter's start)
+QUIET = 0.02  # a channel's own rise above rest under which its input gives no evidence
 SELECT: dict[str, tuple[str, ...]] = {
     "gaze": tuple(n for n in GROUPS["eyes"] if n.startswith("eyeLook")),
     "lids": tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook")),
@@ -124,22 +130,28 @@ def choose(w, folds: dict[str, tuple], report: Report | None = None) -> Choice:
     cands = candidates()
     sse = np.zeros((len(cands), len(keys), n_sel))
     off = np.zeros((len(cands), n_sel))  # the worst channel's mean |y - truth| at rest
+    lift = np.zeros((len(cands), n_sel))  # the worst channel's mean y - u where u is at rest
     for ci, (kind, lam) in enumerate(cands):
         every = {g: (kind, lam) for g in SELECT}
         dev, frames = np.zeros(len(names)), 0
+        up, still = np.zeros(len(names)), np.zeros(len(names))
         for f, key in enumerate(keys):
             gram, xty, held = folds[key]
             _set_linear(w, *solve(gram, xty, names, every))
             for feat in held:
                 pred = _predict(w, feat.u, feat.r, feat.e)
                 np.add.at(sse[ci, f], gi, ((pred - feat.y) ** 2).sum(0))
+                quiet = (feat.u - feat.r) < QUIET  # no evidence on the channel's own input
+                up += np.where(quiet, pred - feat.u, 0.0).sum(0)
+                still += quiet.sum(0)
                 if at_rest(key):
                     keep = feat.t - feat.t[0] >= SETTLE_S
                     dev += np.abs(pred[keep] - feat.y[keep]).sum(0)
                     frames += int(keep.sum())
-        if frames:
-            for g in range(n_sel):
+        for g in range(n_sel):
+            if frames:
                 off[ci, g] = (dev / frames)[gi == g].max(initial=0.0)
+            lift[ci, g] = (up / np.maximum(still, 1))[gi == g].max(initial=0.0)
     # performances only: a neutral hold's raw error is MediaPipe's offset alone, and a
     # ratio to it would outweigh every take (the holds judge the rest, below)
     ok = (raw > 1e-9) & ~np.array([at_rest(k) for k in keys])[:, None]
@@ -161,6 +173,8 @@ def choose(w, folds: dict[str, tuple], report: Report | None = None) -> Choice:
                     "val_mse": score, "worst_family": float(worst),
                     "neutral_off": float(off[ci, g])})  # fmt: skip
             if worst > HARM and cand[0] != "pass":
+                continue
+            if lift[ci, g] > NEUTRAL_TOL:  # a level with no evidence: a training mean
                 continue
             if off[ci, g] < nearest_off:
                 nearest, nearest_off = cand, off[ci, g]

@@ -327,7 +327,7 @@ def fit(
     deadband: float = DEADBAND,
     knees: Sequence[float | None] = KNEES,
     details: Sequence[float] = DETAILS,
-    structured: bool = True,
+    structured: bool = False,
 ) -> MapWeights:
     """The tracker map: for each pre-filter (None: none) and shrinkage, the linear part by
     ridge on the training pairs (and the hidden layer when ``hidden`` > 0), scored on
