@@ -288,8 +288,12 @@ def test_batch_equals_reset_then_step(build):
     cleaner.reset()
     streamed = steps(cleaner, t, x)
     streamed[40] = np.nan  # clean() leaves missing frames NaN; step() holds
-    np.testing.assert_array_equal(batch, streamed)
-    np.testing.assert_array_equal(batch2, streamed)
+    # the tracker map's compiled take (on whenever numba is loaded in this process, as any
+    # earlier fit or long take leaves it) sums its products in its own order: 1e-12, as the
+    # whole-take clause allows it; every other backend is bit for bit
+    tol = 1e-12 if getattr(cleaner, "name", "") == "tracker-map" else 0.0
+    np.testing.assert_allclose(batch, streamed, rtol=0.0, atol=tol)
+    np.testing.assert_allclose(batch2, streamed, rtol=0.0, atol=tol)
 
 
 @pytest.mark.clause("streams")
