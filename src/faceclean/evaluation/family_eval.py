@@ -217,6 +217,18 @@ def _channels(per: dict) -> dict[str, dict[str, float]]:
 
 
 BEGIN, END = "<!-- appearance families: begin -->", "<!-- appearance families: end -->"
+NOTES = (
+    "How to read it. *shipped before* is the model shipped since issue 18, fitted on painted "
+    "faces of these same takes: on every family it has seen the performances (and on "
+    "painted and dressed, nearly the look), so its rows are not held out; they are here "
+    "for continuity. The two *map* rows are fitted inside each fold and have seen neither "
+    "the family nor the source. The fold fits choose among a subset of the shipped fit's "
+    "candidates (one pre-filter, one shrinkage for the map over every input; "
+    "`FOLD_PREFILTERS` and the rest in evaluation/family_eval.py); the structure of each "
+    "group is chosen in full. Folds whose test source has fewer than two pairs in the "
+    "family (jmtechart, sentien) are left out. The neutral column is the worst channel's "
+    "mean |output - 0| over the family's neutral holds after 0.5 s.",
+)
 
 
 def markdown(result: dict[str, Any]) -> str:
@@ -250,6 +262,7 @@ def markdown(result: dict[str, Any]) -> str:
                 f"{s['blink_closure']:.2f} | {s['jitter_ratio']:.2f} | {s['lag_ms']:.0f} | "
                 f"{neutral} |"
             )
+    lines += ["", *NOTES]
     chans = result["channels"]
     rows = [r for r in chans if r != "raw"]
     lines += ["", "Per channel, MSE x raw pooled over every held-out family:", "",
