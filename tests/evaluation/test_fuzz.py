@@ -15,6 +15,7 @@ from faceclean.evaluation import fuzz
 
 EXAMPLES = {t: 80 for t in fuzz.TARGETS}
 EXAMPLES.update({"vmc": 200, "livelink-udp": 200, "ifacialmocap": 200})  # cheap: no files
+EXAMPLES.update({"page": 200, "pairs": 120})  # a few seconds each
 SETTINGS = dict(
     deadline=None,
     database=None,
@@ -24,8 +25,12 @@ SETTINGS = dict(
 
 def _strategy(target: str):
     """Arbitrary bytes, a seed as is, or a seed mutated by the library's own edits
-    (``fuzz.mutated``, drawn from a hypothesis-chosen numpy seed)."""
+    (``fuzz.mutated``, drawn from a hypothesis-chosen numpy seed); the page's messages and
+    pair folders: the library's own structured edits (``fuzz.draw``)."""
     pool = fuzz.seeds(target)
+    if target in fuzz.SURFACES:
+        drawn = st.integers(0, 2**63 - 1).map(lambda k: fuzz.draw(np.random.default_rng(k), target))
+        return st.one_of(drawn, st.binary(max_size=512), st.sampled_from(pool))
     edits = st.integers(0, 2**63 - 1).map(lambda k: fuzz.mutated(np.random.default_rng(k), pool))
     return st.one_of(st.binary(max_size=fuzz.MAX_BYTES), edits, st.sampled_from(pool))
 
@@ -85,6 +90,35 @@ def test_the_mutation_fuzzer_is_seeded_and_edits_real_seeds():
     assert sum(x not in fuzz.seeds("csv") for x in first) > 25
     report = fuzz.run("vmc", examples=300, seed=1)
     assert report.tried == 300 == report.accepted + report.refused and not report.failure
+
+
+def test_the_page_and_pairs_checks_catch_what_they_are_for(tmp_path, monkeypatch):
+    """An answer with NaN, an internal error, or a refused change kept, fails the page
+    check; a stray exception from the pairs reader fails the pairs check."""
+    from faceclean.evaluation import paired
+    from faceclean.ui import session
+
+    page = fuzz.Checker("page", tmp_path)
+    message = b'{"type": "view", "seq": 1, "t0": 0, "t1": 0.5}'
+    assert page(message) is True
+    monkeypatch.setattr(session.Base, "on_uncalibrate", lambda self, c, m: c.send({"type": "x"}))
+    assert page(b'{"type": "uncalibrate"}') is True
+    monkeypatch.setattr(session.Base, "on_uncalibrate", lambda self, c, m: 1 / 0)
+    with pytest.raises(AssertionError, match="internal error"):
+        page(b'{"type": "uncalibrate"}')
+
+    def changes_then_refuses(self, client, m):
+        self.window = (0.0, 0.1)
+        raise session.FacecleanError("no")
+
+    monkeypatch.setattr(session.Base, "on_uncalibrate", changes_then_refuses)
+    with pytest.raises(AssertionError, match="changed the state"):
+        page(b'{"type": "uncalibrate"}')
+    pairs = fuzz.Checker("pairs", tmp_path)
+    assert pairs(fuzz.seeds("pairs")[0]) is True and pairs(b"") is False
+    monkeypatch.setattr(paired, "usable", lambda p: [][0])
+    with pytest.raises(IndexError):
+        pairs(fuzz.seeds("pairs")[0])
 
 
 def test_a_failing_input_is_shrunk_to_what_fails():

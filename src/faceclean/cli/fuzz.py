@@ -1,7 +1,8 @@
 """``faceclean fuzz [--target NAME] [--examples N | --seconds S] [--seed K]``: the long
 fuzz run.
 
-Feeds every file reader and relay decoder (or one) arbitrary and mutated real inputs
+Feeds every file reader, relay decoder, the page's messages and the pairs reader (or one)
+arbitrary and mutated real inputs
 (faceclean.evaluation.fuzz: a seeded numpy mutation fuzzer, no hypothesis) and prints,
 per target, how many inputs were tried, accepted and refused. Exit 0 when nothing broke
 the policy, 1 with the (shrunk) failure and its input otherwise. The structure-aware
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "fuzz the readers and relay decoders (seeded mutations), reporting inputs and failures"
+HELP = "fuzz the readers, relay decoders, page messages and pair folders (seeded mutations)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -34,7 +34,8 @@ from faceclean.errors import FacecleanError
 READERS = {"livelink": ".csv", "csv": ".csv", "json": ".json", "npz": ".npz", "glb": ".glb"}
 READERS.update(gltf=".gltf", mediapipe=".csv")
 DECODERS = ("vmc", "livelink-udp", "ifacialmocap")
-TARGETS: tuple[str, ...] = (*READERS, *DECODERS)
+SURFACES = ("page", "pairs")  # evaluation/fuzz_surfaces.py: the page's messages, pair folders
+TARGETS: tuple[str, ...] = (*READERS, *DECODERS, *SURFACES)
 MAX_BYTES = 4096  # arbitrary inputs up to this size
 # Byte strings parsers treat specially, spliced into real inputs.
 TOKENS = (
@@ -67,9 +68,13 @@ class Checker:
             raise FacecleanError(f"unknown fuzz target {target!r} (known: {', '.join(TARGETS)})")
         self.target = target
         self.folder = Path(folder)
-        self._check: Callable[[bytes], bool] = (
-            self._reader if target in READERS else _DECODERS[target]
-        )
+        self._check: Callable[[bytes], bool]
+        if target in SURFACES:
+            from faceclean.evaluation import fuzz_surfaces
+
+            self._check = fuzz_surfaces.checker(target, self.folder)
+        else:
+            self._check = self._reader if target in READERS else _DECODERS[target]
 
     def __call__(self, data: bytes) -> bool:
         """True: accepted; False: refused as the policy says. Raises on a bug."""
@@ -180,6 +185,10 @@ _DECODERS: dict[str, Callable[[bytes], bool]] = {
 @cache
 def seeds(target: str) -> tuple[bytes, ...]:
     """Well-formed inputs of a target: real data where the shared folder has it."""
+    if target in SURFACES:
+        from faceclean.evaluation import fuzz_surfaces
+
+        return fuzz_surfaces.seeds(target)
     if target in ("livelink", "csv", "json", "npz"):
         return tuple(_file_seeds(target))
     if target in ("glb", "gltf"):
@@ -334,7 +343,11 @@ def mutated(rng: np.random.Generator, pool: tuple[bytes, ...]) -> bytes:
 
 def draw(rng: np.random.Generator, target: str) -> bytes:
     """One input for ``target``: arbitrary bytes (a quarter), a seed as is (an eighth),
-    else a mutated seed."""
+    else a mutated seed; the page's messages and pair folders get their own edits."""
+    if target in SURFACES:
+        from faceclean.evaluation import fuzz_surfaces
+
+        return fuzz_surfaces.draw(rng, target)
     pool = seeds(target)
     u = rng.random()
     if u < 0.25:
@@ -428,6 +441,6 @@ def failing_example(report: Report) -> str:
 
 
 __all__ = [
-    "DECODERS", "READERS", "TARGETS", "Checker", "Report", "check_animation", "draw",
+    "DECODERS", "READERS", "SURFACES", "TARGETS", "Checker", "Report", "check_animation", "draw",
     "mutated", "run", "seeds", "shrink",
 ]  # fmt: skip

@@ -230,26 +230,34 @@ class Server:
                 if isinstance(raw, bytes):
                     connection.close(1003, "text messages only")
                     return
-                try:
-                    message = strict_json.loads(raw.encode("utf-8"), "message")
-                except FacecleanError as e:
-                    client.send({"type": "error", "message": f"faceclean: {e}"})
-                    continue
-                if not isinstance(message, dict) or not isinstance(message.get("type"), str):
-                    client.send({"type": "error", "message": "faceclean: a message is an object"})
-                    continue
-                try:
-                    self.session.handle(client, message)
-                except FacecleanError as e:
-                    reply = {"type": "error", "message": f"faceclean: {e}"}
-                    client.send({**reply, "for": message["type"], "seq": _seq(message)})
-                except Exception as e:  # never a dead channel: one line, as cli.main says it
-                    why = f"faceclean: internal error: {type(e).__name__}: {e}"
-                    client.send({"type": "error", "message": why, "for": message["type"]})
+                receive(self.session, client, raw)
         except ConnectionClosed:
             pass
         finally:
             self.session.detach(client)
+
+
+def receive(session: Session, client: Client, raw: str) -> None:
+    """Parse one text message from the page and let ``session`` answer it. Never raises:
+    bad JSON, a non-object or a refusal is answered by one ``error`` message (``for``: the
+    type it answers), anything else too, as an internal error (a bug: ``faceclean fuzz``
+    looks for one)."""
+    try:
+        message = strict_json.loads(raw.encode("utf-8"), "message")
+    except FacecleanError as e:
+        client.send({"type": "error", "message": f"faceclean: {e}"})
+        return
+    if not isinstance(message, dict) or not isinstance(message.get("type"), str):
+        client.send({"type": "error", "message": "faceclean: a message is an object"})
+        return
+    try:
+        session.handle(client, message)
+    except FacecleanError as e:
+        reply = {"type": "error", "message": f"faceclean: {e}"}
+        client.send({**reply, "for": message["type"], "seq": _seq(message)})
+    except Exception as e:  # never a dead channel: one line, as cli.main says it
+        why = f"faceclean: internal error: {type(e).__name__}: {e}"
+        client.send({"type": "error", "message": why, "for": message["type"]})
 
 
 def _seq(message: dict[str, Any]) -> int | None:
