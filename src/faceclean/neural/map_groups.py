@@ -112,12 +112,23 @@ def candidates() -> list[tuple[str, float]]:
     return [("pass", 0.0)] + [(kind, lam) for kind in KINDS[1:] for lam in LAMBDAS]
 
 
-def choose(w, folds: dict[str, tuple], report: Report | None = None) -> Choice:
+NEUTRAL = "neutral"  # the neutral holds' source (synthetic/engine.py)
+
+
+def at_rest(key: str) -> bool:
+    """Whether a fold holds the neutral holds (``pairs --neutral``, source ``neutral``):
+    judged for keeping a face at rest, never by MSE over raw (raw's error on a face at
+    rest is MediaPipe's offset alone: a ratio to it outweighs the takes)."""
+    return key.rpartition("/")[2] == NEUTRAL
+
+
+def choose(w, folds: dict[str, tuple], predict: Callable, set_linear: Callable,
+           report: Report | None = None) -> Choice:  # fmt: skip
     """Per selection group the (kind, lam) of the least mean ratio to raw over ``folds``
     (key -> (x'x, x'y without the fold, its held-out features)) among those within HARM
-    in every family (module docstring). Sets ``w``'s linear part while it scores."""
-    from faceclean.neural.tracker_map import _predict, _set_linear, at_rest
-
+    in every family (module docstring). ``set_linear(w, coef, c, d)`` sets ``w``'s linear
+    part while it scores and ``predict(w, u, r, e)`` is the runtime's output on features
+    (tracker_map.py's, passed in: that module calls this one)."""
     report = report or (lambda _e: None)
     names = w.inputs
     gi = np.array([list(SELECT).index(group_of(n)) for n in names])
@@ -137,9 +148,9 @@ def choose(w, folds: dict[str, tuple], report: Report | None = None) -> Choice:
         up, still = np.zeros(len(names)), np.zeros(len(names))
         for f, key in enumerate(keys):
             gram, xty, held = folds[key]
-            _set_linear(w, *solve(gram, xty, names, every))
+            set_linear(w, *solve(gram, xty, names, every))
             for feat in held:
-                pred = _predict(w, feat.u, feat.r, feat.e)
+                pred = predict(w, feat.u, feat.r, feat.e)
                 np.add.at(sse[ci, f], gi, ((pred - feat.y) ** 2).sum(0))
                 quiet = (feat.u - feat.r) < QUIET  # no evidence on the channel's own input
                 up += np.where(quiet, pred - feat.u, 0.0).sum(0)

@@ -29,6 +29,7 @@ from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.tracker_map import MAX_DETAIL, MAX_LIFT, MapWeights
 from faceclean.neural import map_groups
+from faceclean.neural.map_groups import at_rest
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
 # (1-0.5 Hz, beta 5-20) ones hold a face at rest hard and open up when it moves (the speed
@@ -66,7 +67,6 @@ DETAILS = (0.0, 0.25, 0.5, 0.75, 1.0)
 DETAIL_SHRINK = 0.01  # the detail gain's ridge, relative to the detail's own mean square
 LIFT_FROM = 0.5  # the gain is fitted where the truth is over this (an eye closing)
 Report = Callable[[dict[str, Any]], None]
-NEUTRAL = "neutral"  # the neutral holds' source (synthetic/engine.py)
 
 
 def channels(pairs: Sequence[Pair]) -> tuple[str, ...]:
@@ -244,13 +244,6 @@ def fold_key(p: Pair, families: bool) -> str:
     return f"{p.family}/{p.group}" if families else p.group
 
 
-def at_rest(key: str) -> bool:
-    """Whether a fold holds the neutral holds (``pairs --neutral``, source ``neutral``):
-    judged for keeping a face at rest (map_groups.py), never by MSE over raw (raw's error
-    on a face at rest is MediaPipe's offset alone: a ratio to it outweighs the takes)."""
-    return key.rpartition("/")[2] == NEUTRAL
-
-
 def _left_out(p: Pair, key: str) -> bool:
     """Whether ``key``'s fold keeps ``p`` out of its training: the same source, or (a
     family fold) the same look."""
@@ -352,7 +345,8 @@ def fit(
             gram, xty = _moments(*_stack(feats, rest, detail=True))
             if structured and rest:  # per output group, on the folds (map_groups.py)
                 _, scored = _sources(pool)
-                choice = map_groups.choose(w, _folds(pool, feats, rest, scored), report)
+                folds = _folds(pool, feats, rest, scored)
+                choice = map_groups.choose(w, folds, _predict, _set_linear, report)
                 w.config["structure"] = {g: [k, lam] for g, (k, lam) in choice.items()}
             _set_linear(w, *_fold_solve(w, gram, xty))
             _choose_lift(w, pool, rest, knees, report)

@@ -29,12 +29,12 @@ from __future__ import annotations
 import io
 import os
 import tarfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from faceclean.errors import FacecleanError
+from faceclean.synthetic.render import Skin
 
 # (archive file name, member, portrait name, licence): read from a package's sdist
 PACKAGED = (
@@ -118,18 +118,6 @@ def _decode(data: bytes, label: str) -> np.ndarray:
             return np.asarray(im.convert("RGB"))
     except (UnidentifiedImageError, OSError, ValueError) as e:
         raise FacecleanError(f"{label}: not a readable image ({e})") from None
-
-
-@dataclass(eq=False)
-class Skin:
-    """A portrait fitted to the head: what the renderer needs to texture it."""
-
-    name: str
-    texture: np.ndarray  # (H, W, 3) float32, linear RGB in [0, 1]
-    coords: np.ndarray  # (V, 2) float32 px into texture, per rendered vertex
-    weight: np.ndarray  # (V,) float32 in [0, 1]: 1 photograph, 0 paint
-    alpha: np.ndarray  # (K,) fitted identity
-    iris: tuple[float, float, float]  # linear RGB of the portrait's irises
 
 
 class Fitter:

@@ -14,15 +14,27 @@ sensor noise drawn from (seed, frame), JPEG.
 from __future__ import annotations
 
 import io as bytes_io
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from faceclean.synthetic import head as H
 from faceclean.synthetic.head import Head
-from faceclean.synthetic.portrait import Skin
 from faceclean.synthetic.raster import rasterise
 from faceclean.synthetic.scene import Scene
+
+
+@dataclass(eq=False)
+class Skin:
+    """A portrait fitted to the head (portrait.py): what the renderer textures it with."""
+
+    name: str
+    texture: np.ndarray  # (H, W, 3) float32, linear RGB in [0, 1]
+    coords: np.ndarray  # (V, 2) float32 px into texture, per rendered vertex
+    weight: np.ndarray  # (V,) float32 in [0, 1]: 1 photograph, 0 paint
+    alpha: np.ndarray  # (K,) fitted identity
+    iris: tuple[float, float, float]  # linear RGB of the portrait's irises
 
 
 class Renderer:
