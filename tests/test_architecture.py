@@ -42,6 +42,7 @@ MAY_IMPORT: dict[str, set[str]] = {
         *("filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"),
         "synthetic",  # the still real face is tracked by the tracker in the loop
         "calibration",  # the tracker table's calibration row (a pair's own clip)
+        "ui",  # the fuzz of the tuning page's messages (fuzz_surfaces.py, inside functions)
     },
     "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
     "trackers": {"synthetic", "relay", "io"},  # the model bundle check; the live send
