@@ -11,7 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from faceclean.cli.tasks import done
+from faceclean.cli.tasks import done, summary
 from faceclean.errors import FacecleanError
 
 HELP = "render faces from known weights, track them with MediaPipe: paired training data"
@@ -152,12 +152,7 @@ def run(args: argparse.Namespace) -> int:
                 for f in as_completed(futures):
                     done(bar, futures[f], f.result(), failed)
     print(f"made {len(todo) - len(failed)} of {len(todo)} in {out}")
-    if failed:
-        print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
-        for name, why in failed:
-            print(f"  {name}: {why}", file=sys.stderr)
-        return 1
-    return 0
+    return summary(failed)
 
 
 def _families(text: str) -> tuple[str, ...]:

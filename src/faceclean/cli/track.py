@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from faceclean.cli import options
+from faceclean.cli.tasks import summary
 from faceclean.errors import FacecleanError
 
 HELP = "track a video (or a webcam) with MediaPipe and write (or send) a clean take"
@@ -205,12 +206,7 @@ def _batch(args: argparse.Namespace) -> int:
                 for future in as_completed(futures):
                     done(futures[future], *future.result())
     print(f"tracked {len(jobs) - len(failed)} of {len(jobs)} videos into {outdir}")
-    if failed:
-        print(f"faceclean: {len(failed)} failed:", file=sys.stderr)
-        for video, why in failed:
-            print(f"  {video}: {why}", file=sys.stderr)
-        return 1
-    return 0
+    return summary(failed)
 
 
 def _job(args: argparse.Namespace, video: str, out: str) -> tuple[bool, str]:

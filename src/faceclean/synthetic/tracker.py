@@ -39,33 +39,8 @@ _NOT_A_ZIP = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, Run
 
 class Tracker:
     def __init__(self, model_path: str | os.PathLike, threads: int = 1) -> None:
-        path = Path(model_path)
-        bundle = read_bytes(path, MAX_MODEL, "tracker model file")  # regular, bounded, once
-        check_bundle(bundle, path)
-        os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
-        try:
-            from mediapipe.tasks.python import BaseOptions
-            from mediapipe.tasks.python.vision import (
-                FaceLandmarker,
-                FaceLandmarkerOptions,
-                RunningMode,
-            )
-        except ImportError:
-            raise FacecleanError(
-                "the tracker needs mediapipe: pip install 'faceclean[pairs]'"
-            ) from None
         del threads  # MediaPipe's CPU graph picks its own; the job pool spreads the work
-        options = FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_buffer=bundle),
-            running_mode=RunningMode.VIDEO,
-            num_faces=1,
-            output_face_blendshapes=True,
-        )
-        try:
-            self._landmarker = FaceLandmarker.create_from_options(options)
-        except (RuntimeError, ValueError) as e:
-            text = " ".join(str(e).split())[:160]
-            raise FacecleanError(f"{path}: not a usable face landmarker model ({text})") from None
+        self._landmarker = landmarker(model_path, video=True, blendshapes=True)
         self._last_ms = -1
         self._map: tuple[tuple[str, ...], ChannelMap] | None = None
 
@@ -99,6 +74,40 @@ class Tracker:
         self.close()
 
 
+def landmarker(model_path: str | os.PathLike, video: bool, blendshapes: bool = False,
+               pose: bool = False, extra: str = "pairs"):  # fmt: skip
+    """MediaPipe's FaceLandmarker for one face from the bundle at ``model_path`` (read once,
+    bounded, checked by ``check_bundle``): VIDEO mode when ``video``, else IMAGE; with the
+    52 scores (``blendshapes``) and the head's transformation matrix (``pose``). A bundle
+    MediaPipe refuses, or mediapipe missing (``pip install 'faceclean[EXTRA]'``), is one line."""
+    path = Path(model_path)
+    bundle = read_bytes(path, MAX_MODEL, "tracker model file")  # regular, bounded, once
+    check_bundle(bundle, path)
+    os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
+    try:
+        from mediapipe.tasks.python import BaseOptions
+        from mediapipe.tasks.python.vision import (
+            FaceLandmarker,
+            FaceLandmarkerOptions,
+            RunningMode,
+        )
+    except ImportError:
+        raise FacecleanError(f"the tracker needs mediapipe: pip install 'faceclean[{extra}]'"
+                             ) from None  # fmt: skip
+    options = FaceLandmarkerOptions(
+        base_options=BaseOptions(model_asset_buffer=bundle),
+        running_mode=RunningMode.VIDEO if video else RunningMode.IMAGE,
+        num_faces=1,
+        output_face_blendshapes=blendshapes,
+        output_facial_transformation_matrixes=pose,
+    )
+    try:
+        return FaceLandmarker.create_from_options(options)
+    except (RuntimeError, ValueError) as e:
+        text = " ".join(str(e).split())[:160]
+        raise FacecleanError(f"{path}: not a usable face landmarker model ({text})") from None
+
+
 def landmarks(model_path: str | os.PathLike, image: np.ndarray) -> np.ndarray | None:
     """(478, 3) MediaPipe face landmarks of one still RGB ``image`` (H, W, 3) uint8, in
     pixels (x right, y down; z toward the camera negative, in x's pixel scale; 468-477 the
@@ -106,16 +115,7 @@ def landmarks(model_path: str | os.PathLike, image: np.ndarray) -> np.ndarray | 
     state carried from another picture."""
     import mediapipe as mp
 
-    path = Path(model_path)
-    bundle = read_bytes(path, MAX_MODEL, "tracker model file")
-    check_bundle(bundle, path)
-    os.environ.setdefault("GLOG_minloglevel", "2")
-    from mediapipe.tasks.python import BaseOptions
-    from mediapipe.tasks.python.vision import FaceLandmarker, FaceLandmarkerOptions, RunningMode
-
-    options = FaceLandmarkerOptions(base_options=BaseOptions(model_asset_buffer=bundle),
-                                    running_mode=RunningMode.IMAGE, num_faces=1)  # fmt: skip
-    with FaceLandmarker.create_from_options(options) as marker:
+    with landmarker(model_path, video=False) as marker:
         img = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(image))
         result = marker.detect(img)
     if not result.face_landmarks:

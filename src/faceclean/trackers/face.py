@@ -26,7 +26,7 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channel_map import ChannelMap
 from faceclean.errors import FacecleanError
-from faceclean.synthetic.tracker import MAX_MODEL, NAMES, check_bundle
+from faceclean.synthetic.tracker import NAMES, landmarker
 
 HEAD = ("HeadYaw", "HeadPitch", "HeadRoll")  # the angles a tracked take carries, rad
 
@@ -58,35 +58,8 @@ class FaceTracker:
     """MediaPipe Face Landmarker, VIDEO mode, one face, with the head's rotation."""
 
     def __init__(self, model: str | os.PathLike | None = None) -> None:
-        from faceclean.io.source import read_bytes
-
-        path = model_path(model)
-        bundle = read_bytes(path, MAX_MODEL, "tracker model file")
-        check_bundle(bundle, path)
-        os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
-        try:
-            from mediapipe.tasks.python import BaseOptions
-            from mediapipe.tasks.python.vision import (
-                FaceLandmarker,
-                FaceLandmarkerOptions,
-                RunningMode,
-            )
-        except ImportError:
-            raise FacecleanError(
-                "tracking needs mediapipe: pip install 'faceclean[track]'"
-            ) from None
-        options = FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_buffer=bundle),
-            running_mode=RunningMode.VIDEO,
-            num_faces=1,
-            output_face_blendshapes=True,
-            output_facial_transformation_matrixes=True,
-        )
-        try:
-            self._marker = FaceLandmarker.create_from_options(options)
-        except (RuntimeError, ValueError) as e:
-            text = " ".join(str(e).split())[:160]
-            raise FacecleanError(f"{path}: not a usable face landmarker model ({text})") from None
+        self._marker = landmarker(model_path(model), video=True, blendshapes=True, pose=True,
+                                  extra="track")  # fmt: skip
         self._last_ms = -1
         self._map: tuple[tuple[str, ...], ChannelMap] | None = None
 
