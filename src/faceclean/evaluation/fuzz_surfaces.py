@@ -12,7 +12,7 @@ maybe a subfolder) packed in one byte string (``pack``): ``paired.load`` then
 ``paired.usable`` return pairs, every value kept finite within MAX_ABS or NaN, or
 raise a one-line FacecleanError. Inputs are drawn from seeded valid ones by structured
 edits (keys, types, huge numbers, NaN tokens, lone surrogates, deep nesting, bad cells,
-shifted times, missing files) and the byte-level edits of ``fuzz.mutated``.
+shifted times, missing files) and the byte-level edits of ``fuzz_inputs.mutated``.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ SPECIAL = ("/proc/self/mem", "/proc/self/status", "/dev/zero", "/dev/null")  # r
 
 def page_message(rng: np.random.Generator) -> bytes:
     """A valid message with structured edits, then maybe byte-level ones (or deep nesting)."""
-    from faceclean.evaluation.fuzz import mutated
+    from faceclean.evaluation.fuzz_inputs import mutated
 
     m = dict(MESSAGES[int(rng.integers(len(MESSAGES)))])
     for _ in range(int(rng.integers(0, 4))):
@@ -92,7 +92,7 @@ class Page:
 
     def __init__(self, folder: Path) -> None:
         from faceclean import io
-        from faceclean.evaluation.fuzz import _sample_animation
+        from faceclean.evaluation.fuzz_inputs import sample_animation
         from faceclean.ui.offline import Offline
         from faceclean.ui.server import Client
         from faceclean.ui.session import Base
@@ -108,7 +108,7 @@ class Page:
 
         self.folder = folder
         take = folder / "take.csv"
-        io.save(_sample_animation(), take)
+        io.save(sample_animation(), take)
         self.session = Quiet(str(take), Tuning("one-euro"))
         self.sent: list[str] = []
         self.client = Client(Connection())
@@ -210,10 +210,10 @@ def pairs_seed() -> dict[str, bytes]:
     """A real pair (``faceclean pairs``' own file names and metadata), and its ROM clip."""
     from faceclean import io
     from faceclean.animation import Animation
-    from faceclean.evaluation.fuzz import _sample_animation
+    from faceclean.evaluation.fuzz_inputs import sample_animation
     from faceclean.synthetic.engine import FORMAT
 
-    truth = _sample_animation()
+    truth = sample_animation()
     rng = np.random.default_rng(0)
     noisy = np.clip(truth.values + 0.05 * rng.standard_normal(truth.values.shape), 0, 1)
     tracked = Animation(truth.times, noisy, truth.names)
@@ -238,8 +238,8 @@ NAMES += ("b.tracked.csv", "sub/a.tracked.csv", "sub/a.truth.csv", "a.tracked.np
 
 def pairs_folder(rng: np.random.Generator) -> bytes:
     """The seed folder with 1 to 4 edits: a cell made bad, times shifted, a file removed,
-    renamed, copied over another, or given byte-level edits (``fuzz.mutated``)."""
-    from faceclean.evaluation.fuzz import mutated
+    renamed, copied over another, or given byte-level edits (``fuzz_inputs.mutated``)."""
+    from faceclean.evaluation.fuzz_inputs import mutated
 
     files = pairs_seed()
     for _ in range(int(rng.integers(1, 5))):
