@@ -10,8 +10,9 @@ MSE, with a price on jitter beyond ``JITTER_BUDGET`` x the truth's, and with the
 much of each output's detail (its own input's x - u) it keeps (``DETAILS``: the detail
 gains are fitted unshrunk, then scaled). The output deadband
 (``DEADBAND``) is a fixed setting, in place while every candidate is scored. Then the
-blink lift (``_choose_lift``): its knee chosen leaving each source out as well, with a
-price on blink closure outside ``CLOSURE_BAND``, its gains fitted on the performances.
+blink lift (blink_lift.py, on this module's folds): its knee chosen leaving each source
+out as well, with a price on blink closure outside ``CLOSURE_BAND``, its gains fitted on
+the performances.
 """
 
 from __future__ import annotations
@@ -27,8 +28,10 @@ from faceclean.channels import ARKIT52
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
-from faceclean.learned.tracker_map import MAX_DETAIL, MAX_LIFT, MapWeights
-from faceclean.neural import map_groups
+from faceclean.learned.tracker_map import MAX_DETAIL, MapWeights
+from faceclean.neural import blink_lift, map_groups
+from faceclean.neural.blink_lift import CLOSURE_BAND as CLOSURE_BAND  # the fit's settings
+from faceclean.neural.blink_lift import KNEES, TOPS
 from faceclean.neural.map_groups import at_rest
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
@@ -50,14 +53,6 @@ TIE = 0.005  # cross-validated scores this close to the best (relative) count as
 # the map's output (0.0007, docs/MODEL.md); it holds a face at rest, so the tie among
 # pre-filters can go to lag.
 DEADBAND = 0.01
-# The blink lift's knees (rise above rest, weight units; None: no lift) and the closure
-# (output peak / true peak) a blink should reach: below 0.9 an eye does not read as
-# closed, above 1.1 it slams; a candidate outside the band pays its distance from it.
-KNEES: tuple[float | None, ...] = (None, 0.1, 0.2, 0.3, 0.4)
-# The lift's top: fixed (a gain of g), or following the stream's largest lift so far
-# (``lift_top``: the gain falls for an eye that reads higher than the training faces').
-TOPS = (False, True)
-CLOSURE_BAND = (0.9, 1.1)
 # How much of the least-squares detail gain each candidate keeps (0: none; the model's
 # ``detail_scale``, which a user may change: TrackerMap's ``detail``). The gain is shrunk
 # by its own scale only: the detail is small beside the levels, and a shrinkage scaled to
@@ -65,7 +60,6 @@ CLOSURE_BAND = (0.9, 1.1)
 # trades lag against jitter.
 DETAILS = (0.0, 0.25, 0.5, 0.75, 1.0)
 DETAIL_SHRINK = 0.01  # the detail gain's ridge, relative to the detail's own mean square
-LIFT_FROM = 0.5  # the gain is fitted where the truth is over this (an eye closing)
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -377,6 +371,18 @@ def fit(
     return w
 
 
+class Candidate(NamedTuple):
+    """One (pre-filter, shrinkage, detail scale) scored leaving each source out."""
+
+    score: float  # mean MSE x raw over the folds, x the jitter's price
+    jitter: float  # mean jitter ratio to the truth's over the folds
+    worst: float  # the worst fold's jitter ratio
+    pre: tuple[float, float, float] | None  # the pre-filter (None: none)
+    lam: float
+    detail: float  # the detail scale
+    config: dict[str, Any]  # the config of weights with this choice
+
+
 def _cross_validate(
     pool, names, prefilters, lams, rest: bool, report: Report, deadband: float = 0.0,
     details: Sequence[float] = DETAILS,
@@ -399,21 +405,21 @@ def _cross_validate(
         w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None, deadband=deadband)
         return w, _own(w), _folds(pool, features(w, pool), rest, scored)
 
-    # Pass 1, every candidate: (score, jitter, worst jitter, pre, lam, kappa, config).
-    found: list[tuple] = []
+    # Pass 1, every candidate.
+    found: list[Candidate] = []
     for pre in prefilters:
         w, own, folds = folded(pre)
         solved = {(g, lam): _solve_detail(gram, xty, lam, own)
                   for lam in lams for g, (gram, xty, _) in folds.items()}  # fmt: skip
         for lam, kappa in [(lam, kappa) for lam in lams for kappa in details
                            if pre is not None or kappa == 0.0]:  # fmt: skip
-            w.config["detail_scale"] = kappa  # one fit, its detail scaled
+            trial = MapWeights(dict(w.config, detail_scale=kappa), w.arrays)  # one fit, scaled
             ratios, jits = [], []
             for g, (_, _, held) in folds.items():
                 if at_rest(g):
                     continue
-                _set_linear(w, *solved[g, lam])
-                mse, jit = _score(w, held)
+                _set_linear(trial, *solved[g, lam])
+                mse, jit = _score(trial, held)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
             known = np.array(jits)[~np.isnan(jits)]  # NaN: too short to tell
@@ -423,36 +429,36 @@ def _cross_validate(
             report({"event": "candidate", "pre": pre, "lam": lam, "detail": kappa,
                     "val_mse": ratio, "jitter": jit, "worst_jitter": worst,
                     "cv": len(groups)})  # fmt: skip
-            config = dict(w.config, lam=lam, detail_scale=kappa, val_mse=ratio,
-                          val_jitter=jit,
+            config = dict(trial.config, lam=lam, val_mse=ratio, val_jitter=jit,
                           selected="leave one source out: " + ", ".join(groups))  # fmt: skip
-            found.append((score, jit, worst, pre, lam, kappa, config))
-    top = min(f[0] for f in found)
-    tied = [f for f in found if f[0] <= top * (1.0 + TIE)]
-    calm = [f for f in tied if f[2] <= JITTER_BUDGET]
+            found.append(Candidate(score, jit, worst, pre, lam, kappa, config))
+    top = min(c.score for c in found)
+    tied = [c for c in found if c.score <= top * (1.0 + TIE)]
+    calm = [c for c in tied if c.worst <= JITTER_BUDGET]
     if not calm:
-        chosen = min(tied, key=lambda f: f[1])
-        return MapWeights(chosen[6], folded(chosen[3])[0].arrays)
+        chosen = min(tied, key=lambda c: c.jitter)
+        return MapWeights(chosen.config, folded(chosen.pre)[0].arrays)
     # Pass 2, the lag of the calm ones only (the costliest measure: ~80 % of a score).
-    best: tuple | None = None  # (lag, config, arrays)
-    for pre in dict.fromkeys(f[3] for f in calm):
+    best: MapWeights | None = None
+    least = float("inf")
+    for pre in dict.fromkeys(c.pre for c in calm):
         w, own, folds = folded(pre)
-        for _, _, _, _, lam, kappa, config in [f for f in calm if f[3] == pre]:
+        for c in [c for c in calm if c.pre == pre]:
+            trial = MapWeights(c.config, w.arrays)  # the candidate's detail scale
             lags = []
-            w.config["detail_scale"] = kappa
             for g, (gram, xty, held) in folds.items():
                 if at_rest(g):
                     continue
-                _set_linear(w, *_solve_detail(gram, xty, lam, own))
-                lags.append(_score(w, held, lag=True)[2])
+                _set_linear(trial, *_solve_detail(gram, xty, c.lam, own))
+                lags.append(_score(trial, held, lag=True)[2])
             lag = float(np.nanmean(lags)) if np.isfinite(lags).any() else 0.0
-            report({"event": "candidate_lag", "pre": pre, "lam": lam, "detail": kappa,
+            report({"event": "candidate_lag", "pre": pre, "lam": c.lam, "detail": c.detail,
                     "lag_ms": lag, "cv": len(groups)})  # fmt: skip
-            if best is None or lag < best[0]:
+            if best is None or lag < least:
                 arrays = {k: v.copy() for k, v in w.arrays.items()}
-                best = (lag, dict(config, val_lag_ms=lag), arrays)
+                best, least = MapWeights(dict(c.config, val_lag_ms=lag), arrays), lag
     assert best is not None
-    return MapWeights(best[1], best[2])
+    return best
 
 
 def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None
@@ -491,79 +497,28 @@ def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None =
     return y
 
 
-def _lift_gains(w: MapWeights, feats, knee: float) -> np.ndarray:
-    """(M,) lift gains for ``knee`` (0 where no lift): per blink output, the median over
-    ``feats``' frames whose truth is over LIFT_FROM of truth / (rise - knee), the rise
-    the input of the same name's u - r (frames where it has not passed the knee skipped)."""
-    from faceclean.evaluation.metrics import BLINK_CHANNELS
-
-    gains = np.zeros(len(w.outputs))
-    for i, name in enumerate(w.outputs):
-        if name not in BLINK_CHANNELS or name not in w.inputs:
-            continue
-        j = w.inputs.index(name)
-        over = np.concatenate([f.u[:, j] - f.r[:, j] - knee for f in feats])
-        y = np.concatenate([f.y[:, i] for f in feats])
-        sel = (y > LIFT_FROM) & (over > 0.02)
-        if sel.sum() >= 10:
-            gains[i] = float(np.clip(np.median(y[sel] / over[sel]), 0.0, MAX_LIFT))
-    return gains
-
-
-def _set_lift(w: MapWeights, gains: np.ndarray, knee: float) -> None:
-    w.arrays["lift_gain"] = gains
-    w.arrays["lift_knee"] = np.where(gains > 0, knee, 0.0)
+_lift_gains, _set_lift = blink_lift.gains, blink_lift.set_gains  # as the tests reach them
 
 
 def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report, tops=TOPS) -> None:
-    """Sets ``w``'s blink lift: the knee (None: no lift) and top (``tops``) that score
-    best leaving one
-    source out, as ``_cross_validate`` scores (the linear part fitted on every other
-    source at ``w``'s pre-filter and shrinkage, the gains on their performances), x
-    (1 + the mean closure's distance outside CLOSURE_BAND); its gains then fitted on
-    every performance in ``pool``. The linear part of ``w`` is kept as it is."""
-    none = np.zeros(len(w.outputs))
-    _set_lift(w, none, 0.0)
-    w.config.update(lift_knee=None, lift_top=False)
+    """Sets ``w``'s blink lift (blink_lift.choose): the knee (None: no lift) and top
+    (``tops``) chosen leaving one source out, on the folds ``_cross_validate`` scores
+    (the linear part fitted on every other source at ``w``'s pre-filter and shrinkage, the
+    gains on their performances); its gains then fitted on every performance in
+    ``pool``. The linear part of ``w`` is kept as it is."""
+    blink_lift.clear(w)
     groups, scored = _sources(pool)
     feats = features(w, pool)
     performed = [f for f, s in zip(feats, scored, strict=True) if s is not None]
     if tuple(knees) == (None,) or len(groups) < 3 or not any(_lift_gains(w, performed, 0.0)):
         return  # nothing to lift, or too few sources to choose
     raw_mse = _raw_mse(pool, w.inputs, rest, scored)
-    folds = _folds(pool, feats, rest, scored)
-    coefs = {g: _fold_solve(w, gram, xty) for g, (gram, xty, _) in folds.items()}
-    # each fold's training performances, which its gains are fitted on
-    trains = {g: [f for f, s, p in zip(feats, scored, pool, strict=True)
-                  if s is not None and not _left_out(p, g)] for g in groups}  # fmt: skip
-    linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
-    lo, hi = CLOSURE_BAND
-    found = []  # (score, knee, top, closure)
-    for knee, top in [(k, t) for k in knees for t in tops if k is not None or not t]:
-        w.config["lift_top"] = top
-        ratios, jits, closures = [], [], []
-        for g, (_, _, held) in folds.items():
-            if at_rest(g):
-                continue
-            _set_linear(w, *coefs[g])
-            _set_lift(w, none if knee is None else _lift_gains(w, trains[g], knee), knee or 0.0)
-            mse, jit, close = _score(w, held, closure=True)
-            ratios.append(mse / max(raw_mse[g], 1e-12))
-            jits.append(jit)
-            closures.append(close)
-        ratio = float(np.mean(ratios))
-        jit = float(np.nanmean(jits)) if np.isfinite(jits).any() else 0.0
-        close = float(np.nanmean(closures)) if np.isfinite(closures).any() else 1.0
-        price = max(0.0, lo - close) + max(0.0, close - hi)
-        score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0)) * (1.0 + price)
-        report({"event": "lift", "knee": knee, "top": top, "val_mse": ratio, "jitter": jit,
-                "closure": close, "cv": len(groups)})  # fmt: skip
-        found.append((score, knee, top, close))
-    _, knee, top, close = min(found, key=lambda f: f[0])
-    for k, v in linear.items():
-        w.arrays[k] = v
-    _set_lift(w, none if knee is None else _lift_gains(w, performed, knee), knee or 0.0)
-    w.config.update(lift_knee=knee, lift_top=top, val_closure=close)
+    folds = {}
+    for g, (gram, xty, held) in _folds(pool, feats, rest, scored).items():
+        train = [f for f, s, p in zip(feats, scored, pool, strict=True)
+                 if s is not None and not _left_out(p, g)]  # fmt: skip
+        folds[g] = blink_lift.Fold(_fold_solve(w, gram, xty), train, held, raw_mse[g])
+    blink_lift.choose(w, performed, folds, _score, _set_linear, report, JITTER_BUDGET, knees, tops)
 
 
 def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Report) -> None:
