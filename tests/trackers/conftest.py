@@ -1,7 +1,8 @@
 """Rendered faces written as real video files, once per session: the tracker's inputs.
 
 ``face_video``: an mp4 (mp4v, 30 fps) of a rendered head turning and opening its jaw,
-with ``BLANK`` frames black (no face: missing rows). ``vfr_video``: the same faces at
+with ``BLANK`` frames black (no face: missing rows). ``two_faces``: two rendered people
+in one picture. ``vfr_video``: the same faces at
 irregular times (``VFR_TIMES``), written by PyAV with explicit timestamps. Each needs
 the renderer (numba), MediaPipe's model and the shared head mesh, or skips saying so.
 """
@@ -79,6 +80,42 @@ def write_vfr(path, frames, times) -> str:
         for packet in stream.encode():
             out.mux(packet)
     return str(path)
+
+
+def two_jaws(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) jawOpen of face A (left, the larger at first) and of face B (right), in
+    opposite phase: tracking the wrong face shows as a negative correlation."""
+    i = np.arange(n)
+    return 0.6 * np.sin(i / 3.0) ** 2, 0.6 * np.cos(i / 3.0) ** 2
+
+
+@pytest.fixture(scope="session")
+def two_faces(rendered):
+    """(N_FRAMES, 360, 660, 3) RGB: two people side by side. A (left) is a 300 px square
+    throughout (its face about 100 px wide); B (right, another identity and room, framed
+    closer) grows from 110 to 330 px (its face from about 60 to 180 px), larger than A
+    from about a third of the way on. Needs what ``rendered`` needs."""
+    import cv2
+
+    from faceclean import settings
+    from faceclean.channels import ARKIT52
+    from faceclean.synthetic.head import Head
+    from faceclean.synthetic.render import Renderer
+    from faceclean.synthetic.scene import Scene
+
+    head = Head.load(settings.mesh_file("ict_full.npz"))
+    jaw_a, jaw_b = two_jaws(N_FRAMES)
+    people = [Renderer(head, Scene.draw(3, "studio")), Renderer(head, Scene.draw(11, "studio"))]
+    frames = np.full((N_FRAMES, 360, 660, 3), 90, np.uint8)
+    for i in range(N_FRAMES):
+        grown = 110 + 220 * i // N_FRAMES  # px, B's square
+        for renderer, jaw, size, x in ((people[0], jaw_a[i], 300, 5),
+                                       (people[1], jaw_b[i], grown, 320)):  # fmt: skip
+            w = np.zeros(len(ARKIT52))
+            w[ARKIT52.index("jawOpen")] = jaw
+            img = cv2.resize(renderer.frame(w, np.zeros(3), i), (size, size))
+            frames[i, 15 : 15 + size, x : x + size] = img  # px: (row, column) offsets
+    return frames
 
 
 @pytest.fixture(scope="session")

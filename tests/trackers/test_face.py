@@ -70,3 +70,27 @@ def test_a_video_without_a_face_is_refused(rendered, tmp_path):
     blank = write_video(tmp_path / "blank.mp4", rendered[:5], 30, blank=range(5))
     with pytest.raises(FacecleanError, match="no face found in any of its 5 frames"):
         track_video(blank)
+
+
+def _face(cx: float, cy: float, size: float) -> np.ndarray:
+    """(4, 2) px: the corners of a face box of ``size`` px centred on (cx, cy)."""
+    h = size / 2
+    return np.array([[cx - h, cy - h], [cx + h, cy - h], [cx - h, cy + h], [cx + h, cy + h]])
+
+
+def test_follow_takes_the_largest_first_then_the_nearest_and_says_so_once():
+    from faceclean.trackers.face import Follow
+
+    follow = Follow()
+    assert follow.choose([_face(500, 200, 80), _face(150, 200, 120)], 0.5, 640) == 1
+    assert follow.crowd.startswith("2 faces in view at 0.50 s: tracking the largest, on the left")
+    first = follow.crowd
+    # the other face grows larger and the followed one moves a little: still the same one
+    assert follow.choose([_face(170, 210, 118), _face(480, 200, 300)], 0.6, 640) == 0
+    assert follow.choose([_face(480, 200, 300)], 0.7, 640) == 0  # alone in view: followed
+    follow = Follow()
+    follow.choose([_face(150, 200, 120)], 0.0, 640)  # one face: nothing to say
+    assert follow.crowd is None
+    assert follow.choose([_face(600, 50, 200), _face(160, 205, 100)], 0.1, 640) == 1
+    assert "tracking the one followed so far" in follow.crowd
+    assert follow.crowd != first

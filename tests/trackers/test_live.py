@@ -80,3 +80,27 @@ def test_live_refuses_what_it_cannot_do(face_video, capsys):
         assert main(["track", *argv]) == 2
         err = capsys.readouterr().err
         assert words in err and "Traceback" not in err, err
+
+
+def test_a_camera_lost_mid_run_is_one_line_exit_1_and_a_whole_recording(rendered, tmp_path,
+                                                                        capsys):  # fmt: skip
+    from conftest import write_video
+
+    whole = write_video(tmp_path / "cam.avi", rendered, 30, "MJPG")
+    data = open(whole, "rb").read()
+    cut = tmp_path / "unplugged.avi"  # the camera stops delivering half way
+    cut.write_bytes(data[: len(data) // 2])
+    record = tmp_path / "session.csv"
+    with vmc_peer() as peer:
+        argv = ["--camera", str(cut), "--send", f"vmc://127.0.0.1:{peer.port}",
+                "--record", str(record)]  # fmt: skip
+        assert main(["track", *argv]) == 1
+    captured = capsys.readouterr()
+    lines = [ln for ln in captured.err.splitlines() if ln.startswith("faceclean:")]
+    assert len(lines) == 1 and "Traceback" not in captured.err, captured.err
+    assert f"camera {cut} stopped delivering frames (the file failed mid-stream" in lines[0]
+    assert "plugged in" in lines[0] and f"recording up to then is in {record}" in lines[0]
+    raw, cleaned = io.load(record), io.load(tmp_path / "session.clean.csv")
+    assert 3 <= raw.n_frames == cleaned.n_frames < N_FRAMES  # written whole, up to the loss
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "cam.avi", "session.clean.csv", "session.csv", "unplugged.avi"]  # no temporaries

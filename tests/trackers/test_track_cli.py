@@ -97,3 +97,25 @@ def test_track_does_not_import_torch(face_video, tmp_path):
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def test_two_faces_in_view_the_first_largest_is_kept_and_said_once(two_faces, tmp_path,
+                                                                   capsys):  # fmt: skip
+    from conftest import two_jaws, write_video
+
+    video = write_video(tmp_path / "two.mp4", two_faces, 30)
+    out = tmp_path / "two.csv"
+    assert main(["track", video, "-o", str(out), "--keep-raw"]) == 0
+    said = capsys.readouterr().out
+    crowd = [ln for ln in said.splitlines() if "faces in view" in ln]
+    assert len(crowd) == 1 and "on the left of the picture" in crowd[0], said
+    from faceclean.channels import ARKIT52
+
+    jaw = io.load(tmp_path / "two.raw.csv").arkit()[0][:, ARKIT52.index("jawOpen")]
+    mine, other = two_jaws(N_FRAMES)
+    assert np.isfinite(jaw).all()
+    # A's mouth throughout, also once B has become the larger face (from a third on)
+    late = slice(N_FRAMES // 3, None)
+    assert np.corrcoef(jaw, mine)[0, 1] > 0.9
+    assert np.corrcoef(jaw[late], mine[late])[0, 1] > 0.9
+    assert np.corrcoef(jaw, other)[0, 1] < -0.5

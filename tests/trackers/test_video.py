@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -103,3 +104,32 @@ def test_frames_not_taken_in_time_are_counted_as_dropped(tmp_path):
 def test_a_camera_index_that_does_not_open_is_one_line():
     with pytest.raises(FacecleanError, match="camera 97 does not open"):
         Camera(97)
+
+
+def test_a_source_that_goes_quiet_is_lost_not_ended(tmp_path):
+    # frames for 0.2 s, then nothing for 3 s (then more): a camera unplugged mid-run
+    times = np.array([0, 33, 66, 100, 133, 166, 200, 3200, 3233]) / 1000.0
+    path = write_vfr(tmp_path / "gap.mp4", _frames(len(times)), times)
+    with Camera(path, stall=0.4) as cam:
+        cam.start()
+        while not cam.ended:
+            cam.latest(timeout=0.1)
+    assert cam.captured == 7  # the frames before the gap, none after
+    assert cam.lost == "no frame for 0.4 s"
+
+
+def test_a_stand_in_that_fails_mid_stream_is_lost_and_its_end_is_not(tmp_path):
+    whole = write_video(tmp_path / "whole.avi", _frames(40), 120, "MJPG")
+    data = Path(whole).read_bytes()
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(data[: len(data) // 2])
+    for path, lost in ((cut, "failed mid-stream: .*truncated"), (whole, None)):
+        with Camera(path) as cam:
+            cam.start()
+            while not cam.ended:
+                cam.latest(timeout=0.1)
+        assert cam.captured >= 5  # it played up to the cut
+        if lost is None:
+            assert cam.lost is None and cam.captured == 40  # a file's end: a normal end
+        else:
+            assert re.search(lost, cam.lost) and "\n" not in cam.lost

@@ -128,6 +128,7 @@ def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = F
         io.check_output(raw, "livelink", "livelink")
     model = face.model_path(args.tracker_model)
     started = time.perf_counter()
+    said: list[str] = []  # the one line about several faces in view, if any
     if progress:
         from tqdm import tqdm
 
@@ -139,9 +140,9 @@ def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = F
                     bar.total = total
                 bar.update(done - bar.n)
 
-            anim = face.track_video(video, model, tick)
+            anim = face.track_video(video, model, tick, said.append)
     else:
-        anim = face.track_video(video, model)
+        anim = face.track_video(video, model, on_crowd=said.append)
     tracked = time.perf_counter() - started
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice, anim.names)
@@ -156,7 +157,7 @@ def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = F
         io.save(anim, raw, fmt="livelink")
     lost = int((~anim.valid).sum())
     ms = 1000.0 * tracked / max(anim.n_frames, 1)
-    return (
+    return "".join(f"{video}: {line}\n" for line in said) + (
         f"wrote {out}: {anim.n_frames} frames"
         + (f" ({lost} without a face: missing)" if lost else "")
         + f", {len(anim.names)} channels + head yaw/pitch/roll, cleaned with {what}"

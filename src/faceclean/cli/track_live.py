@@ -7,6 +7,10 @@ relay's encoders). Ctrl-C or SIGTERM stops it with exit 0 and a final counters l
 a camera that stops delivering (unplugged) ends it with that said and exit 1; a file's
 end is a normal stop. ``--record take.csv`` writes the raw scores to take.csv and what
 was sent to take.clean.csv (the relay's recorder).
+
+Unplugged (``Camera.lost``): a camera read that fails, no frame for ``video.STALL`` s, or
+a stand-in file that fails mid-stream. The recording is written first; the one line
+says what stopped and what to do.
 """
 
 from __future__ import annotations
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     source = int(args.camera) if args.camera.strip().isdigit() else args.camera
     model = model_path(args.tracker_model)
     with (
-        FaceTracker(model) as tracker,
+        FaceTracker(model, lambda line: print(line, flush=True)) as tracker,
         Camera(source) as camera,
         Live(camera, tracker, cleaner, send, pose=pose, recorder=recorder) as live,
     ):
@@ -77,7 +81,12 @@ def run(args: argparse.Namespace) -> int:
         print("recorded nothing: no face was sent, so no file was written", flush=True)
     if stats.send_errors:
         print(f"faceclean: {stats.send_errors} sends refused by {send}", file=sys.stderr)
-    if camera.ended and isinstance(source, int) and not live.stopped:
-        print(f"faceclean: camera {source} stopped delivering frames (unplugged?)", file=sys.stderr)
+    if camera.lost is not None and not live.stopped:  # unplugged, stalled, a failed file
+        kept = ""
+        if recorder is not None and len(recorder):
+            kept = f"; the recording up to then is in {args.record}"
+        print(f"faceclean: camera {args.camera} stopped delivering frames ({camera.lost}): "
+              f"check that it is plugged in and no other program holds it, then run again{kept}",
+              file=sys.stderr)  # fmt: skip
         return 1
     return 0

@@ -75,10 +75,11 @@ class Tracker:
 
 
 def landmarker(model_path: str | os.PathLike, video: bool, blendshapes: bool = False,
-               pose: bool = False, extra: str = "pairs"):  # fmt: skip
-    """MediaPipe's FaceLandmarker for one face from the bundle at ``model_path`` (read once,
-    bounded, checked by ``check_bundle``): VIDEO mode when ``video``, else IMAGE; with the
-    52 scores (``blendshapes``) and the head's transformation matrix (``pose``). A bundle
+               pose: bool = False, extra: str = "pairs", faces: int = 1):  # fmt: skip
+    """MediaPipe's FaceLandmarker for up to ``faces`` faces from the bundle at ``model_path``
+    (read once, bounded, checked by ``check_bundle``): VIDEO mode when ``video``, else
+    IMAGE; with the 52 scores (``blendshapes``) and the head's transformation matrix
+    (``pose``). A bundle
     MediaPipe refuses, or mediapipe missing (``pip install 'faceclean[EXTRA]'``), is one line."""
     path = Path(model_path)
     bundle = read_bytes(path, MAX_MODEL, "tracker model file")  # regular, bounded, once
@@ -97,7 +98,7 @@ def landmarker(model_path: str | os.PathLike, video: bool, blendshapes: bool = F
     options = FaceLandmarkerOptions(
         base_options=BaseOptions(model_asset_buffer=bundle),
         running_mode=RunningMode.VIDEO if video else RunningMode.IMAGE,
-        num_faces=1,
+        num_faces=faces,
         output_face_blendshapes=blendshapes,
         output_facial_transformation_matrixes=pose,
     )

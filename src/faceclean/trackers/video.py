@@ -12,7 +12,11 @@ the frame count its container states (truncated mid-stream), is refused in one l
 for one (played at its own pace, so a test feeds the live path as a camera would). A
 capture thread reads frames as they come and stamps each with ``time.monotonic()`` at
 capture; the consumer takes only the newest (``latest``), and a frame replaced before it
-was taken is counted in ``dropped``, as the relay counts stale frames.
+was taken is counted in ``dropped``, as the relay counts stale frames. A source that
+stops delivering ends the camera with ``lost`` saying why: a camera whose read fails
+(unplugged, or its driver gave up), a stand-in file that fails mid-stream (truncated), or
+no frame for ``stall`` seconds (``FIRST_FRAME`` s for the first: a webcam takes a moment
+to start). A stand-in file's end is a normal end (``lost`` None).
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from faceclean.errors import FacecleanError
 
 NOMINAL_FPS = 30.0  # Hz, when a container states no rate
 TRUNCATED = 0.9  # a file that yields under this share of its stated frame count is truncated
+STALL = 2.0  # s without a new frame: the camera has stopped delivering
+FIRST_FRAME = 10.0  # s allowed for a camera's first frame
 
 
 def _cv2():
@@ -109,13 +115,16 @@ class Camera:
     """A live source: ``Camera(0)`` (an OpenCV camera index) or ``Camera("take.mp4")`` (a
     file played at its own pace, standing in for a camera). ``start()``, then ``latest()``
     gives the newest ``(rgb, t)`` not yet taken, t in ``time.monotonic()`` seconds at
-    capture (see the module docstring)."""
+    capture (see the module docstring). ``stall``: s without a frame that end it as lost."""
 
-    def __init__(self, source: int | str | os.PathLike) -> None:
+    def __init__(self, source: int | str | os.PathLike, stall: float = STALL) -> None:
         self.source = source
+        self.stall = stall
         self.captured = 0  # frames read from the source
         self.dropped = 0  # frames replaced by a newer one before they were taken
         self.ended = False  # the source stopped delivering (a file's end, an unplugged camera)
+        self.lost: str | None = None  # why it stopped, when that was not a file's normal end
+        self._last = time.monotonic()  # s, when the last frame came (or the capture started)
         self._slot: tuple[np.ndarray, float] | None = None
         self._cond = threading.Condition()
         self._stop = threading.Event()
@@ -132,17 +141,30 @@ class Camera:
             self._video = Video(source)
 
     def start(self) -> Camera:
+        self._last = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="camera", daemon=True)
         self._thread.start()
         return self
 
     def latest(self, timeout: float = 1.0) -> tuple[np.ndarray, float] | None:
-        """The newest frame not yet taken, waiting up to ``timeout`` s; None if none came."""
+        """The newest frame not yet taken, waiting up to ``timeout`` s; None if none came.
+        No frame for ``stall`` s (``FIRST_FRAME`` before the first) ends the camera as lost."""
         with self._cond:
             if self._slot is None and not self.ended:
                 self._cond.wait(timeout)
             frame, self._slot = self._slot, None
+            if frame is None and not self.ended:
+                limit = self.stall if self.captured else max(self.stall, FIRST_FRAME)
+                if time.monotonic() - self._last > limit:
+                    self._end(f"no frame for {limit:g} s")
         return frame
+
+    def _end(self, lost: str | None) -> None:
+        """Mark the source ended (``lost``: why, when it failed); hold ``_cond``."""
+        if not self.ended:
+            self.ended, self.lost = True, lost
+            self._stop.set()
+            self._cond.notify_all()
 
     def _put(self, rgb: np.ndarray) -> None:
         t = time.monotonic()  # s, stamped at capture
@@ -150,21 +172,20 @@ class Camera:
             if self._slot is not None:
                 self.dropped += 1
             self._slot = (rgb, t)
+            self._last = t
             self.captured += 1
             self._cond.notify()
 
     def _run(self) -> None:
+        lost: str | None = "the capture stopped"  # unless it returns why, or a file's end
         try:
-            if self._video is not None:
-                self._play()
-            else:
-                self._grab()
+            lost = self._play() if self._video is not None else self._grab()
         finally:
             with self._cond:
-                self.ended = True
-                self._cond.notify_all()
+                self._end(lost)
 
-    def _play(self) -> None:
+    def _play(self) -> str | None:
+        """Play the stand-in file at its own pace; None at its end, else why it failed."""
         start: float | None = None
         try:
             for rgb, t in self._video:
@@ -172,20 +193,23 @@ class Camera:
                     start = time.monotonic() - t
                 wait = start + t - time.monotonic()
                 if wait > 0 and self._stop.wait(wait):
-                    return
+                    return None
                 if self._stop.is_set():
-                    return
+                    return None
                 self._put(rgb)
-        except FacecleanError:
-            return  # a truncated stand-in ends as an unplugged camera would
+        except FacecleanError as e:  # a truncated stand-in ends as an unplugged camera would
+            return f"the file failed mid-stream: {e}"
+        return None
 
-    def _grab(self) -> None:
+    def _grab(self) -> str | None:
+        """Read the camera until stopped (None) or until a read fails (why)."""
         cv2 = _cv2()
         while not self._stop.is_set():
             ok, bgr = self._cap.read()
             if not ok or bgr is None:
-                return  # unplugged, or the driver gave up
+                return "a read failed (unplugged, or its driver gave up)"
             self._put(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        return None
 
     def close(self) -> None:
         self._stop.set()
