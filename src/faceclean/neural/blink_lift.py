@@ -20,7 +20,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from faceclean.learned.tracker_map import MAX_LIFT, MapWeights
+from faceclean.learned.map_weights import MAX_LIFT, MapWeights
 from faceclean.neural.map_groups import at_rest
 
 # The blink lift's knees (rise above rest, weight units; None: no lift) and the closure

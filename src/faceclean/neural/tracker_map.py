@@ -28,7 +28,7 @@ from faceclean.channels import ARKIT52
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
-from faceclean.learned.tracker_map import MAX_DETAIL, MapWeights
+from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_groups
 from faceclean.neural.blink_lift import CLOSURE_BAND as CLOSURE_BAND  # the fit's settings
 from faceclean.neural.blink_lift import KNEES, TOPS

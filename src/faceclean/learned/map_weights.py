@@ -1,0 +1,128 @@
+"""A tracker map's weights (learned/tracker_map.py): its config and arrays, validated.
+
+Checkpoint (.npz, no pickle): ``config`` JSON {"format": FORMAT, "inputs": [K],
+"outputs": [M], "hidden": H, "rest": bool, "prefilter": bool, "deadband": eps (a number
+or M of them, weight units, 0 if absent), ...facts}; arrays
+``min_cutoff``, ``beta``, ``d_cutoff`` (K,) Hz; ``mu``, ``sd`` (2K,); ``w1`` (H, 2K),
+``b1`` (H,), ``w2`` (M, H), ``b2`` (M,), ``a`` (M, K), ``b`` (M, K), ``c`` (M,); optional
+``lift_gain`` >= 0 and ``lift_knee`` in [0, 1] (M,) (absent: no lift; a gain > 0 needs an
+input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_DETAIL]
+(absent: 0; nonzero needs an input of the output's name, as the lift does), the fitted
+gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
+user's ``detail`` setting; config ``lift_top`` true or false (absent: false).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from faceclean.errors import FacecleanError
+from faceclean.learned import formats
+from faceclean.learned.formats import TRACKER_MAP as FORMAT
+
+MAX_WIDTH = 4096
+MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
+MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blinks
+MAX_DETAIL = 4.0  # the detail's gain: more would pass the raw input's noise amplified
+
+
+@dataclass(frozen=True)
+class MapWeights:
+    """A tracker map's config and arrays (float64), validated."""
+
+    config: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return tuple(self.config["inputs"])
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return tuple(self.config["outputs"])
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MapWeights:
+        config, arrays = formats.read(path)
+        return cls.build(config, arrays, Path(path).name)
+
+    @classmethod
+    def build(cls, config: dict, arrays: dict, label: str = "tracker map") -> MapWeights:
+        if config.get("format") != FORMAT:
+            raise FacecleanError(f"{label}: not a {FORMAT} model")
+        try:
+            k, m = len(config["inputs"]), len(config["outputs"])
+            h = int(config["hidden"])
+            names_ok = all(isinstance(n, str) for n in [*config["inputs"], *config["outputs"]])
+        except (KeyError, TypeError, ValueError):
+            raise FacecleanError(f"{label}: config lacks inputs, outputs or hidden") from None
+        if not (names_ok and 1 <= k <= MAX_WIDTH and 1 <= m <= MAX_WIDTH and 0 <= h <= MAX_WIDTH):
+            raise FacecleanError(f"{label}: bad inputs/outputs/hidden in config")
+        if len(set(config["inputs"])) != k or len(set(config["outputs"])) != m:
+            raise FacecleanError(f"{label}: channel names repeat")
+        shapes = {
+            "min_cutoff": (k,),
+            "beta": (k,),
+            "d_cutoff": (k,),
+            "mu": (2 * k,),
+            "sd": (2 * k,),
+            "w1": (h, 2 * k),
+            "b1": (h,),
+            "w2": (m, h),
+            "b2": (m,),
+            "a": (m, k),
+            "b": (m, k),
+            "c": (m,),
+        }
+        out = {}
+        for key, shape in shapes.items():
+            a = arrays.get(key)
+            if a is None or tuple(np.shape(a)) != shape or not np.issubdtype(a.dtype, np.number):
+                raise FacecleanError(f"{label}: array {key!r} missing or not of shape {shape}")
+            a = np.asarray(a, np.float64)
+            if not np.isfinite(a).all():
+                raise FacecleanError(f"{label}: array {key!r} is not finite")
+            out[key] = a
+        if (out["sd"] <= 0).any() or (out["min_cutoff"] <= 0).any() or (out["d_cutoff"] <= 0).any():
+            raise FacecleanError(f"{label}: scales and cut-offs must be > 0")
+        if (out["beta"] < 0).any():
+            raise FacecleanError(f"{label}: beta must be >= 0")
+        limits = (("lift_gain", (0.0, MAX_LIFT)), ("lift_knee", (0.0, 1.0)),
+                  ("detail", (-MAX_DETAIL, MAX_DETAIL)))  # fmt: skip
+        for key, (lo, hi) in limits:
+            a = arrays.get(key, np.zeros(m))
+            if tuple(np.shape(a)) != (m,) or not np.issubdtype(np.asarray(a).dtype, np.number):
+                raise FacecleanError(f"{label}: array {key!r} not of shape {(m,)}")
+            a = np.asarray(a, np.float64)
+            if not (np.isfinite(a).all() and (a >= lo).all() and (a <= hi).all()):
+                raise FacecleanError(f"{label}: {key} must be within [{lo:g}, {hi:g}]")
+            out[key] = a
+        for key, what in (("lift_gain", "is lifted"), ("detail", "has a detail")):
+            own = [o for o, g in zip(config["outputs"], out[key], strict=True) if g != 0]
+            if set(own) - set(config["inputs"]):
+                name = sorted(set(own) - set(config["inputs"]))[0]
+                raise FacecleanError(f"{label}: output {name!r} {what} but is not an input")
+        try:
+            band = np.broadcast_to(np.asarray(config.get("deadband", 0.0), np.float64), (m,))
+        except (TypeError, ValueError):
+            raise FacecleanError(f"{label}: deadband must be a number or one per output") from None
+        if not (np.isfinite(band).all() and (band >= 0).all() and (band <= MAX_DEADBAND).all()):
+            raise FacecleanError(f"{label}: deadband must be within [0, {MAX_DEADBAND}]")
+        if not isinstance(config.get("lift_top", False), bool):
+            raise FacecleanError(f"{label}: lift_top must be true or false")
+        scale = config.get("detail_scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
+            raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")
+        return cls(dict(config), out)
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the map, once ``formats.write`` has checked it: every array finite, and
+        the file as written loads (``build``); else one line, and nothing written."""
+        label = Path(path).name
+        formats.write(path, self.config, self.arrays,
+                      lambda a: MapWeights.build(*formats.split(a, label), label))  # fmt: skip
