@@ -19,7 +19,7 @@ ROOT = SRC / "faceclean"
 
 CORE = {
     "animation", "channels", "channel_map", "errors", "settings", "timing", "strict_json",
-    "workers", "pose",
+    "workers", "pose", "tracking",
 }  # fmt: skip
 # package (a subpackage or a top-level module) -> what it may import besides the core and
 # itself, at module level or inside a function. The same table is in docs/ARCHITECTURE.md.
@@ -47,7 +47,10 @@ MAY_IMPORT: dict[str, set[str]] = {
     "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
     "trackers": {"synthetic", "relay", "io"},  # the model bundle check; the live send
     "report": {"evaluation", "face", "io", "faceclean"},
-    "ui": {"resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"},
+    "ui": {
+        *("resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"),
+        "guided",  # the page's guided calibration (the fit calibrate --guided uses)
+    },
     "neural": {"filters", "learned", "evaluation", "face", "io", "cli"},
     "cli": {"*"},  # the command line may use anything (heavy imports inside run)
     "faceclean": {"io", "cleaner"},  # the package's public face

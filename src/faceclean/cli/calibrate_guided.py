@@ -41,15 +41,7 @@ def run_guided(args: argparse.Namespace) -> int:
     result = guided(anim, args.tracker, take=label)
     for line in report(result):
         print(line)
-    a = result.alignment
-    missing = [g for g in a.segments if not g.seen]
-    if not a.follows:
-        why = f"the take did not follow the script ({a.seen} of {len(a.segments)} prompts seen)"
-    elif missing:
-        names = ", ".join(f"{g.prompt.id} ({g.why})" for g in missing)
-        why = f"{len(missing)} prompt{'s' * (len(missing) > 1)} not seen: {names}"
-    else:
-        why = None
+    why = result.alignment.shortfall()
     if why is not None and not args.partial:
         raise FacecleanError(f"{why}; nothing written (--partial writes from the prompts seen)")
     if why is not None:

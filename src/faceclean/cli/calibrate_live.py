@@ -17,9 +17,8 @@ import numpy as np
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
+from faceclean.guided.script import COUNTDOWN, TAIL
 
-COUNTDOWN = 3  # s
-TAIL = 3.0  # s recorded after the script's end (a late person finishes)
 MAX_DATAGRAM = 65536
 
 

@@ -223,7 +223,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) 
     pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
     with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:
         what = f"{relay.address} -> {send}"
-        session = Live(tuning, relay, tap, what, nice=args.ui_nice)
+        session = Live(tuning, relay, tap, what, nice=args.ui_nice, say=ui.say)
         session.mesh()  # the face built before the page asks
         session.start()
         server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser)

@@ -4,16 +4,21 @@ Serves the page on 127.0.0.1 (``--host`` to change; ``--port``, else a free one)
 its URL with the per-start token and opens it in a browser when one is there. The page
 takes the cleaner options of ``clean`` as its starting point; its controls are the same
 words (``--method``, ``--set``, ``--calibration``), saved as the files the CLI reads.
-Ctrl-C stops it. See faceclean.ui.
+Ctrl-C stops it. See faceclean.ui. ``camera_page`` serves the same page on ``track
+--camera --ui`` (faceclean.ui.camera); ``say`` prints what a page has to say.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+from collections.abc import Iterator
+from typing import Any
 
 from faceclean.cli import options
 
 HELP = "tune a take in the browser: sliders, calibrate, curves and faces; save settings"
+NICE = 10  # track --camera --ui: a page drawn on the CPU lets its browser yield (relay's default)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,12 +65,41 @@ def serve(session, host: str, port: int, no_browser: bool):
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"faceclean: the page listens on {host}: anyone with the URL can use it", flush=True)
     if not no_browser:
-        import contextlib
         import webbrowser
 
         with contextlib.suppress(Exception):  # no browser here: the printed URL is enough
             webbrowser.open(server.url)
     return server
+
+
+def say(line: str) -> None:
+    """What the page has to say, printed (faceclean.ui prints nothing itself)."""
+    print(line, flush=True)
+
+
+@contextlib.contextmanager
+def camera_page(args: argparse.Namespace, loop: Any, camera: Any, tap: Any) -> Iterator[Any]:
+    """``track --camera --ui``: the page on the camera loop (faceclean.ui.camera) while the
+    block runs; nothing without a ``tap`` (no --ui)."""
+    if tap is None:
+        yield None
+        return
+    from faceclean.ui.camera import CameraPage
+
+    session = CameraPage(tuning(args).with_choice(), loop, camera, tap,
+                         f"camera {args.camera}", nice=NICE, say=say)  # fmt: skip
+    session.mesh()  # the face built before the page asks
+    loop.on_image = session.image
+    session.start()
+    try:
+        server = serve(session, args.ui_host, args.ui_port, args.no_browser)
+        try:
+            yield session
+        finally:
+            server.close()
+    finally:
+        loop.on_image = None
+        session.stop()
 
 
 def run(args: argparse.Namespace) -> int:

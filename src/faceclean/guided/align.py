@@ -69,6 +69,17 @@ class Alignment:
     def follows(self) -> bool:
         return self.seen >= FOLLOW * len(self.segments)
 
+    def shortfall(self) -> str | None:
+        """Why the take falls short of the script, in one line (None: every prompt seen)."""
+        missing = [g for g in self.segments if not g.seen]
+        if not self.follows:
+            return (f"the take did not follow the script ({self.seen} of {len(self.segments)} "
+                    "prompts seen)")  # fmt: skip
+        if missing:
+            names = ", ".join(f"{g.prompt.id} ({g.why})" for g in missing)
+            return f"{len(missing)} prompt{'s' * (len(missing) > 1)} not seen: {names}"
+        return None
+
     def script_time(self, t: np.ndarray) -> np.ndarray:
         """Script time (s) of take times ``t`` (NaN outside the aligned span)."""
         t = np.asarray(t, dtype=np.float64)

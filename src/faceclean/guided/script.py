@@ -30,6 +30,8 @@ from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 
 SCRIPT_FORMAT = "faceclean-guided-script/1"
+COUNTDOWN = 3  # s counted down before a live performance starts (the terminal's, the page's)
+TAIL = 3.0  # s recorded live after the script's end (a late person finishes)
 SHIPPED = Path(__file__).resolve().parent.parent / "scripts" / "guided.json"
 _COL = {n: i for i, n in enumerate(ARKIT52)}
 

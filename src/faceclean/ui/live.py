@@ -16,13 +16,17 @@ the last ``PRIME`` s of input so its state is the stream's, and hands it over wi
 Calibrate holds a neutral face for N s: the next N s of raw input (before any level
 mapping), with a countdown on the page; the mapping is ``calibrate`` on them as
 ``--calibrate-seconds`` measures it (the tops of a loaded calibration kept), and the
-new cleaner is swapped in as for any change.
+new cleaner is swapped in as for any change. The guided calibration (ui/guided.py)
+records from the same ``Tap`` (one of its recorders while the script runs), ticked by the
+push thread. What the command should print (the browser's priority lowered, a guided
+calibration's outcome) goes to ``say``, the CLI's callback: this module prints nothing.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -32,6 +36,7 @@ from faceclean.animation import Animation
 from faceclean.calibration import MIN_FRAMES
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
+from faceclean.ui.guided import Panel
 from faceclean.ui.server import Client
 from faceclean.ui.session import MAX_PATH, Base, number, seq, text
 from faceclean.ui.tuning import Tuning
@@ -94,8 +99,10 @@ class Live(Base):
     mode = "live"
     MESSAGES = (*Base.MESSAGES, "channels", "calibrate", "record", "gl")
 
-    def __init__(self, tuning: Tuning, relay: Any, tap: Tap, describe: str, nice: int = 0) -> None:
-        super().__init__(tuning)
+    def __init__(self, tuning: Tuning, relay: Any, tap: Tap, describe: str, nice: int = 0,
+                 say: Callable[[str], None] | None = None) -> None:  # fmt: skip
+        super().__init__(tuning, say)
+        self.guided = Panel(self, tap=tap)
         self.relay, self.tap, self.what = relay, tap, describe
         self.nice = nice  # a software-drawn page's browser yields at this nice (ui/priority.py)
         self._yielded = False
@@ -155,7 +162,9 @@ class Live(Base):
         def lower() -> None:
             from faceclean.ui import priority
 
-            print(priority.lower_page(server, page, self.nice), flush=True)
+            said = priority.lower_page(server, page, self.nice)
+            if self.say is not None:
+                self.say(said)
 
         threading.Thread(target=lower, name="faceclean-ui-nice", daemon=True).start()
 
@@ -208,6 +217,7 @@ class Live(Base):
             n, rows = self.tap.since(max(sent, self.tap.n - BACKLOG))
             sent = n
             self._calibration()
+            self.guided.tick()
             now = time.monotonic()
             stats = None
             if now - last_stats >= STATS_EVERY:

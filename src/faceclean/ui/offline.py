@@ -12,7 +12,8 @@ Binary message: uint32 little-endian header length, the JSON header
 ``{"kind": "input"|"cleaned", "seq", "start", "count", "channels": 52}``, zero padding to
 a multiple of 4 bytes, then ``count x 52`` float32 values (NaN: missing).
 Calibrate measures the neutral as ``faceclean calibrate --neutral S`` does, on the take
-from the playhead on; export writes the cleaned take as ``clean -o`` would.
+from the playhead on; export writes the cleaned take as ``clean -o`` would; the guided
+calibration's panel (ui/guided.py) fits on the take as ``calibrate --guided take.csv`` does.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
+from faceclean.ui.guided import Panel
 from faceclean.ui.server import Client
 from faceclean.ui.session import MAX_PATH, Base, number, seq, text
 from faceclean.ui.tuning import Tuning
@@ -64,6 +66,7 @@ class Offline(Base):
         self.times = np.asarray(self.take.times, np.float64)  # (N,) s
         self.input, self.present = self.take.arkit()  # (N, 52)
         super().__init__(tuning)
+        self.guided = Panel(self, take=lambda: (self.take, self.path.name))
         self.cleaned: np.ndarray | None = None  # (N, 52) of the whole take, current tuning
         self.cleaned_seq: int | None = None
         self.good: Tuning | None = None  # the last tuning that cleaned the whole take

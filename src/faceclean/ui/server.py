@@ -50,6 +50,7 @@ def files() -> dict[str, Path]:
         "/": STATIC / "index.html",
         "/ui.js": STATIC / "ui.js",
         "/curves.js": STATIC / "curves.js",
+        "/guided.js": STATIC / "guided.js",
         "/ui.css": STATIC / "ui.css",
         "/face.js": build.FACE_JS,
         "/three/three.module.js": three / "three.module.js",

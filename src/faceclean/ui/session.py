@@ -1,5 +1,6 @@
 """The messages both pages share: choose the cleaner and its settings, save and load the
-CLI's files, drop the calibration. ``Offline`` (ui/offline.py) and ``Live``
+CLI's files, drop the calibration, the guided calibration's panel (ui/guided.py: each
+mode makes its ``Panel`` as ``guided``). ``Offline`` (ui/offline.py) and ``Live``
 (ui/live.py) add what their mode does with a new ``Tuning`` (``apply``) and their own
 messages (``on_<type>``).
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -30,9 +32,11 @@ class Base:
     """Clients, the current ``Tuning`` and the shared messages."""
 
     mode = "?"
-    MESSAGES: tuple[str, ...] = ("set", "save", "load", "uncalibrate")
+    MESSAGES: tuple[str, ...] = ("set", "save", "load", "uncalibrate", "guided")
+    guided: Any = None  # the guided calibration's panel (ui/guided.py), made by the mode
 
-    def __init__(self, tuning: Tuning) -> None:
+    def __init__(self, tuning: Tuning, say: Callable[[str], None] | None = None) -> None:
+        self.say = say  # what the command prints: the CLI's callback (None: nothing)
         self.tuning = tuning.with_choice()
         self.lock = threading.RLock()  # the tuning and the clients
         self.clients: list[Client] = []
@@ -83,6 +87,7 @@ class Base:
             "presets": presets.shipped(),
             "trackers": list(TRACKERS),  # --tracker's names
             "state": self.tuning.describe(),
+            "guided": None if self.guided is None else self.guided.hello(),
         }
 
     # -- messages -----------------------------------------------------------------------
@@ -138,6 +143,11 @@ class Base:
 
     def on_uncalibrate(self, client: Client, m: dict[str, Any]) -> None:
         self.use(self.tuning.calibrated(None).with_choice(), seq(m), "uncalibrate")
+
+    def on_guided(self, client: Client, m: dict[str, Any]) -> None:
+        if self.guided is None:
+            raise FacecleanError("guided calibration: not on this page")
+        self.guided.handle(client, m, seq(m))
 
 
 # -- field checks ----------------------------------------------------------------------------

@@ -144,7 +144,7 @@ class Tuning:
     # -- the files -------------------------------------------------------------------------
     def save_levels(self, path: str | os.PathLike) -> Adjust:
         """The level mapping as a ``--calibration`` file; returns what was written."""
-        _json_path(path, "levels")
+        json_path(path, "levels")
         adjust = self.levels(ARKIT52)
         adjust.save(path)
         return adjust
@@ -152,7 +152,7 @@ class Tuning:
     def save_preset(self, path: str | os.PathLike) -> list[str]:
         """The cleaner and its smoothing items as a ``--preset`` file; returns the items a
         preset cannot hold (per-channel smoothing, levels), as ``--set`` words."""
-        _json_path(path, "preset")
+        json_path(path, "preset")
         if self.words is None and self.tracker:  # the tracker's own cleaner
             doc, rest = preset_doc(tracker_words(self.tracker), self.items,
                                    f"--tracker {self.tracker}")  # fmt: skip
@@ -225,7 +225,7 @@ def _defaults(cls: type) -> dict[str, Any]:
     return {k: p.default for k, p in sig.parameters.items() if p.default is not inspect._empty}
 
 
-def _json_path(path: str | os.PathLike, what: str) -> None:
+def json_path(path: str | os.PathLike, what: str) -> None:
     if len(str(path)) > 4096 or not str(path).lower().endswith(".json"):
         raise FacecleanError(f"{str(path)[:80]}: a {what} file is a .json file")
     folder = Path(path).parent

@@ -3,9 +3,12 @@
 // as {"type": "set", words, items}; the server checks them with the CLI's resolver and
 // answers with the state, or the CLI's one-line refusal, shown below the controls.
 // Offline: the take arrives as ARKit-52 float32 arrays (binary messages); live: frames
-// arrive aggregated, at most ~30 messages a second.
+// arrive aggregated, at most ~30 messages a second; on track --camera --ui the camera's
+// image arrives as JPEG binary messages (faceclean/ui/camera.py) beside them. The guided
+// calibration's panel is guided.js.
 import { faceView, softwareGL } from "faceclean/face";
 import { drawCurve, STYLE } from "/curves.js";
+import { guidedPanel } from "/guided.js";
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -29,6 +32,7 @@ const api = {
   ready: false, mode: null, frames: 0, pushes: 0, openMs: null, readyMs: null, firstFrameMs: null, errors: [], notes: [],
   state: null, sentSeq: 0, setSeq: 0, stats: null, cleanedSeq: null, fullSeq: null, cleanedParts: 0,
   calibrating: null, countdown: [], softwareGL: null, faceDraws: 0, curveDraws: 0, firstFaceMs: null,
+  guided: null, guidedPhase: null, guidedShown: [], images: 0, imageSize: null, // the guided panel; camera images drawn
   sentAt: {}, cleanedAt: {}, fullAt: {}, // ms (page clock) a message went, its first cleaned part and whole take came
   get time() { return play.t; },
   get cleaned() { return take.cleaned; }, // (N * 52) float32, offline
@@ -38,7 +42,7 @@ const api = {
 };
 window.faceclean = api;
 
-let hello = null, state = null, items = [], face = null, seq = 0;
+let hello = null, state = null, items = [], face = null, seq = 0, guided = null;
 let inFlight = null, dirty = false; // one "set" at a time; the newest wins
 const picked = [];
 const play = { t: 0, playing: false, last: null, span: 10, duration: 0 };
@@ -86,6 +90,7 @@ function onMessage(m) {
   if (m.type === "frames") { api.pushes++; return onFrames(m); }
   if (m.type === "stats") { api.stats = m; return showStatus(); }
   if (m.type === "calibrating") return onCalibrating(m);
+  if (m.type === "guided") return guided && guided.on(m);
   if (m.type === "saved") {
     const rest = m.rest.length ? ` (not in a preset, keep as --set: ${m.rest.join(" ")})` : "";
     return note(`saved ${m.what} ${m.path}${rest}`);
@@ -100,6 +105,7 @@ function onMessage(m) {
 function onBinary(buf) {
   const n = new DataView(buf).getUint32(0, true);
   const head = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n)));
+  if (head.kind === "image") return onImage(head, new Uint8Array(buf, 4 + n, head.bytes));
   const values = new Float32Array(buf, 4 + n, head.count * 52);
   if (head.kind === "input") {
     take.input = new Float32Array(values);
@@ -123,7 +129,10 @@ function start(m) {
   hello = m;
   api.mode = m.mode;
   document.querySelectorAll("[data-mode]").forEach((el) => { el.hidden = el.dataset.mode !== m.mode; });
-  $("fc-title").textContent = m.mode === "offline" ? `faceclean tuning: ${m.take}` : `faceclean tuning: live relay ${m.relay}`;
+  $("fc-title").textContent = m.mode === "offline" ? `faceclean tuning: ${m.take}`
+    : m.camera ? `faceclean tuning: ${m.camera}` : `faceclean tuning: live relay ${m.relay}`;
+  $("fc-camera-box").hidden = !m.camera;
+  if (m.guided) guided = guidedPanel(m.guided, send, api);
   document.title = $("fc-title").textContent;
   const words = $("fc-words-list");
   for (const w of ["default", ...m.methods, ...m.presets.map((p) => p)]) words.append(new Option(w, w));
@@ -175,8 +184,11 @@ function onState(s) {
   $("fc-source").textContent = `cleaning with ${s.source}`;
   $("fc-command").textContent = s.command;
   const cal = s.calibration;
+  const measured = cal && cal.guided
+    ? `guided, ${cal.guided.seen.length} of ${cal.guided.seen.length + cal.guided.not_seen.length} prompts seen (tracker ${cal.tracker})`
+    : cal && `neutral ${(+cal.neutral_s).toFixed(2)} s`;
   $("fc-calibration").textContent = cal
-    ? `calibrated${cal.take ? ` from ${cal.take}` : ""}: ${cal.frames} frames, neutral ${(+cal.neutral_s).toFixed(2)} s${cal.file ? `; saved as ${cal.file}` : " (not saved yet: save levels)"}`
+    ? `calibrated${cal.take ? ` from ${cal.take}` : ""}: ${cal.frames} frames, ${measured}${cal.file ? `; saved as ${cal.file}` : ` (not saved yet: save ${cal.guided ? "calibration" : "levels"})`}`
     : "no calibration";
   render();
   flush();
@@ -548,6 +560,21 @@ function onFrames(m) {
   redraw();
 }
 
+// A camera image (JPEG): decoded off the main thread, drawn at its own size (CSS fits it).
+function onImage(head, jpeg) {
+  createImageBitmap(new Blob([jpeg], { type: "image/jpeg" })).then((bitmap) => {
+    const canvas = $("fc-camera");
+    if (canvas.width !== bitmap.width || canvas.height !== bitmap.height) {
+      canvas.width = bitmap.width;
+      canvas.height = bitmap.height;
+    }
+    canvas.getContext("2d").drawImage(bitmap, 0, 0);
+    bitmap.close();
+    api.images++;
+    api.imageSize = [head.width, head.height];
+  }).catch((err) => note(`a camera image could not be decoded (${err.message})`, true));
+}
+
 function onCalibrating(m) {
   api.calibrating = m;
   const el = $("fc-countdown");
@@ -566,6 +593,12 @@ function showStatus() {
   const s = api.stats;
   if (!s) { $("fc-status").textContent = `${hello.relay} · waiting for a sender`; return; }
   const ms = (v) => (v === null ? "–" : `${v.toFixed(3)} ms`);
+  if (s.camera) {
+    $("fc-status").textContent =
+      `${s.camera} · ${s.rate.toFixed(1)} fps · captured ${s.captured} · dropped ${s.dropped} · tracked ${s.tracked} ` +
+      `(no face ${s.lost}) · sent ${s.sent} · MediaPipe p50 ${ms(s.mediapipe_p50)} · clean+send p50 ${ms(s.p50)} p99 ${ms(s.p99)}`;
+    return;
+  }
   $("fc-status").textContent =
     `sender ${s.sender || "none yet"} · ${s.rate.toFixed(1)} fps · in ${s.frames_in} out ${s.frames_out} · ` +
     `dropped ${s.dropped} · latency p50 ${ms(s.p50)} p99 ${ms(s.p99)}`;
