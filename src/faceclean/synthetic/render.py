@@ -38,9 +38,11 @@ class Skin:
 
 
 class Renderer:
-    """Frames of one take: ``frame(weights, pose_deg, index) -> (size, size, 3) uint8``."""
+    """Frames of one take: ``frame(weights, pose_deg, index) -> (size, size, 3) uint8``.
+    ``gaze``: the eyeballs turn with the eyeLook weights (gaze.py; off: straight ahead)."""
 
-    def __init__(self, head: Head, scene: Scene, skin: Skin | None = None) -> None:
+    def __init__(self, head: Head, scene: Scene, skin: Skin | None = None,
+                 gaze: bool = False) -> None:  # fmt: skip
         self.head, self.scene, self.skin = head, scene, skin
         alpha = np.zeros(head.n_identity, np.float32)
         k = min(len(scene.identity), head.n_identity)
@@ -49,6 +51,11 @@ class Renderer:
             alpha *= scene.identity_scale
             alpha[: len(skin.alpha)] += skin.alpha
         self.base = head.identity(alpha)  # (V*3,) cm
+        self.eyes = None
+        if gaze:
+            from faceclean.synthetic.gaze import Eyes
+
+            self.eyes = Eyes(head, self.base)
         self.albedo = _albedo(head, scene, skin)  # (V, 3) linear RGB
         self._pose = None  # the last frame's pose (motion blur)
         n = scene.resolution
@@ -70,6 +77,8 @@ class Renderer:
     def _posed(self, weights, pose_deg):
         s, hd = self.scene, self.head
         v = hd.vertices(self.base, np.nan_to_num(weights))  # (V, 3) cm, head space
+        if self.eyes is not None:
+            self.eyes.turn(v, weights)
         r = rotation(*pose_deg)
         p = (v - hd.pivot) @ r.T
         p[:, 2] -= s.distance  # camera space, in front of the camera at -z
