@@ -2,8 +2,9 @@
 
 ``plan(...)`` lists jobs in a fixed order; ``shard(jobs, i, n)`` keeps every n-th one, so any
 scheduler can spread them (``--shard i/n``). ``run_job(job, out)`` renders the clip's frames
-at the job's timestamps from the truth weights, tracks them with MediaPipe, and writes one
-pair (docs/FORMATS.md, "Pairs"):
+at the job's timestamps from the truth weights, tracks them with MediaPipe (or the tracker
+a ``Worker`` is given: faceclean.tracking's interface), and writes one pair
+(docs/FORMATS.md, "Pairs"):
 
     NAME.tracked.csv   plain CSV: time (s) + MediaPipe's 51 ARKit channels; lost face = empty row
     NAME.truth.csv     plain CSV: the same times + the 52 ARKit weights that drove the render
@@ -19,6 +20,7 @@ import hashlib
 import json
 import os
 import re
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -28,6 +30,7 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.errors import FacecleanError
 from faceclean.timing import resample, stream_times
+from faceclean.tracking import Tracker, scores
 
 FORMAT = "faceclean-pair/1"
 SYNTH = "synth:"  # source prefix of a synthetic performer: "synth:SEED"
@@ -221,17 +224,26 @@ def frame_times(job: Job, duration: float) -> np.ndarray:
 
 
 class Worker:
-    """Everything a process loads once: the head mesh and the tracker model."""
+    """Everything a process loads once: the head mesh and the tracker model. ``tracker``
+    makes a fresh tracker for each clip (faceclean.tracking's interface; default:
+    MediaPipe's Face Landmarker at ``tracker_path``, which a photo scene's portrait fit
+    uses whatever ``tracker`` is)."""
 
     def __init__(self, head_path: str | os.PathLike, tracker_path: str | os.PathLike,
-                 portraits: list[str] | None = None) -> None:  # fmt: skip
+                 portraits: list[str] | None = None, *,
+                 tracker: Callable[[], Tracker] | None = None) -> None:  # fmt: skip
         from faceclean.synthetic.head import Head
 
         self.head = Head.load(head_path)
         self.tracker_path = tracker_path
-        from faceclean.synthetic.tracker import Tracker
+        if tracker is None:
+            from faceclean.synthetic.tracker import Tracker as MediaPipe
 
-        Tracker(tracker_path).close()  # refuse a bad model file before any job runs
+            tracker = lambda: MediaPipe(tracker_path)  # noqa: E731
+        self.tracker = tracker
+        probe = tracker()  # refuse a bad model file before any job runs
+        self.tracker_name = probe.name  # what a pair's record says tracked it
+        probe.close()
         self.portrait_sources = list(portraits or [])
         self._portraits: dict[str, np.ndarray] | None = None
         self._fitter = None
@@ -301,7 +313,7 @@ class Worker:
                 "format": FORMAT,
                 "job": asdict(job),
                 "scene": scene.record(),
-                "tracker": _tracker_version(),
+                "tracker": self.tracker_name,
                 "frames": len(times),
                 "lost": int((~tracked.valid).sum()),
                 "pose": "take" if src_pose is not None else "drift",
@@ -324,18 +336,18 @@ class Worker:
         return {"frames": len(times), "lost": int((~tracked.valid).sum())}
 
     def _track(self, scene, times: np.ndarray, truth: np.ndarray, pose: np.ndarray) -> Animation:
-        """MediaPipe's scores of the rendered frames (K, 51); a lost face is a NaN row."""
+        """The tracker's scores of the rendered frames (K, C: MediaPipe's 51); a lost face
+        is a NaN row."""
         from faceclean.synthetic.render import Renderer
-        from faceclean.synthetic.tracker import NAMES, Tracker
 
         renderer = Renderer(self.head, scene, self.skin(scene))
-        tracked = np.full((len(times), len(NAMES)), np.nan)
-        with Tracker(self.tracker_path) as tracker:
-            for k, t in enumerate(times):
-                y = tracker.track(renderer.frame(truth[k], pose[k], k), float(t))
-                if y is not None:
-                    tracked[k] = y
-        return Animation(times, tracked, NAMES, {"format": "csv"})
+        frames = ((renderer.frame(truth[k], pose[k], k), float(t)) for k, t in enumerate(times))
+        tracker = self.tracker()
+        try:
+            tracked = scores(tracker, frames)
+        finally:
+            tracker.close()
+        return Animation(times, tracked, tracker.names, {"format": "csv"})
 
 
 def rom_path(out: Path, job: Job, kind: str) -> Path:
@@ -356,12 +368,3 @@ def write_pair(out: Path, name: str, tracked: Animation, truth: Animation, meta:
     io.save(truth, out / f"{name}.truth.csv", fmt="csv")
     atomic_write(out / f"{name}.json", json.dumps(meta, indent=1) + "\n")
     return meta
-
-
-def _tracker_version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return f"mediapipe {version('mediapipe')} face_landmarker"
-    except Exception:  # pragma: no cover - metadata missing in odd installs
-        return "mediapipe face_landmarker"

@@ -1,10 +1,12 @@
 """The tracker in the loop: Google's MediaPipe Face Landmarker, in VIDEO mode.
 
 ``Tracker(model_path)`` loads the ``face_landmarker.task`` bundle from a file (never
-downloaded: ``settings.tracker_model()``, ``../shared/models`` by default). ``track(frame,
-t)`` gives the 51 ARKit scores of one RGB frame at ``t`` seconds, in MediaPipe's names
-mapped onto canonical ARKit (``_neutral`` dropped; MediaPipe has no ``tongueOut``), or None
-when no face is found: a lost face is a missing frame. VIDEO mode needs increasing integer
+downloaded: ``settings.tracker_model()``, ``../shared/models`` by default). It is a
+faceclean.tracking ``Tracker``: ``read(frame, t)`` gives the 51 ARKit scores of one RGB
+frame at ``t`` seconds, in MediaPipe's names mapped onto canonical ARKit (``_neutral``
+dropped; MediaPipe has no ``tongueOut``), with the 478 landmarks (no head pose: it does not
+ask MediaPipe for the matrix), or None when no face is found: a lost face is a missing
+frame. ``track(frame, t)`` gives the scores alone. VIDEO mode needs increasing integer
 millisecond timestamps; real frame times are rounded to ms and forced to increase.
 
 The bundle is a zip of TFLite models (``MEMBERS``); ``check_bundle`` refuses, in one line,
@@ -26,6 +28,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, MEDIAPIPE
 from faceclean.errors import FacecleanError
 from faceclean.io.source import read_bytes
+from faceclean.tracking import Reading
 
 NAMES = tuple(n for n in ARKIT52 if n != "tongueOut")  # what the tracker gives, canonical
 MAX_MODEL = 64 << 20  # bytes, of the bundle and of its models unpacked (the float16 one: 3.8 MB)
@@ -38,22 +41,44 @@ _NOT_A_ZIP = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, Run
 
 
 class Tracker:
+    """MediaPipe Face Landmarker, VIDEO mode, one face (faceclean.tracking's interface)."""
+
+    names = NAMES
+
     def __init__(self, model_path: str | os.PathLike, threads: int = 1) -> None:
         del threads  # MediaPipe's CPU graph picks its own; the job pool spreads the work
         self._landmarker = landmarker(model_path, video=True, blendshapes=True)
         self._last_ms = -1
         self._map: tuple[tuple[str, ...], ChannelMap] | None = None
 
+    @property
+    def name(self) -> str:
+        return version()
+
+    def read(self, frame: np.ndarray, t: float) -> Reading | None:
+        """The (51,) scores in ``NAMES`` order and the (478, 3) landmarks (px, as
+        ``landmarks``) of an (H, W, 3) uint8 RGB frame, or None (no face)."""
+        result = self._detect(frame, t)
+        if result is None:
+            return None
+        return Reading(self._scores(result), _pixels(result.face_landmarks[0], frame.shape))
+
     def track(self, frame: np.ndarray, t: float) -> np.ndarray | None:
         """(51,) scores in ``NAMES`` order for an (H, W, 3) uint8 RGB frame, or None (no face)."""
+        result = self._detect(frame, t)
+        return None if result is None else self._scores(result)
+
+    def _detect(self, frame: np.ndarray, t: float):
+        """MediaPipe's result for the frame, or None (no face)."""
         import mediapipe as mp
 
         ms = max(int(round(t * 1000.0)), self._last_ms + 1)
         self._last_ms = ms
         image = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(frame))
         result = self._landmarker.detect_for_video(image, ms)
-        if not result.face_blendshapes:
-            return None
+        return result if result.face_blendshapes else None
+
+    def _scores(self, result) -> np.ndarray:
         cats = result.face_blendshapes[0]
         names = tuple(c.category_name for c in cats)
         if self._map is None or self._map[0] != names:
@@ -72,6 +97,16 @@ class Tracker:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def version() -> str:
+    """MediaPipe's version and model, as a pair's record names the tracker."""
+    try:
+        from importlib import metadata
+
+        return f"mediapipe {metadata.version('mediapipe')} face_landmarker"
+    except Exception:  # pragma: no cover - metadata missing in odd installs
+        return "mediapipe face_landmarker"
 
 
 def landmarker(model_path: str | os.PathLike, video: bool, blendshapes: bool = False,
@@ -121,8 +156,13 @@ def landmarks(model_path: str | os.PathLike, image: np.ndarray) -> np.ndarray | 
         result = marker.detect(img)
     if not result.face_landmarks:
         return None
-    h, w = image.shape[:2]
-    return np.array([(p.x * w, p.y * h, p.z * w) for p in result.face_landmarks[0]])
+    return _pixels(result.face_landmarks[0], image.shape)
+
+
+def _pixels(points, shape: tuple[int, ...]) -> np.ndarray:
+    """(L, 3) px of MediaPipe's normalised landmarks on an image of ``shape`` (H, W, ...)."""
+    h, w = shape[:2]
+    return np.array([(p.x * w, p.y * h, p.z * w) for p in points])
 
 
 def check_bundle(bundle: bytes, path: str | os.PathLike) -> None:
