@@ -108,7 +108,7 @@ def test_glb_round_trips_through_pygltflib(face, glb):
 
 
 def test_glb_is_usable_by_the_distance_loss_mesh_reader(glb):
-    from faceclean.face.pairs import PAIR_NAMES, load_face
+    from faceclean.face.vertex_pairs import PAIR_NAMES, load_face
 
     loss_face = load_face(glb)
     d0 = loss_face.distances(arkit_weights())

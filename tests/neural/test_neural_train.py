@@ -9,7 +9,7 @@ torch = pytest.importorskip("torch")
 
 from faceclean.channels import ARKIT52, INDEX  # noqa: E402
 from faceclean.face.mesh import FaceMesh  # noqa: E402
-from faceclean.face.pairs import LossFace  # noqa: E402
+from faceclean.face.vertex_pairs import LossFace  # noqa: E402
 from faceclean.neural import checkpoint  # noqa: E402
 from faceclean.neural.losses import Loss, Weights  # noqa: E402
 from faceclean.neural.model import LSTMCleaner  # noqa: E402

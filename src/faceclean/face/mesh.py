@@ -4,7 +4,7 @@ A :class:`FaceMesh` is a triangle mesh with one morph target per ARKit channel, 
 canonical order (zeros where the mesh lacks a shape), and optional vertex colours.
 Vertices for weights w (52,): ``v = vertices + tensordot(w, deltas, 1)``. The one type the
 report's viewer, the glTF writer (:mod:`faceclean.io.gltf_take`, which also saves a mesh
-alone: ``save_mesh``) and the distance loss (:mod:`faceclean.face.pairs`) use.
+alone: ``save_mesh``) and the distance loss (:mod:`faceclean.face.vertex_pairs`) use.
 
 GLB files carry the targets on the first primitive of the first mesh that has them, with
 their ARKit names in ``mesh.extras.targetNames`` (the convention Blender and three.js

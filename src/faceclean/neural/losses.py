@@ -5,7 +5,7 @@
 - L_MSE = mean (x_gt - x̂)^2 over valid frames and channels;
 - L_der = sum_k mean (x_gt^(k) - x̂^(k))^2, forward derivatives (Eq. 1), 1/s^k;
 - L_dis = mean |D_gt - D̂| + α_dis |D_i - D̂| over the 6 lip/eyelid distances of a face
-  mesh deformed by the weights (faceclean.face.pairs; distances in mouth widths);
+  mesh deformed by the weights (faceclean.face.vertex_pairs; distances in mouth widths);
 - L_acc (ours) = mean (x_gt'' - x̂'')^2, second time-derivatives on the real,
   irregular times, 1/s^2: the paper's terms reward amplitude and leave most jitter in.
 
@@ -24,7 +24,7 @@ from torch import Tensor
 
 from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52
-from faceclean.face.pairs import LossFace
+from faceclean.face.vertex_pairs import LossFace
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ import torch
 from faceclean.channels import ARKIT52
 from faceclean.evaluation.dataset import Chunks, batches, concat
 from faceclean.evaluation.paired import Pair, performances
-from faceclean.face.pairs import load_face
+from faceclean.face.vertex_pairs import load_face
 from faceclean.neural import checkpoint
 from faceclean.neural.losses import Loss, Weights
 from faceclean.neural.model import LSTMCleaner

@@ -31,7 +31,7 @@ import torch
 
 from faceclean.channels import ARKIT52
 from faceclean.evaluation import dataset, harness
-from faceclean.face.pairs import load_face
+from faceclean.face.vertex_pairs import load_face
 from faceclean.neural import checkpoint, distributed
 from faceclean.neural.data import EpochStream
 from faceclean.neural.losses import Loss, Weights

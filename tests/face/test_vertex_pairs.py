@@ -7,7 +7,7 @@ import pytest
 from helpers import arkit_weights
 
 from faceclean.errors import FacecleanError
-from faceclean.face.pairs import PAIR_NAMES, load_face
+from faceclean.face.vertex_pairs import PAIR_NAMES, load_face
 from faceclean.settings import data_dir
 
 DATA = data_dir()
@@ -130,7 +130,7 @@ def test_bad_mesh_files(tmp_path):
 def test_loss_pairs_of_a_glb_face_equal_those_of_its_source(tmp_path, source):
     """One mesh type: the loss reads what the viewer reads and the GLB writer writes."""
     from faceclean.face import mesh
-    from faceclean.face.pairs import loss_face
+    from faceclean.face.vertex_pairs import loss_face
 
     if source == "stylised":
         face, first = mesh.stylised(), loss_face(mesh.stylised())
