@@ -1,7 +1,7 @@
 """The paper's LSTM on the appearance-family pairs, alone and as a residual over the map.
 
 One held-out family (default ``photo``): the map (neural/tracker_map.py, by group) and the
-LSTM (neural/paired.py) train on the other families' pairs; both are judged on the held-out
+LSTM (neural/pair_lstm.py) train on the other families' pairs; both are judged on the held-out
 family's performances (neutral holds apart), as MSE x raw MediaPipe. The residual LSTM
 trains on (the map's output, truth) pairs, so it corrects what the map leaves; at run time
 it steps after the map. The budget is stated by ``--epochs`` and the wall time printed.
@@ -23,7 +23,7 @@ from faceclean.evaluation.paired import Pair
 from faceclean.learned.cleaner import Learned
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import tracker_map as fit
-from faceclean.neural.paired import train_lstm
+from faceclean.neural.pair_lstm import train_lstm
 
 
 def mse_ratio(outs, pairs) -> float:

@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.neural import tracker_map
 
     if arch == "lstm":
-        from faceclean.neural.paired import train_lstm
+        from faceclean.neural.pair_lstm import train_lstm
 
         epochs = args.epochs or 8
         try:

@@ -148,7 +148,7 @@ def evaluate(
     from faceclean.filters.one_euro import OneEuro
     from faceclean.learned.cleaner import Learned
     from faceclean.learned.tracker_map import TrackerMap
-    from faceclean.neural import paired as paired_lstm
+    from faceclean.neural import pair_lstm
     from faceclean.neural import tracker_map as fit
 
     report = report or (lambda _s: None)
@@ -191,8 +191,8 @@ def evaluate(
         if lstm:
             path = work / f"lstm-{group}.npz"
             # a CPU budget: chunks without overlap (a quarter of the paper's work an epoch)
-            paired_lstm.train_lstm(inner_train, inner_val, path, epochs=lstm_epochs,
-                                   stride=paired_lstm.T)  # fmt: skip
+            pair_lstm.train_lstm(inner_train, inner_val, path, epochs=lstm_epochs,
+                                 stride=pair_lstm.T)  # fmt: skip
             rows["paper LSTM on pairs"] = lambda n, path=path: Learned(model=path, names=n)
         rows["tracker map (ours)"] = lambda n, w=mapped: TrackerMap(weights=w, names=n)
         for d in (0.0, 1.0):  # what the user's ``--set detail=`` trades, on the same map
