@@ -20,7 +20,7 @@ import numpy as np
 
 from faceclean.evaluation import paired
 from faceclean.evaluation.paired import Pair
-from faceclean.learned.cleaner import Learned
+from faceclean.learned.lstm import Learned
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import tracker_map as fit
 from faceclean.neural.pair_lstm import train_lstm

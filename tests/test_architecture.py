@@ -2,8 +2,8 @@
 
 Read from the source with ``ast`` (nothing is imported): every ``import`` and
 ``from ... import`` of every module, at module level and inside functions, and every
-import by name (a string that names one of our modules, ``"faceclean.learned.cleaner"``
-or ``"faceclean.learned.cleaner:Learned"``: what ``importlib`` will load).
+import by name (a string that names one of our modules, ``"faceclean.learned.lstm"``
+or ``"faceclean.learned.lstm:Learned"``: what ``importlib`` will load).
 """
 
 from __future__ import annotations

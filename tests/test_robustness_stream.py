@@ -23,7 +23,7 @@ WAIT = 5.0  # s; the most one datagram may take on loopback before the test give
 
 def _lstm() -> StreamCleaner:
     from faceclean.learned.checkpoint import LSTMWeights
-    from faceclean.learned.cleaner import Learned
+    from faceclean.learned.lstm import Learned
 
     return Learned(weights=LSTMWeights.random(NAMES, hidden=16, layers=2, seed=1), names=NAMES)
 

@@ -15,7 +15,7 @@ from faceclean import Animation, Cleaner, FacecleanError
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
 from faceclean.learned.checkpoint import LSTMWeights
-from faceclean.learned.cleaner import Learned
+from faceclean.learned.lstm import Learned
 
 onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")

@@ -20,7 +20,7 @@ from helpers import shared
 from faceclean import Animation
 from faceclean.channels import ARKIT52
 from faceclean.learned import jit
-from faceclean.learned.cleaner import Learned
+from faceclean.learned.lstm import Learned
 
 torch = pytest.importorskip("torch")
 TOL = 2e-5

@@ -1,4 +1,4 @@
-"""The torch-free learned runtime (learned/cleaner.py) and the Cleaner facade.
+"""The torch-free learned runtime (learned/lstm.py) and the Cleaner facade.
 
 The numpy step is checked against a float64 transcription of SPEC section 2 written
 here from the spec alone; the compiled kernel against the same; the fast path against
@@ -22,7 +22,7 @@ from faceclean.channels import ARKIT52
 from faceclean.filters import make
 from faceclean.learned import jit
 from faceclean.learned.checkpoint import LSTMWeights
-from faceclean.learned.cleaner import Learned
+from faceclean.learned.lstm import Learned
 
 KERNELS = ["numpy"] + (["numba"] if jit.available() else [])
 TOL = 1e-5  # float32 runtime vs float64 reference, over a few hundred closed-loop steps

@@ -47,7 +47,7 @@ def _check(model: str, onnx_path: str) -> float:
     """Max |ONNX - numpy| over 200 steps of a seeded random walk, 2 streams."""
     import numpy as np
 
-    from faceclean.learned.cleaner import Learned
+    from faceclean.learned.lstm import Learned
     from faceclean.learned.onnx import OnnxLearned
 
     a, b = Learned(model), OnnxLearned(onnx_path)

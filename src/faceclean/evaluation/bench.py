@@ -186,7 +186,7 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
     """name -> (factory, note) for every streaming cleaner benchmarked."""
     from faceclean.filters import make, presets
     from faceclean.learned import jit
-    from faceclean.learned.cleaner import Learned
+    from faceclean.learned.lstm import Learned
 
     out: dict[str, tuple[Callable[[], Any], str]] = {}
     for name in ("ema", "one-euro", "kalman"):
@@ -228,7 +228,7 @@ def run(
     """Measure everything; returns a JSON-ready dict (machine, model, rows, reference)."""
     from faceclean.filters import make
     from faceclean.learned.checkpoint import LSTMWeights
-    from faceclean.learned.cleaner import default_model_path
+    from faceclean.learned.lstm import default_model_path
 
     sizes = sizes or Sizes()
     say = progress or (lambda s: None)

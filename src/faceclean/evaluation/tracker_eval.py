@@ -146,7 +146,7 @@ def evaluate(
     map choices (pre-filter, shrinkage, detail scale, blink knee)}, "one_euro": {group: the
     fold's tuned One Euro {"min_cutoff": Hz, "beta": beta}}}."""
     from faceclean.filters.one_euro import OneEuro
-    from faceclean.learned.cleaner import Learned
+    from faceclean.learned.lstm import Learned
     from faceclean.learned.tracker_map import TrackerMap
     from faceclean.neural import pair_lstm
     from faceclean.neural import tracker_map as fit

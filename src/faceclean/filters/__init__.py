@@ -23,7 +23,7 @@ METHODS: dict[str, str] = {
     "savgol": "faceclean.filters.savgol:SavGol",
     "rotation": "faceclean.filters.rotation:Rotation",
     "adaptive": "faceclean.learned.adaptive:Adaptive",
-    "lstm": "faceclean.learned.cleaner:Learned",
+    "lstm": "faceclean.learned.lstm:Learned",
     "fc": "faceclean.learned.derivative_net:FullyConnected",
     "gbt": "faceclean.learned.derivative_net:BoostedTrees",
     "tracker-map": "faceclean.learned.tracker_map:TrackerMap",

@@ -2,7 +2,7 @@
 
 The graph holds one step with its state as explicit inputs and outputs; this class keeps
 that state between calls and applies the time rules of filters/base.py around it, so it
-is interchangeable with the numpy runtime (``learned.cleaner.Learned``).
+is interchangeable with the numpy runtime (``learned.lstm.Learned``).
 """
 
 from __future__ import annotations
