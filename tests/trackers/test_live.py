@@ -7,6 +7,7 @@ from __future__ import annotations
 import socket
 import sys
 import threading
+from pathlib import Path
 
 import numpy as np
 from conftest import BLANK, N_FRAMES
@@ -87,7 +88,7 @@ def test_a_camera_lost_mid_run_is_one_line_exit_1_and_a_whole_recording(rendered
     from conftest import write_video
 
     whole = write_video(tmp_path / "cam.avi", rendered, 30, "MJPG")
-    data = open(whole, "rb").read()
+    data = Path(whole).read_bytes()
     cut = tmp_path / "unplugged.avi"  # the camera stops delivering half way
     cut.write_bytes(data[: len(data) // 2])
     record = tmp_path / "session.csv"
@@ -102,5 +103,16 @@ def test_a_camera_lost_mid_run_is_one_line_exit_1_and_a_whole_recording(rendered
     assert "plugged in" in lines[0] and f"recording up to then is in {record}" in lines[0]
     raw, cleaned = io.load(record), io.load(tmp_path / "session.clean.csv")
     assert 3 <= raw.n_frames == cleaned.n_frames < N_FRAMES  # written whole, up to the loss
-    assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "cam.avi", "session.clean.csv", "session.csv", "unplugged.avi"]  # no temporaries
+    names = sorted(p.name for p in tmp_path.iterdir())  # no temporaries left
+    assert names == ["cam.avi", "session.clean.csv", "session.csv", "unplugged.avi"]
+
+
+def test_live_says_once_when_two_faces_are_in_view(two_faces, tmp_path, capsys):
+    from conftest import write_video
+
+    video = write_video(tmp_path / "two.mp4", two_faces, 30)
+    with vmc_peer() as peer:
+        assert main(["track", "--camera", video, "--send", f"vmc://127.0.0.1:{peer.port}"]) == 0
+    said = capsys.readouterr().out
+    crowd = [ln for ln in said.splitlines() if "faces in view" in ln]
+    assert len(crowd) == 1 and "on the left of the picture" in crowd[0], said
