@@ -90,12 +90,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--arch",
-        choices=("adaptive", "lstm", "fc", "gbt", "map", "ridge"),
+        choices=("adaptive", "lstm", "fc", "gbt", "map", "rises", "ridge"),
         default=None,
         help="adaptive (default, the shipped kind: a One Euro filter whose cut-off a GRU "
         "shared by all channels sets), lstm (the paper's), or the paper's non-recurrent "
         "baselines fc / gbt (SPEC section 3; they use --data, --val-sources, --seed, --out); "
-        "with --pairs: map (default, the tracker map), lstm or ridge",
+        "with --pairs: rises (default with several appearance families: the tracker map over "
+        "rises above rest only), map (default with one: the tracker map), lstm or ridge",
     )
     p.add_argument(
         "--pairs",
@@ -118,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
         return train_pairs.run(args)
     args.arch = args.arch or "adaptive"
-    if args.arch in ("map", "ridge"):
+    if args.arch in ("map", "rises", "ridge"):
         raise FacecleanError(f"--arch {args.arch} trains on pairs: give --pairs DIR")
     if args.report:
         print(_report(args))

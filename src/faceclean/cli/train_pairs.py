@@ -1,7 +1,9 @@
 """``faceclean train --pairs DIR``: fit a cleaner on (tracked, truth) pairs.
 
-``--arch map`` (default) fits the tracker map (learned/tracker_map.py), ``ridge`` the
-linear baseline, ``lstm`` the paper's LSTM. The sources named by ``--val-sources`` (the
+``--arch rises`` (the default on pairs of several appearance families) fits the tracker
+map over rises above rest only (neural/map_rises.py), its choices made leaving a look and a
+source out, on every pair; ``map`` (the default on one look) the tracker map
+(learned/tracker_map.py), ``ridge`` the linear baseline, ``lstm`` the paper's LSTM. The sources named by ``--val-sources`` (the
 pairs' performance groups; default: the largest one) are held out of fitting and used for
 early stopping and the choice of pre-filter; pairs of one look never use the ``window``
 render setting (held out for the tracker table), while pairs of several appearance
@@ -27,15 +29,17 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.errors import FacecleanError
     from faceclean.evaluation import paired
 
-    arch = args.arch or "map"
-    if arch not in ("map", "ridge", "lstm"):
-        raise FacecleanError(f"--arch {arch} does not train on pairs (map, ridge or lstm)")
+    if args.arch and args.arch not in ("map", "rises", "ridge", "lstm"):
+        raise FacecleanError(
+            f"--arch {args.arch} does not train on pairs (rises, map, ridge or lstm)"
+        )
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
     from faceclean.io.atomic import writable
 
     writable(args.out)  # refused now, not after the training
     pairs = paired.load(args.pairs)
+    arch = args.arch or ("rises" if len({p.family for p in pairs}) > 1 else "map")
     if len({p.family for p in pairs}) < 2:  # one look: the window setting is what is held out
         pairs = [p for p in pairs if p.setting != "window"]  # (with families: the family is)
     if not pairs:
@@ -60,7 +64,9 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(
             f"--val-sources {sorted(unknown)[0]!r}: no such pair source ({', '.join(groups)})"
         )
-    if not val_groups and len(groups) > 1:
+    if arch == "rises":  # every choice on folds that leave a look and a source out
+        val_groups = set()
+    elif not val_groups and len(groups) > 1:
         counts = {g: sum(p.group == g for p in pairs) for g in groups}
         val_groups = {max(groups, key=lambda g: counts[g])}
     val = [p for p in pairs if p.group in val_groups]
@@ -94,6 +100,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"{knee}: leaving each of {e['cv']} sources out, MSE {e['val_mse']:.3f}x "
                   f"raw, jitter {e['jitter']:.2f}x, blink closure {e['closure']:.2f}",
                   file=sys.stderr)  # fmt: skip
+        elif e.get("event") == "rises":
+            worst = max(e["worst_family"].values(), default=float("nan"))
+            print(f"rises, shrinkage {e['lam']:g}: leaving a look and a source out, MSE "
+                  f"{e['val_mse']:.3f}x raw, worst group {worst:.2f}x, at rest "
+                  f"{e['neutral_off']:.3f} off", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "epoch" and arch == "lstm":
             print(f"epoch {e['epoch']}: validation MSE {e['val_mse']:.5f}", file=sys.stderr)
 
@@ -110,7 +121,12 @@ def run(args: argparse.Namespace) -> int:
             raise FacecleanError(f"{e}{_poisoned(raw)}") from None
         print(f"wrote {args.out}: lstm, validation MSE {best.get('val_mse', float('nan')):.5f}")
         return 0
-    if arch == "ridge":
+    if arch == "rises":  # chosen on its own folds: every pair trains
+        from faceclean.neural import map_rises
+
+        w = map_rises.fit([*train, *val], report=report)
+        w.config.update(selected="leave a look and a source out")
+    elif arch == "ridge":
         w = tracker_map.fit_ridge(train, val)
     else:
         w = tracker_map.fit(train, val, hidden=args.hidden or 0, seed=args.seed, report=report,

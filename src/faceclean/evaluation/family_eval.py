@@ -111,6 +111,7 @@ def fold(folder: str, fam: str, group: str, shipped, pairs=None) -> tuple:
     """One fold: (row -> [(test pair name, output)], the by-group map's structure, a line)."""
     from faceclean.filters.one_euro import OneEuro
     from faceclean.learned.tracker_map import TrackerMap
+    from faceclean.neural import map_rises
     from faceclean.neural import tracker_map as fit
 
     pairs = pairs if pairs is not None else paired.load(folder, require_meta=True)
@@ -123,13 +124,12 @@ def fold(folder: str, fam: str, group: str, shipped, pairs=None) -> tuple:
     }
     if shipped is not None:
         rows["shipped before"] = lambda n: TrackerMap(model=shipped, names=n)
-    structure = None
-    for label, structured in (("map, every input", False), ("map, by group (ours)", True)):
-        w = fit.fit(train, [], prefilters=FOLD_PREFILTERS, lams=FOLD_LAMBDAS,
-                    details=FOLD_DETAILS, knees=FOLD_KNEES, structured=structured)  # fmt: skip
-        rows[label] = lambda n, w=w: TrackerMap(weights=w, names=n)
-        if structured:
-            structure = w.config.get("structure")
+    w = fit.fit(train, [], prefilters=FOLD_PREFILTERS, lams=FOLD_LAMBDAS,
+                details=FOLD_DETAILS, knees=FOLD_KNEES)  # fmt: skip
+    rows["map, every input"] = lambda n, w=w: TrackerMap(weights=w, names=n)
+    rises = map_rises.fit(train)
+    rows["map, rises (ours)"] = lambda n, w=rises: TrackerMap(weights=w, names=n)
+    structure = {"lam": rises.config["lam"], "passed": rises.config["passed"]}
     out = {name: [(p.name, o) for p, o in zip(test, outputs(b, test), strict=True)]
            for name, b in rows.items()}  # fmt: skip
     raw = sum(float(np.nansum((o.values - p.truth.arkit(o.names)[0]) ** 2))

@@ -1,0 +1,196 @@
+"""The tracker map over rises only: what a face does, measured from where that face rests.
+
+What MediaPipe reads on a face at rest depends on the face: a painted face reads
+browInnerUp 0.7, a photographed one browDown 0.3 (docs/RESULTS.md, the neutral column).
+A map over the readings themselves learns the training looks' resting readings and gives
+them back as expressions on a new look (issue 34: a face at rest comes out sneering; the
+map over every input 1.02x raw on photo-textured faces). This map reads no level at all:
+per output j, over the causal features of tracker_map.py (u the pre-filtered input, r its
+running minimum since reset, the stream's rest so far):
+
+    y_j = clip(sum_k W_jk (u_k - r_k), 0, 1)          no offset, no u, (M,) from (K,)
+
+fitted by ridge on the covariances of the rise of the truth above its own rest (y - q5(y)
+per pair: the truth's resting level is the performer's, not something the tracker can
+show) with the inputs' rises, shrunk toward the identity (W -> I as ``lam`` grows: each
+output its own input's rise):
+
+    W = (cov(Z, Z) + lam I)^-1 (cov(Z, T) + lam I),  Z = u - r (F, K), T = y - q5(y) (F, M)
+
+``lam`` is in weight^2 (a rise's variance is about 0.01). On a face at rest every rise is
+0 and so is every output: no training level can come back, whatever the look. The fit is
+on covariances, not raw products: through the origin, least squares explains a channel's
+mean level by the (positive) mean rises of unrelated channels, a training level in
+disguise. On covariances an unrelated channel's gain is only what chance co-movement gives
+(on the made-up looks of tests/looks.py, a channel the tracker reads as zero: 0.39 mean
+output through the origin, 0.23 by covariance, where the truth averages 0.5); on real
+takes the channels that move together are evidence (docs/MODEL.md: noseSneer, which
+MediaPipe barely reads, from the brows and the upper lip). An output group
+(map_groups.SELECT) the map makes worse than raw in any family of the folds passes
+through (y_j = u_j) instead.
+
+The choice of ``lam`` is made on folds that leave a look and a source out at once (with
+one family, a source), the held-out pairs never seen by the fit they score.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from faceclean.evaluation.paired import Pair, performances
+from faceclean.learned.map_weights import MapWeights
+from faceclean.neural import tracker_map
+from faceclean.neural.map_groups import SELECT, at_rest, group_of
+
+LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
+# One Euro pre-filters (min_cutoff Hz, beta, d_cutoff Hz), from reactive to calm: on these
+# pairs the MSE barely moves with them, the jitter and the lag do (docs/MODEL.md)
+PREFILTERS = ((2.0, 50.0, 4.0), (1.0, 10.0, 1.0), (1.0, 3.0, 1.0), (0.5, 2.0, 1.0))
+JITTER_BUDGET = tracker_map.JITTER_BUDGET  # x the truth's jitter, past which a fit pays
+REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
+HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
+SETTLE_S = 0.5  # s into a neutral hold before it is judged
+Report = Callable[[dict[str, Any]], None]
+
+
+def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
+        prefilters: Sequence[tuple[float, float, float]] = PREFILTERS,
+        deadband: float = tracker_map.DEADBAND, report: Report | None = None
+        ) -> MapWeights:  # fmt: skip
+    """The map over rises on ``pairs``: the pre-filter, ``lam`` and the groups that pass
+    through chosen on their folds (module docstring) by MSE x raw, times the jitter's
+    price past JITTER_BUDGET x the truth's; then fitted on every pair."""
+    report = report or (lambda _e: None)
+    names = tracker_map.channels(pairs)
+    folds = _folds(pairs)
+    if not folds:  # one source: nothing to choose on; the first pre-filter, the middle lam
+        prefilters, lams = prefilters[:1], [lams[len(lams) // 2]]
+    best = None
+    for pre in prefilters:
+        w = tracker_map.blank(names, 0, pre, rest=True, deadband=deadband)
+        feats = tracker_map.features(w, pairs)
+        moments = [_moments(f) for f in feats]
+        for lam in lams:
+            score, jitter, per_group, off = _cross_validate(
+                pairs, feats, moments, folds, lam, names
+            )
+            price = score * (1.0 + max(0.0, jitter / JITTER_BUDGET - 1.0))
+            worst = {g: max(v.values()) for g, v in per_group.items()}
+            report({"event": "rises", "pre": pre, "lam": lam, "val_mse": score, "jitter": jitter,
+                    "neutral_off": off, "worst_family": worst})  # fmt: skip
+            if best is None or not price >= best[0]:  # (a NaN price: no folds, kept)
+                best = (price, pre, lam, score, jitter, per_group, off, moments)
+    assert best is not None
+    _, pre, lam, score, jitter, per_group, off, moments = best
+    passed = sorted(g for g, fam in per_group.items() if max(fam.values()) > HARM)
+    w = tracker_map.blank(names, 0, pre, rest=True, deadband=deadband)
+    set_rises(w, solve(moments, lam), passed)
+    w.config.update(fitted="rises", lam=lam, passed=passed, val_mse=score, val_jitter=jitter,
+                    neutral_off=off, frames=int(sum(m[4] for m in moments)))  # fmt: skip
+    return w
+
+
+def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarray:
+    """W (M, K) from summed per-pair moments (Z'Z, Z'T, sum Z, sum T, frames): per output
+    j, ridge on the centred covariances toward its own input's rise (module docstring),
+    another channel's gain shrunk ``cross`` times harder than its own."""
+    zz, zt, sz, st, n = (sum(m[i] for m in moments) for i in range(5))
+    n = max(n, 1)
+    cov_zz = zz / n - np.outer(sz, sz) / n**2
+    cov_zt = zt / n - np.outer(sz, st) / n**2
+    k = len(zz)
+    w = np.zeros((cov_zt.shape[1], k))
+    for j in range(len(w)):
+        reg = np.full(k, lam * cross)
+        prior = np.zeros(k)
+        if j < k:
+            reg[j], prior[j] = lam, 1.0
+        rhs = cov_zt[:, j] - cov_zz @ prior
+        w[j] = prior + np.linalg.solve(cov_zz + np.diag(reg), rhs)
+    return w
+
+
+def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = ()) -> None:
+    """Sets ``w``'s linear part to y = W (u - r) (b = W, a = 0, c = 0, no detail), the
+    outputs of the ``passed`` groups to y = u."""
+    k = len(w.inputs)
+    a, b = np.zeros((k, k)), coef.copy()
+    for j, name in enumerate(w.outputs):
+        if group_of(name) in passed:
+            a[j], b[j] = 0.0, 0.0
+            a[j, j] = 1.0
+    w.arrays.update(a=a, b=b, c=np.zeros(k), detail=np.zeros(k))
+
+
+def predict(w: MapWeights, u: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The runtime's output on features, before its deadband: clip(A u + B (u - r), 0, 1)."""
+    return np.clip(u @ w.arrays["a"].T + (u - r) @ w.arrays["b"].T + w.arrays["c"], 0.0, 1.0)
+
+
+def _moments(f) -> tuple:
+    """(Z'Z, Z'T, sum Z, sum T, frames) of one pair."""
+    z = f.u - f.r
+    target = f.y - np.percentile(f.y, REST_Q, axis=0) if len(f.y) else f.y
+    return z.T @ z, z.T @ target, z.sum(0), target.sum(0), len(z)
+
+
+def _folds(pairs: Sequence[Pair]) -> dict[str, list[int]]:
+    """fold key -> indices of the pairs it scores; more than one family: a (family, source)
+    cell left out both ways (tracker_map.fold_key), else a source."""
+    many = len({p.family for p in pairs}) > 1
+    perf = {id(p) for p in performances(pairs)}
+    folds: dict[str, list[int]] = {}
+    for i, p in enumerate(pairs):
+        if id(p) in perf:
+            folds.setdefault(tracker_map.fold_key(p, many), []).append(i)
+    return folds if len({k.rpartition("/")[2] for k in folds}) >= 3 else {}
+
+
+def _left_out(p: Pair, key: str) -> bool:
+    """Whether fold ``key`` ("family/source" or "source") keeps ``p`` out of its fit."""
+    family, _, group = key.rpartition("/")
+    return p.group == group or (bool(family) and p.family == family)
+
+
+def _cross_validate(pairs, feats, moments, folds, lam, names
+                    ) -> tuple[float, dict[str, dict[str, float]], float]:  # fmt: skip
+    """(mean MSE x raw over the folds' performances, their mean jitter x the truth's,
+    group -> family -> MSE x raw, the worst channel's mean |y - truth| on the neutral
+    holds after SETTLE_S) for ``lam``."""
+    from faceclean.evaluation.metrics import jitter_ratio  # numpy only
+
+    gi = np.array([list(SELECT).index(group_of(n)) for n in names])
+    w = tracker_map.blank(names, 0, PREFILTERS[0], rest=True)  # (its linear part only is used)
+    ratios, sse, jitter = [], {}, []
+    dev, frames = np.zeros(len(names)), 0
+    for key, idx in folds.items():
+        out = {i for i, p in enumerate(pairs) if _left_out(p, key)}
+        set_rises(w, solve([m for i, m in enumerate(moments) if i not in out], lam))
+        fam = key.rpartition("/")[0] or "all"
+        s, r = np.zeros(len(SELECT)), np.zeros(len(SELECT))
+        for i in idx:
+            f = feats[i]
+            pred = predict(w, f.u, f.r)
+            if at_rest(key):
+                keep = f.t - f.t[0] >= SETTLE_S
+                dev += np.abs(pred[keep] - f.y[keep]).sum(0)
+                frames += int(keep.sum())
+                continue
+            np.add.at(s, gi, ((pred - f.y) ** 2).sum(0))
+            if len(f.t) > 3:
+                jitter.append(jitter_ratio(f.t, pred, f.y))
+            np.add.at(r, gi, ((f.u + f.e - f.y) ** 2).sum(0))
+        if at_rest(key) or r.sum() <= 0:
+            continue
+        ratios.append(s.sum() / r.sum())
+        for g, group in enumerate(SELECT):
+            sse.setdefault(group, {}).setdefault(fam, [0.0, 0.0])
+            sse[group][fam][0] += s[g]
+            sse[group][fam][1] += r[g]
+    per_group = {g: {f: v[0] / max(v[1], 1e-12) for f, v in fam.items()} for g, fam in sse.items()}
+    off = float((dev / frames).max()) if frames else float("nan")
+    mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
+    return mean(ratios), mean(jitter), per_group, off

@@ -1,0 +1,88 @@
+"""The map over rises (neural/map_rises.py, the shipped MediaPipe map since issue 34) on a
+look it never saw: fitted on two made-up looks (tests/looks.py), each with its own resting
+readings, gaze mix and channels read as zero, judged on a third."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from looks import GAZE, NAMES, PRE, cleaned, gaze_ratio, neutral_off, pairs
+
+from faceclean.animation import Animation
+from faceclean.learned.tracker_map import TrackerMap
+from faceclean.neural import map_rises
+from faceclean.neural import tracker_map as fit
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    train = pairs(1) + pairs(2)
+    rises = map_rises.fit(train, prefilters=PRE)
+    every = fit.fit(train, [], prefilters=PRE, knees=(None,))
+    return rises, every, pairs(3)
+
+
+def mse_ratio(w, test) -> float:
+    num = den = 0.0
+    for out, p in cleaned(w, test):
+        if p.group != "neutral":
+            num += float(((out - p.truth.values) ** 2).sum())
+            den += float(((p.tracked.values - p.truth.values) ** 2).sum())
+    return num / den
+
+
+def test_a_new_look_comes_out_better_than_raw_with_gaze_no_worse(fitted):
+    rises, _, test = fitted
+    assert mse_ratio(rises, test) < 0.8
+    assert gaze_ratio(rises, test) <= 1.0
+
+
+def test_a_face_at_rest_of_a_new_look_stays_at_rest(fitted):
+    # the look's own resting readings (up to 0.12 here) are taken off, not mapped
+    rises, _, test = fitted
+    assert neutral_off(rises, test) <= 0.05
+
+
+def test_no_offset_and_no_level_a_face_at_rest_reads_zero(fitted):
+    rises, _, _ = fitted
+    assert not rises.arrays["c"].any()
+    assert not rises.arrays["a"][rises.arrays["b"].any(axis=1)].any()  # mapped rows: no u
+    t = np.arange(60) / 30.0
+    still = np.tile(np.linspace(0.05, 0.6, len(NAMES)), (len(t), 1))  # any look's rest
+    out = TrackerMap(weights=rises, names=NAMES).clean(Animation(t, still, NAMES)).values
+    mapped = rises.arrays["b"].any(axis=1)
+    assert np.abs(out[:, mapped]).max() == 0.0
+
+
+def test_the_map_over_every_input_leaves_a_new_look_at_rest_off_rest(fitted):
+    # the method before issue 34, on the same pairs: its offsets and levels are the
+    # training looks' resting readings, which this fixture tells apart
+    _, every, test = fitted
+    assert neutral_off(every, test) > 0.05 or gaze_ratio(every, test) > 1.0
+
+
+def test_the_runtime_gives_what_the_fit_scored(fitted):
+    # predict (the fit's score) is the runtime before its deadband, on the same features
+    rises, _, test = fitted
+    feats = fit.features(rises, test[:2])
+    w0 = map_rises.MapWeights(dict(rises.config, deadband=0.0), rises.arrays)
+    for f, p in zip(feats, test[:2], strict=True):
+        out = TrackerMap(weights=w0, names=NAMES).clean(p.tracked).values
+        np.testing.assert_allclose(out, map_rises.predict(rises, f.u, f.r), atol=1e-9)
+
+
+def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
+    # look 2's tracker reads gaze upside down (1 - reading): a gaze map fitted on either
+    # look is worse than raw on the other, so gaze passes through, and the mouth need not
+    def inverted(p):
+        v = p.tracked.values.copy()
+        v[:, GAZE] = 1.0 - v[:, GAZE]
+        return replace(p, tracked=Animation(p.tracked.times, v, NAMES))
+
+    w = map_rises.fit(pairs(1) + [inverted(p) for p in pairs(2)], prefilters=PRE)
+    assert "gaze" in w.config["passed"]
+    assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
+    assert not w.arrays["b"][GAZE].any()
+    assert "mouth" not in w.config["passed"]
