@@ -72,7 +72,8 @@ def test_camera_frames_go_out_over_live_link(face_video):
 
 def test_live_refuses_what_it_cannot_do(face_video, capsys):
     for argv, words in (
-        (["--camera", face_video, "--send", "vmc://127.0.0.1:9", "--ui"], "--ui"),
+        (["--camera", face_video, "--send", "vmc://127.0.0.1:9", "--ui", "--ui-port", "70000"],
+         "0..65535"),  # the page's own refusal (its camera path: tests/ui/test_ui_camera.py)
         (["--camera", "97", "--send", "vmc://127.0.0.1:9"], "camera 97 does not open"),
         (["--camera", face_video, "--send", "ftp://x:1"], "ftp"),
         (["--camera", face_video, "--send", "vmc://127.0.0.1:9", "--method", "gaussian"],

@@ -67,7 +67,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     live.add_argument("--send", metavar="URL", help="vmc://HOST:PORT or livelink://HOST:PORT")
     live.add_argument("--record", metavar="FILE", help="save raw to FILE, cleaned to FILE.clean")
     live.add_argument("--stats", type=float, metavar="SECONDS", help="print counters this often")
-    live.add_argument("--ui", action="store_true", help="(not built yet for track: refused)")
+    live.add_argument("--ui", action="store_true", help="serve the tuning page: the camera "
+                      "image beside the two faces, drops counted")  # fmt: skip
+    from faceclean.cli import ui
+
+    ui.add_page_arguments(live, "ui-")
 
 
 def run(args: argparse.Namespace) -> int:

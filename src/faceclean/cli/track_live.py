@@ -6,7 +6,8 @@ angles' rotation filter, and one datagram per frame to ``--send`` (VMC or Live L
 relay's encoders). Ctrl-C or SIGTERM stops it with exit 0 and a final counters line;
 a camera that stops delivering (unplugged) ends it with that said and exit 1; a file's
 end is a normal stop. ``--record take.csv`` writes the raw scores to take.csv and what
-was sent to take.clean.csv (the relay's recorder).
+was sent to take.clean.csv (the relay's recorder). ``--ui`` serves the tuning page on
+the loop, the camera's image beside the faces (cli/ui.camera_page, faceclean.ui.camera).
 
 Unplugged (``Camera.lost``): a camera read that fails, no frame for ``video.STALL`` s, or
 a stand-in file that fails mid-stream. The recording is written first; the one line
@@ -28,6 +29,7 @@ MIN_STATS, MAX_STATS = 0.001, 86400.0  # s, the --stats period
 def run(args: argparse.Namespace) -> int:
     from faceclean.adjust import Adjust, Adjusted
     from faceclean.channels import ARKIT52, POSE
+    from faceclean.cli import ui
     from faceclean.cli.relay import build_cleaner
     from faceclean.relay import parse
     from faceclean.relay.loop import probe, warm_up
@@ -35,9 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.trackers.face import FaceTracker, model_path
     from faceclean.trackers.live import Live
     from faceclean.trackers.video import Camera
+    from faceclean.ui.live import Tap
 
-    if args.ui:
-        raise FacecleanError("--ui: the camera page is not built yet (docs/TRACK.md); drop it")
     if not args.send:
         raise FacecleanError("--camera needs --send URL (vmc://HOST:PORT or livelink://HOST:PORT)")
     if args.jobs != 1 or args.keep_raw or args.fmt:
@@ -56,10 +57,13 @@ def run(args: argparse.Namespace) -> int:
     recorder = Recorder(args.record) if args.record else None
     source = int(args.camera) if args.camera.strip().isdigit() else args.camera
     model = model_path(args.tracker_model)
+    tap = Tap(recorder) if args.ui else None  # --ui: the page sees every frame (ui/live.py)
+    sink = recorder if tap is None else tap
     with (
         FaceTracker(model, lambda line: print(line, flush=True)) as tracker,
         Camera(source) as camera,
-        Live(camera, tracker, cleaner, send, pose=pose, recorder=recorder) as live,
+        Live(camera, tracker, cleaner, send, pose=pose, recorder=sink) as live,
+        ui.camera_page(args, live, camera, tap),
     ):
 
         def stop(signum: int, frame: object) -> None:

@@ -7,11 +7,15 @@ at its capture time, cleans the 52 scores (``cleaner.step``) and the head angles
 Link, the relay's encoders). A lost face is a missing frame for the cleaner (it holds);
 nothing is sent before the first face. ``run()`` serves until ``stop()`` or until the
 camera ends; ``stats`` counts frames and times what the loop adds to MediaPipe.
+``swap(cleaner)`` hands the loop another cleaner, taken between two frames (the relay's
+rule, relay/loop.py); ``on_image(rgb, t)``, when set, is given each frame before it is
+tracked (the tuning page keeps a reference: it must return at once).
 """
 
 from __future__ import annotations
 
 import socket
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -69,6 +73,9 @@ class Live:
         self.encoder = send.encoder()
         self._stopping = False
         self._seen = False  # a face has been found: from then on every frame is sent
+        self._pending = None  # handed over by swap(), taken between frames
+        self._swap_lock = threading.Lock()
+        self.on_image: Callable[[np.ndarray, float], None] | None = None
         family, addr = send.sockaddr()
         self._out = socket.socket(family, socket.SOCK_DGRAM)
         try:
@@ -76,6 +83,12 @@ class Live:
         except OSError as e:
             self._out.close()
             raise FacecleanError(f"cannot send to {send}: {e.strerror or e}") from None
+
+    def swap(self, cleaner) -> None:
+        """Clean with ``cleaner`` from the next frame on (thread-safe; warmed up and probed
+        by the caller, as for the relay)."""
+        with self._swap_lock:
+            self._pending = cleaner
 
     def stop(self) -> None:
         """Ask ``run`` to return (thread- and signal-safe)."""
@@ -107,6 +120,11 @@ class Live:
         return self.stats
 
     def _frame(self, rgb: np.ndarray, t: float) -> None:
+        if self.on_image is not None:
+            self.on_image(rgb, t)
+        if self._pending is not None:
+            with self._swap_lock:
+                self.cleaner, self._pending = self._pending, None
         start = self.clock()
         found = self.tracker.track(rgb, t)
         tracked = self.clock()
