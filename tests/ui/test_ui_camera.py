@@ -7,6 +7,7 @@ playwright, MediaPipe's model, the renderer and the shared head mesh."""
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
 import subprocess
 from pathlib import Path
@@ -63,6 +64,8 @@ def test_track_ui_shows_the_camera_beside_the_faces_and_swaps_the_cleaner(camera
         shown = int(re.search(r"dropped (\d+)", status)[1])  # the camera's count, shown
         assert status.startswith(f"camera {camera_video}") and "MediaPipe p50" in status
         assert "faceclean tuning: camera" in tab.page.inner_text("#fc-title")
+        if os.environ.get("FACECLEAN_SCREENSHOTS"):  # docs/ui-camera.png
+            tab.page.screenshot(path=os.environ["FACECLEAN_SCREENSHOTS"] + "/ui-camera.png")
 
         # a change of the cleaner is taken between two frames of the camera loop
         while not any(v[JAW] > 0.05 for _, v in receiver.frames):

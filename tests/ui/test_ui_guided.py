@@ -7,6 +7,7 @@ performance. Needs Debian's chromium and playwright (tests/headless.py)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -96,6 +97,8 @@ def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, ta
         assert "prompts seen" in tab.page.inner_text("#fc-calibration")
         state = tab.js("window.faceclean.state.calibration")
         assert len(state["guided"]["seen"]) == len(SCRIPT.prompts)
+        if os.environ.get("FACECLEAN_SCREENSHOTS"):  # docs/ui-guided.png
+            tab.page.screenshot(path=os.environ["FACECLEAN_SCREENSHOTS"] + "/ui-guided.png")
 
         # applied between frames to the running cleaner: the rest now reads 0
         second = replay(take, port, loop=True)

@@ -267,3 +267,25 @@ def test_page_messages_are_strict_json_and_binary_has_no_inf():
     floats = np.frombuffer(data[4 + head :], "<f4").reshape(2, 52)
     assert not np.isinf(floats).any() and np.isnan(floats[0, :3]).all()
     assert (floats[1] == 0.5).all()
+
+
+def test_the_guided_panel_refuses_in_one_line_and_a_short_take_is_said(server):
+    """The guided calibration's messages (ui/guided.py): each refusal is one line, and a
+    take too short for the script gets the fit's own reason, nothing applied."""
+    with _open(server) as ws:
+        for n, (message, words) in enumerate((
+            ({"action": "undo"}, "nothing to undo"),
+            ({"action": "stop"}, "no guided calibration is recording"),
+            ({"action": "save", "path": "x.json"}, "no guided calibration fitted yet"),
+            ({"action": "apply"}, "no guided calibration fitted yet"),
+            ({"action": "explode"}, "action: one of start, stop, apply, undo, save"),
+        )):  # fmt: skip
+            ws.send(json.dumps({"type": "guided", "seq": n + 1, **message}))
+            m = _said(ws, n + 1)
+            assert m["type"] == "error" and m["for"] == "guided" and words in m["message"]
+        ws.send(json.dumps({"type": "guided", "action": "start", "seq": 99}))
+        while (m := _reply(ws)).get("phase") != "stopped":
+            assert m["type"] != "state"  # nothing applied
+        assert "shorter than the script" in m["why"], m
+        m = _reply(ws)
+        assert m["type"] == "error" and m["for"] == "guided" and "\n" not in m["message"]

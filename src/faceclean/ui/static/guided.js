@@ -44,6 +44,7 @@ export function guidedPanel(script, send, api) {
     $("fc-guided-start").disabled = busy;
     $("fc-guided-stop").hidden = !(phase === "countdown" || phase === "recording");
     $("fc-guided-apply").hidden = !(done && !done.applied);
+    if (done) $("fc-guided-apply").textContent = done.problem ? "apply anyway" : "apply";
     $("fc-guided-undo").hidden = !(done && done.undo);
     $("fc-guided-save").hidden = $("fc-guided-path").hidden = !done;
   }
