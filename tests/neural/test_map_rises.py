@@ -19,7 +19,7 @@ from faceclean.neural import tracker_map as fit
 @pytest.fixture(scope="module")
 def fitted():
     train = pairs(1) + pairs(2)
-    rises = map_rises.fit(train, prefilters=PRE)
+    rises = map_rises.fit(train, prefilters=PRE, keep=())
     every = fit.fit(train, [], prefilters=PRE, knees=(None,))
     return rises, every, pairs(3)
 
@@ -70,7 +70,7 @@ def test_the_runtime_gives_what_the_fit_scored(fitted):
     w0 = map_rises.MapWeights(dict(rises.config, deadband=0.0), rises.arrays)
     for f, p in zip(feats, test[:2], strict=True):
         out = TrackerMap(weights=w0, names=NAMES).clean(p.tracked).values
-        np.testing.assert_allclose(out, map_rises.predict(rises, f.u, f.r), atol=1e-9)
+        np.testing.assert_allclose(out, map_rises.predict(rises, f.u, f.r, f.e), atol=1e-9)
 
 
 def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
@@ -81,7 +81,7 @@ def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
         v[:, GAZE] = 1.0 - v[:, GAZE]
         return replace(p, tracked=Animation(p.tracked.times, v, NAMES))
 
-    w = map_rises.fit(pairs(1) + [inverted(p) for p in pairs(2)], prefilters=PRE)
+    w = map_rises.fit(pairs(1) + [inverted(p) for p in pairs(2)], prefilters=PRE, keep=())
     assert "gaze" in w.config["passed"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["b"][GAZE].any()

@@ -1,16 +1,17 @@
 """``faceclean train --pairs DIR``: fit a cleaner on (tracked, truth) pairs.
 
 ``--arch rises`` (the default on pairs of several appearance families) fits the tracker
-map over rises above rest only (neural/map_rises.py), its choices made leaving a look and a
-source out, on every pair; ``map`` (the default on one look) the tracker map
-(learned/tracker_map.py), ``ridge`` the linear baseline, ``lstm`` the paper's LSTM. The sources named by ``--val-sources`` (the
-pairs' performance groups; default: the largest one) are held out of fitting and used for
-early stopping and the choice of pre-filter; pairs of one look never use the ``window``
-render setting (held out for the tracker table), while pairs of several appearance
-families (``pairs --families``) use every setting: the map's choices are made leaving a
-family and a source out at once (neural/map_groups.py). A pair's calibration clip
-(``pairs --rom``: its NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its
-own. The written model runs with ``--model M.npz``.
+map over rises above rest only (neural/map_rises.py), its choices made leaving a look and
+a source out, on every pair; ``map`` (the default on one look) the tracker map
+(learned/tracker_map.py), ``ridge`` the linear baseline, ``lstm`` the paper's LSTM. The
+sources named by ``--val-sources`` (the pairs' performance groups; default: the largest
+one) are held out of fitting and used for early stopping and the choice of pre-filter;
+pairs of one look never use the ``window`` render setting (held out for the tracker
+table), while pairs of several appearance families (``pairs --families``) use every
+setting: the map's choices are made leaving a family and a source out at once
+(neural/map_groups.py). A pair's calibration clip (``pairs --rom``: its NAME.rom.tracked +
+NAME.rom.truth) trains with it, as a pair of its own. The written model runs with
+``--model M.npz``.
 
 Only real pairs train (``paired.usable``): a value that is infinite or beyond 1e6 is read
 as missing (said on stderr), a pair that is no tracker's reading of its truth is skipped
@@ -102,9 +103,10 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)  # fmt: skip
         elif e.get("event") == "rises":
             worst = max(e["worst_family"].values(), default=float("nan"))
-            print(f"rises, shrinkage {e['lam']:g}: leaving a look and a source out, MSE "
-                  f"{e['val_mse']:.3f}x raw, worst group {worst:.2f}x, at rest "
-                  f"{e['neutral_off']:.3f} off", file=sys.stderr)  # fmt: skip
+            print(f"rises, pre-filter {e['pre']}, shrinkage {e['lam']:g}: leaving a look and "
+                  f"a source out, MSE {e['val_mse']:.3f}x raw, jitter {e['jitter']:.2f}x, worst "
+                  f"group {worst:.2f}x, at rest {e['neutral_off']:.3f} off",
+                  file=sys.stderr)  # fmt: skip
         elif e.get("event") == "epoch" and arch == "lstm":
             print(f"epoch {e['epoch']}: validation MSE {e['val_mse']:.5f}", file=sys.stderr)
 

@@ -14,8 +14,10 @@ never reaches a choice (nested). Rows:
   unseen here, for continuity);
 - map, every input: the tracker map as fitted before issue 34 (one ridge over every
   input), on the fold's training pairs;
-- map, by group (ours): the same, each output group's inputs chosen on folds
-  (neural/map_groups.py).
+- map, rises (ours): the map over rises above rest only (neural/map_rises.py, shipped
+  since issue 34), its pre-filter, shrinkage and passed groups chosen on the fold's
+  training pairs' own folds. (The map by group, neural/map_groups.py, is
+  ``train --by-group``; its row is in docs/MODEL.md's history, not refitted here.)
 
 Columns per family: MSE as x raw (frame-weighted over the family's folds), x raw per
 channel group (gaze apart), blink closure, jitter (x the truth's), lag. The neutral rows:
@@ -223,9 +225,9 @@ NOTES = (
     "painted and dressed, nearly the look), so its rows are not held out; they are here "
     "for continuity. The two *map* rows are fitted inside each fold and have seen neither "
     "the family nor the source. The fold fits choose among a subset of the shipped fit's "
-    "candidates (one pre-filter, one shrinkage for the map over every input; "
-    "`FOLD_PREFILTERS` and the rest in evaluation/family_eval.py); the structure of each "
-    "group is chosen in full. Folds whose test source has fewer than two pairs in the "
+    "candidates for the map over every input (one pre-filter, one shrinkage; "
+    "`FOLD_PREFILTERS` and the rest in evaluation/family_eval.py); the map over rises "
+    "chooses among all of its own (neural/map_rises.py). Folds whose test source has fewer than two pairs in the "
     "family (jmtechart, sentien) are left out. The neutral column is the worst channel's "
     "mean |output - 0| over the family's neutral holds after 0.5 s.",
 )
