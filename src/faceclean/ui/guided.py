@@ -108,7 +108,7 @@ class Panel:
             self._broadcast({"phase": "fitting"})
             self._fit_in_thread(anim, label)
             return
-        self.tap.recorders = [*self.tap.recorders, self]
+        self.tap.join(self)
         self._broadcast({"phase": "countdown", "remaining": float(COUNTDOWN)})
 
     def _stop(self, seq: int | None) -> None:
@@ -174,7 +174,7 @@ class Panel:
     def _end(self, phase: str) -> None:
         """Leave the loop's recorders (under the lock)."""
         if self.tap is not None:
-            self.tap.recorders = [r for r in self.tap.recorders if r is not self]
+            self.tap.leave(self)
         self.phase = phase
 
     def _recorded(self, rows: list[tuple[float, np.ndarray]], restarted: bool) -> None:

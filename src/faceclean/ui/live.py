@@ -59,13 +59,23 @@ class Tap:
         self.y = np.zeros((RING, len(ARKIT52)))  # cleaned output
         self.n = 0  # frames seen; row i % RING holds frame i
         self.restarts = 0
-        self.recorders = [r for r in (recorder,) if r is not None]
+        self.recorders = [r for r in (recorder,) if r is not None]  # replaced, never changed
+        self._joining = threading.Lock()  # the page's and the guided panel's joins and leaves
         self.hold: list[tuple[float, np.ndarray]] | None = None  # a neutral being measured
         self.hold_s = 0.0  # s it lasts: complete at the first frame this long after its first
         self.held = False  # complete
 
     def __len__(self) -> int:
         return self.n
+
+    def join(self, recorder: Any) -> None:
+        """Pass frames on to ``recorder`` too, from the next frame on (any thread)."""
+        with self._joining:
+            self.recorders = [*self.recorders, recorder]
+
+    def leave(self, recorder: Any) -> None:
+        with self._joining:
+            self.recorders = [r for r in self.recorders if r is not recorder]
 
     def restart(self) -> None:
         self.restarts += 1
@@ -187,13 +197,13 @@ class Live(Base):
                 raise FacecleanError("already recording: stop first")
             recorder = Recorder(text(m, "path", limit=MAX_PATH))  # the --record checks
             self.page_recorder = recorder
-            self.tap.recorders = [*self.tap.recorders, recorder]
+            self.tap.join(recorder)
             self.broadcast({"type": "recording", "on": True, "path": str(recorder.path)})
         elif action == "stop":
             recorder = self.page_recorder
             if recorder is None:
                 raise FacecleanError("not recording")
-            self.tap.recorders = [r for r in self.tap.recorders if r is not recorder]
+            self.tap.leave(recorder)
             self.page_recorder = None
             take, cleaned = recorder.save()
             self.broadcast(
