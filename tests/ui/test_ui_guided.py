@@ -127,22 +127,30 @@ def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, ta
                  "--calibration", str(tmp_path / "guided.json")]) == 0  # fmt: skip
 
 
-def test_the_offline_page_fits_the_take_as_calibrate_guided_does(browser, take, tmp_path):
-    proc, url = start(["ui", str(take), "--method", "one-euro"])
+@pytest.mark.parametrize("tracker", ["arkit", "mediapipe"])
+def test_the_offline_page_fits_the_take_as_calibrate_guided_does(browser, take, tmp_path,
+                                                                 tracker):  # fmt: skip
+    """ARKit: levels before the cleaner; MediaPipe: the correction after its shipped map."""
+    proc, url = start(["ui", str(take), "--tracker", tracker])
     with reaped(proc):
         tab = Tab(browser, url)
         assert tab.page.inner_text("#fc-guided-start") == "fit this take"
         tab.page.click("#fc-guided-start")
         tab.until("window.faceclean.guided || window.faceclean.errors.length")
         done = tab.js("window.faceclean.guided")
-        assert done["applied"] and done["seen"] == len(SCRIPT.prompts)
+        assert done["applied"] and done["tracker"] == tracker and done["channels"]
+        assert done["seen"] == len(SCRIPT.prompts), done["problem"]
+        kind = "neutral" if tracker == "arkit" else "offset"  # what the table shows
+        assert all(kind in c for c in done["channels"])
+        assert "gain" in tab.page.inner_text("#fc-guided-channels")
         tab.page.fill("#fc-guided-path", str(tmp_path / "page.json"))
         tab.note_after("#fc-guided-save", "saved guided calibration")
         assert f"--calibration {tmp_path / 'page.json'}" in tab.js("window.faceclean.state.command")
         assert tab.errors() == []
         tab.page.close()
         interrupt(proc)
-    assert main(["calibrate", "--guided", str(take), "-o", str(tmp_path / "cli.json")]) == 0
+    cli_json = str(tmp_path / "cli.json")
+    assert main(["calibrate", "--guided", str(take), "-o", cli_json, "--tracker", tracker]) == 0
     page = json.loads((tmp_path / "page.json").read_text())
     cli = json.loads((tmp_path / "cli.json").read_text())
     assert page == cli  # the same fit, the same file
