@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[neural,onnx,fast,ui,pairs,dev]'
+	$(BIN)/python -m pip install -q -e '.[neural,onnx,fast,ui,pairs,cluster,dev]'
 	touch $(STAMP)
 
 # three.js for the HTML report: from the npm registry, pinned by package-lock.json, kept

@@ -40,6 +40,8 @@ batch cleaning:
   faceclean clean takes/ -o cleaned/ --jobs 2  a folder, recursing: same relative paths and
                                               formats; a line per file, a summary of what
                                               failed and why, exit 1 if any file failed
+  faceclean clean takes/ -o cleaned/ --cluster tcp://host:8786
+                                              the same on a Dask cluster (docs/SCALE.md)
 per-channel levels (before the cleaner; y = clip(sign(u)|u|^curve, lo, hi),
 u = gain (x - offset); by channel name, glob or group):
   --set 'eyeBlink*.gain=1.2' --set tongueOut.off --set jawOpen.clamp=0,0.8
@@ -78,6 +80,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--jobs", type=int, default=1, metavar="N", help="batch: clean N files at once (processes)"
     )
+    p.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="batch: one task per file on a running Dask scheduler (tcp://host:8786, or its "
+        "--scheduler-file JSON); a rerun skips the files done (docs/SCALE.md)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -95,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
         args.output = args.input[0]
     if clean_batch.is_batch(args.input, args.output):
         return clean_batch.run(args)
-    if args.jobs != 1:
-        raise FacecleanError("--jobs is for a batch (several files, or a folder)")
+    if args.jobs != 1 or args.cluster is not None:
+        flag = "--jobs" if args.jobs != 1 else "--cluster"
+        raise FacecleanError(f"{flag} is for a batch (several files, or a folder)")
     print(clean_one(args, args.input[0], args.output))
     return 0

@@ -31,6 +31,11 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.cli.clean_take import build_cleaner, build_levels
 
     workers.count(args.jobs, None)  # --jobs 0: refused before anything is read
+    if getattr(args, "cluster", None) is not None and (args.jobs != 1 or args.in_place):
+        raise FacecleanError(
+            "--cluster runs on the cluster's workers into a new folder (a rerun skips what "
+            "is done): without --jobs and --in-place"
+        )
     if args.fmt is not None:
         raise FacecleanError("a batch keeps each file's format: --format is for one file")
     # bad options fail once, here, not once per file
@@ -52,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     n, note = workers.count(args.jobs, len(jobs), "files" if len(jobs) != 1 else "file")
     if note:
         print(note, file=sys.stderr)
+    if getattr(args, "cluster", None) is not None:
+        return _on_cluster(args, jobs)
     Path(args.output).mkdir(parents=True, exist_ok=True)
     failed: list[Failure] = []
     bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, desc="cleaning", leave=False)
@@ -69,6 +76,50 @@ def run(args: argparse.Namespace) -> int:
         print(f"({skipped} file{'s' * (skipped > 1)} already in {args.output}, inside the "
               "input folder, not cleaned again)")  # fmt: skip
     return summary(failed)
+
+
+def _on_cluster(args: argparse.Namespace, jobs: list[Job]) -> int:
+    """The batch as one Dask task per file (cli/cluster.py); a rerun into the same folder
+    with the same options skips the files already cleaned."""
+    import os
+
+    from tqdm import tqdm
+
+    from faceclean.cli import cluster
+
+    remote = argparse.Namespace(**vars(args))  # the files a worker reads, absolute
+    remote._run = None
+    for key in ("method", "model", "preset", "calibration"):
+        if (value := getattr(remote, key, None)) and os.path.isfile(value):
+            setattr(remote, key, os.path.abspath(value))
+    files = [v for k in ("method", "model", "preset", "calibration")
+             if (v := getattr(remote, k, None)) and os.path.isabs(v)]  # fmt: skip
+    files += [os.path.abspath(i) for i in args.input if os.path.exists(i)]
+    out = Path(os.path.abspath(args.output))
+    label = {Job(Path(os.path.abspath(j.src)), out / j.dst.relative_to(args.output)): str(j.src)
+             for j in jobs}  # fmt: skip
+    client = cluster.connect(args.cluster)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        cluster.require(client, files, out)
+        with cluster.hold(out, {k: getattr(args, k, None) for k in _OPTIONS}) as again:
+            todo = [j for j in label if not (again and j.dst.is_file())]
+            if len(todo) < len(jobs):
+                print(f"{len(jobs) - len(todo)} of {len(jobs)} files already cleaned in "
+                      f"{args.output} (an earlier run); {len(todo)} to clean")  # fmt: skip
+            failed: list[Failure] = []
+            bar = tqdm(total=len(todo), unit="file", file=sys.stderr, desc="cleaning", leave=False)
+            with bar:
+                tasks = [(remote, j) for j in todo]
+                cluster.run(client, _clean, tasks, [label[j] for j in todo], bar, failed, True)
+    finally:
+        client.close()
+    print(f"cleaned {len(todo) - len(failed)} of {len(todo)} files into {args.output}")
+    return summary(failed)
+
+
+# what a folder's outputs depend on: a rerun with other values is refused (cluster.hold)
+_OPTIONS = ("method", "model", "tracker", "preset", "params", "calibration", "scale", "compress")
 
 
 def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 from pathlib import Path
 
 from faceclean.cli.tasks import done, summary
 from faceclean.errors import FacecleanError
+
+_LOADING = threading.Lock()  # a cluster worker's threads load its Worker once
 
 HELP = "render faces from known weights, track them with MediaPipe: paired training data"
 EPILOG = """examples:
@@ -49,6 +52,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="same seed, same jobs and scenes")
     p.add_argument("--shard", default="0/1", metavar="I/N", help="run the I-th of N shards")
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes")
+    p.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="one task per clip on a running Dask scheduler (tcp://host:8786, or its "
+        "--scheduler-file JSON) instead of local workers (docs/SCALE.md)",
+    )
     p.add_argument("--head", metavar="NPZ", help="head mesh (default shared ict_full.npz)")
     p.add_argument(
         "--tracker-model", metavar="TASK", help="face_landmarker.task (default ../shared/models)"
@@ -98,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.synthetic import engine
 
     pool_of.count(args.jobs, None)  # --jobs 0: refused before any take is read
+    if args.cluster is not None and args.jobs != 1:
+        raise FacecleanError("--cluster runs on the cluster's workers: without --jobs")
 
     families = _families(args.families)
     head, model = _files(args)
@@ -136,6 +147,8 @@ def run(args: argparse.Namespace) -> int:
     made = len(jobs) - (len(todo) - n_rom)
     print(f"{made} of {len(jobs)} pairs already done; {len(todo) - n_rom} to make"
           + (f", and {n_rom} calibration clips" if args.rom else ""))  # fmt: skip
+    if args.cluster is not None:
+        return _on_cluster(args, todo, (str(head), str(model), portraits))
     failed: list[tuple[str, str]] = []
     bar = tqdm(total=len(todo), unit="pair", file=sys.stderr, desc="pairs", leave=False)
     with bar:
@@ -271,7 +284,50 @@ def _safe(worker, job, kind: str, out) -> tuple[bool, str]:
         return False, f"{type(e).__name__}: {' '.join(str(e).split())[:160]}"
 
 
+def _on_cluster(args: argparse.Namespace, todo: list, files: tuple) -> int:
+    """The pairs to make as one Dask task per clip (cli/cluster.py); each worker loads the
+    head, the tracker model and the portraits once, from the same paths (shared files)."""
+    import os
+
+    from tqdm import tqdm
+
+    from faceclean.cli import cluster
+
+    head, model, portraits = (os.path.abspath(files[0]), os.path.abspath(files[1]),
+                              [os.path.abspath(p) for p in files[2]])  # fmt: skip
+    out = os.path.abspath(args.output)
+    takes = {j.source for j, _ in todo if os.path.isfile(j.source)}
+    client = cluster.connect(args.cluster)
+    try:
+        cluster.require(client, [head, model, *portraits, *map(os.path.abspath, takes)], out)
+        failed: list[tuple[str, str]] = []
+        with cluster.hold(Path(out), {"command": "pairs"}), tqdm(
+            total=len(todo), unit="pair", file=sys.stderr, desc="pairs", leave=False
+        ) as bar:  # fmt: skip
+            remote = (head, model, portraits, os.getcwd())
+            tasks = [(remote, job, kind, out) for job, kind in todo]
+            cluster.run(client, _remote, tasks, [_label(j, k) for j, k in todo], bar, failed)
+    finally:
+        client.close()
+    print(f"made {len(todo) - len(failed)} of {len(todo)} in {args.output}")
+    return summary(failed)
+
+
 _WORKER = None
+_FILES: tuple | None = None  # what _WORKER was loaded from (a cluster worker's cache)
+
+
+def _remote(files: tuple, job, kind: str, out: str) -> tuple[bool, str]:
+    """One clip on a cluster worker: its Worker loaded on the first task, kept after."""
+    global _WORKER, _FILES
+    with _LOADING:
+        if files != _FILES:
+            from faceclean.synthetic import engine
+
+            head, model, portraits, root = files
+            _WORKER, _FILES = engine.Worker(head, model, portraits, root), files
+        worker = _WORKER
+    return _safe(worker, job, kind, out)
 
 
 def _init(head: str, model: str, portraits: list[str]) -> None:

@@ -155,8 +155,11 @@ def done(job: Job, out: Path) -> bool:
     return (out / f"{job.name}.json").is_file()
 
 
-def performance(job: Job) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The clip: (times (N,) s from 0, ARKit weights (N, 52), head pose (N, 3) deg or None)."""
+def performance(
+    job: Job, root: str | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The clip: (times (N,) s from 0, ARKit weights (N, 52), head pose (N, 3) deg or None);
+    a take's relative path is read from ``root`` (the planner's folder; default: here)."""
     from faceclean import io
 
     if job.source.startswith(SYNTH):
@@ -172,7 +175,7 @@ def performance(job: Job) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     if job.source == NEUTRAL:
         t = np.arange(int(job.seconds * 60.0) + 1) / 60.0
         return t, np.zeros((len(t), len(ARKIT52))), None
-    anim = io.load(job.source)
+    anim = io.load(os.path.join(root, job.source) if root else job.source)
     values, _ = anim.arkit()
     pose = _pose(anim)
     t = anim.times - anim.times[0]
@@ -230,10 +233,11 @@ class Worker:
     uses whatever ``tracker`` is)."""
 
     def __init__(self, head_path: str | os.PathLike, tracker_path: str | os.PathLike,
-                 portraits: list[str] | None = None, *,
+                 portraits: list[str] | None = None, root: str | None = None, *,
                  tracker: Callable[[], Tracker] | None = None) -> None:  # fmt: skip
         from faceclean.synthetic.head import Head
 
+        self.root = root  # where a job's relative take path is read from (a cluster worker's)
         self.head = Head.load(head_path)
         self.tracker_path = tracker_path
         if tracker is None:
@@ -291,7 +295,7 @@ class Worker:
     def run(self, job: Job, out: Path) -> dict:
         """Render, track and write one pair; returns its metadata record."""
 
-        src_t, src_w, src_pose = performance(job)
+        src_t, src_w, src_pose = performance(job, self.root)
         times = frame_times(job, float(src_t[-1]))
         truth = resample(src_t, src_w, times)  # (K, 52), NaN across the source's own losses
         seen = ~np.all(np.isnan(truth), axis=1)
