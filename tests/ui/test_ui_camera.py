@@ -83,6 +83,15 @@ def test_track_ui_shows_the_camera_beside_the_faces_and_swaps_the_cleaner(camera
             receiver.arrived.clear()
             receiver.arrived.wait(1.0)
         jaw = np.array([v[JAW] for _, v in receiver.frames[after : after + 30]])
+
+        # the guided calibration records from the camera loop too (then stopped here: the
+        # stand-in face does not perform the script)
+        tab.page.click("#fc-guided-start")
+        summary = "document.querySelector('#fc-guided-summary').textContent"
+        tab.until(f"/recording: [1-9]/.test({summary}) || window.faceclean.errors.length")
+        tab.page.click("#fc-guided-stop")
+        tab.until("window.faceclean.guidedPhase === 'stopped' || window.faceclean.errors.length")
+        assert tab.js(summary) == "stopped: stopped from the page"
         assert tab.errors() == []
         tab.page.close()
         browser.close()
