@@ -21,6 +21,8 @@ if TYPE_CHECKING:
 
 PROGRESS_FRAMES = 5000  # show a progress bar from this many frames on
 PROGRESS_BYTES = 8 << 20  # ... or, when streaming a file, from this many bytes on
+ROW_BYTES = 24  # bytes a channel's cell takes at most, about (repr-exact: ~20 and a comma):
+# a streamed file's frames, at least about size / (ROW_BYTES M), decide its compiled path
 
 
 def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool = True) -> str:
@@ -52,7 +54,8 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
             pose = None
             if angles := stream.angle_names(src, fmt_in):
                 pose = choice.build_pose(angles)
-            frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard, pose)
+            frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard, pose,
+                                      len(names))  # fmt: skip
             return _line(output, frames, missing, names, what, adjust, choice, pose)
     anim = io.load(src)
     if args.scale is None:  # the same judgement as the stream's, block by block
@@ -140,15 +143,20 @@ def _stream(
     progress: bool = True,
     guard: tuple[tuple[str, ...], str] | None = None,
     pose=None,
+    channels: int = 1,
 ) -> tuple[int, int]:
     """``stream.clean_file`` with a progress bar (bytes) on stderr for big files;
     ``guard`` (names, label): refuse a block of values far outside [0, 1]; ``pose``: the
-    head/eye angles' cleaner, or None (its output gets the finite check only)."""
+    head/eye angles' cleaner, or None (its output gets the finite check only). A file of
+    ``channels`` channels long enough for the whole-take path (filters/compiled.py
+    ``for_take``) goes through ``cleaner.steps`` a block at a time: runs of frames
+    compiled, the same numbers."""
     import functools
 
     from tqdm import tqdm
 
     from faceclean.adjust import check_range
+    from faceclean.filters import compiled
     from faceclean.filters.base import check_finite
     from faceclean.io import stream
 
@@ -160,6 +168,10 @@ def _stream(
         check_finite(inp, outp, cleaner.name)
 
     size = src.stat().st_size
+    if compiled.for_take(size // (ROW_BYTES * max(channels, 1))):
+        steps = {"steps": cleaner.steps}  # a long file: runs of frames compiled (issue 38)
+    else:
+        steps = {}
     angles = {}
     if pose is not None:
         pose.reset()
@@ -168,9 +180,9 @@ def _stream(
             "pose_check": functools.partial(check_finite, name=pose.name),
         }
     if size < PROGRESS_BYTES or not progress:
-        return stream.clean_file(src, out, cleaner.step, fmt, check=check, **angles)
+        return stream.clean_file(src, out, cleaner.step, fmt, check=check, **angles, **steps)
     with tqdm(total=size, unit="B", unit_scale=True, file=sys.stderr, leave=False) as bar:
-        return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check, **angles)
+        return stream.clean_file(src, out, cleaner.step, fmt, bar.update, check, **angles, **steps)
 
 
 def clean_with_progress(cleaner: Stepper, anim: Animation) -> Animation:

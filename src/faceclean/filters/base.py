@@ -123,6 +123,16 @@ class Stepper(ABC):
     @abstractmethod
     def step(self, frame: np.ndarray, t: float | np.ndarray) -> np.ndarray: ...
 
+    def steps(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Step each frame of values (B, M) at times (B,) s in order, from the state the
+        earlier steps left: (B, M), what ``step`` gives frame by frame (a class with a
+        faster loop gives the same numbers). For a file that goes through in blocks
+        (io/stream.py); the caller resets first and passes valid frames only."""
+        out = np.empty((len(values), values.shape[1]))
+        for k in range(len(values)):
+            out[k] = self.step(values[k], times[k])
+        return out
+
     def clean(self, anim: Animation) -> Animation:
         """Clean a whole clip: reset, then step every valid frame; missing frames stay NaN."""
         self.reset()
@@ -220,6 +230,22 @@ class StreamCleaner(Stepper):
             progress(len(idx) - told)
         check_finite(anim.values, out, self.name)
         return anim.with_values(out)
+
+    def steps(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """``Stepper.steps`` through ``clean``'s block loop: usual frames straight to
+        ``_advance``, runs of them to the compiled loop once a long take turned it on
+        (filters/compiled.py ``for_take``): the same numbers as stepping."""
+        if type(self).step is not StreamCleaner.step:  # a subclass's own step decides
+            return Stepper.steps(self, times, values)
+        from faceclean.filters import compiled
+
+        run = self._compiled() if compiled.enabled() else None
+        out = np.empty((len(values), values.shape[1]))
+        for a in range(0, len(values), BLOCK):
+            x = np.array(values[a : a + BLOCK], dtype=np.float64)  # ours: _advance may write
+            t64 = np.asarray(times[a : a + BLOCK], dtype=np.float64)
+            self._block(x, t64, out, np.arange(a, a + len(x)), run)
+        return out
 
     def _block(self, x: np.ndarray, t64: np.ndarray, out: np.ndarray, rows, run) -> None:
         """``clean`` over one block: x (B, M) the valid frames at t64 (B,) s, written to

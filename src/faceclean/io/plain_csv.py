@@ -25,6 +25,8 @@ from faceclean.channels import pose_name
 from faceclean.errors import FacecleanError
 from faceclean.io import source
 
+BLOCK = 4096  # lines read, or rows written, at a time
+
 
 def header_line(line: bytes) -> bytes:
     """The first line of a file as ``sniff`` and ``parse_header`` take it: no BOM, no
@@ -39,13 +41,37 @@ def sniff(head: bytes) -> bool:
 
 
 def read(path: str | os.PathLike) -> Animation:
-    """Read a plain CSV; empty cells are NaN."""
+    """Read a plain CSV; empty cells are NaN. The file is read and parsed ``BLOCK`` lines
+    at a time (an hour at 60 fps is 220 MB of text: never whole in memory, nor its
+    cells), then the blocks' arrays are joined once."""
+    from faceclean.io.stream import iter_lines
+
     p = Path(path)
-    lines = source.read_bytes(p).removeprefix(source.BOM).splitlines()
-    if not lines or not sniff(lines[0]):
-        raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
-    t_col, names = parse_header(lines[0])
-    times, values, _ = parse_rows(lines[1:], 0, t_col, len(names) + 1, p.name)
+    size = source.regular(p).st_size
+    if size > source.MAX_FILE:
+        raise FacecleanError(
+            f"{p.name}: {source.size_text(size)}, over the {source.size_text(source.MAX_FILE)} "
+            "limit"
+        )
+    with source.open_binary(p) as f:
+        lines = iter_lines(f)
+        head = header_line(next(lines, b""))
+        if not head or not sniff(head):
+            raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
+        t_col, names = parse_header(head)
+        parts: list[tuple[np.ndarray, np.ndarray]] = []  # (times (R,), values (R, M))
+        done, block = 0, []
+        for line in lines:
+            block.append(line.rstrip(b"\r\n"))
+            if len(block) == BLOCK:
+                t, v, done = parse_rows(block, done, t_col, len(names) + 1, p.name)
+                parts.append((t, v))
+                block = []
+        t, v, done = parse_rows(block, done, t_col, len(names) + 1, p.name)
+        parts.append((t, v))
+    times = np.concatenate([t for t, _ in parts])
+    values = np.concatenate([v for _, v in parts])
+    del parts
     angles = angle_columns(names)
     meta: dict = {"format": "csv"}
     if len(angles):
@@ -100,10 +126,14 @@ def write(anim: Animation, f: BinaryIO) -> None:
     pose, pose_names = anim.meta.get("pose"), list(anim.meta.get("pose_names", ()))
     if pose is None or not pose_names:
         f.write(header_text(anim.names))
-        f.write(rows_text(anim.times, anim.values))
+        for a in range(0, anim.n_frames, BLOCK):  # streamed: no text as large as the take
+            f.write(rows_text(anim.times[a : a + BLOCK], anim.values[a : a + BLOCK]))
         return
     f.write(header_text((*anim.names, *(str(n) for n in pose_names))))
-    f.write(rows_text(anim.times, np.concatenate([anim.values, np.asarray(pose, float)], 1)))
+    pose = np.asarray(pose, float)
+    for a in range(0, anim.n_frames, BLOCK):
+        cells = np.concatenate([anim.values[a : a + BLOCK], pose[a : a + BLOCK]], 1)
+        f.write(rows_text(anim.times[a : a + BLOCK], cells))
 
 
 def header_text(names: tuple[str, ...]) -> bytes:

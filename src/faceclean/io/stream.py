@@ -41,6 +41,7 @@ FORMATS = ("livelink", "csv")
 Progress = Callable[[int], None]  # called with the bytes consumed since the last call
 Step = Callable[[np.ndarray, float], np.ndarray]  # one frame (M,) at t s -> cleaned (M,)
 Check = Callable[[np.ndarray, np.ndarray], None]  # (input, output) (R, M); raises to refuse
+Steps = Callable[[np.ndarray, np.ndarray], np.ndarray]  # times (R,), frames (R, M) -> (R, M)
 
 
 def can_stream(fmt_in: str | None, fmt_out: str | None) -> bool:
@@ -89,17 +90,20 @@ def clean_file(
     check: Check | None = None,
     pose_step: Step | None = None,
     pose_check: Check | None = None,
+    steps: Steps | None = None,
 ) -> tuple[int, int]:
     """Clean ``src`` (format ``fmt``) into ``dst`` block by block with ``step`` (a reset
     cleaner's) and, for a Live Link file's angles, ``pose_step``; (frames, missing
     frames). ``check``: see the module docstring; ``pose_check`` sees the angles.
+    ``steps``: the same cleaner's ``Stepper.steps`` (a block's valid frames in one call,
+    the same numbers), used instead of ``step`` when given.
 
     OUT may be IN: the output replaces it only once the whole file is through.
     """
     if fmt not in FORMATS:
         raise FacecleanError(f"cannot stream format {fmt!r} (only {', '.join(FORMATS)})")
     p = Path(src)
-    rows = _Rows(step, check)
+    rows = _Rows(step, check, steps)
     pose = None if pose_step is None else _Rows(pose_step, pose_check)
     with source.open_binary(p) as f, atomic_open(dst, "wb") as out:
         try:
@@ -144,16 +148,21 @@ def _counted(f: BinaryIO, progress: Progress | None) -> Iterator[list[bytes]]:
 
 class _Rows:
     """Cleaned (R, M) values of a block: valid rows stepped in order, missing rows NaN
-    (as Cleaner.clean), then ``check``ed."""
+    (as Cleaner.clean), then ``check``ed. ``steps``: the valid rows in one call."""
 
-    def __init__(self, step: Step, check: Check | None) -> None:
-        self.step, self.check = step, check
+    def __init__(self, step: Step, check: Check | None, steps: Steps | None = None) -> None:
+        self.step, self.check, self.steps = step, check, steps
 
     def __call__(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
         out = np.full_like(values, np.nan)
         valid = ~np.all(np.isnan(values), axis=1) if values.shape[1] else np.ones(len(values), bool)
-        for i in np.flatnonzero(valid):
-            out[i] = self.step(values[i], times[i])
+        if self.steps is not None:
+            rows = np.flatnonzero(valid)
+            if len(rows):
+                out[rows] = self.steps(times[rows], values[rows])
+        else:
+            for i in np.flatnonzero(valid):
+                out[i] = self.step(values[i], times[i])
         if self.check is not None:
             self.check(values, out)  # as Cleaner.clean: an erasing cleaner fails
         return out
