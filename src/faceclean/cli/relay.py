@@ -76,15 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--ui", action="store_true", help="serve the tuning page on the relay")
     ui.add_page_arguments(p, "ui-")
-    p.add_argument(
-        "--ui-nice",
-        type=int,
-        default=10,
-        metavar="N",
-        help="when the page draws on the CPU (no GPU), its browser yields to the relay at this "
-        "nice, 1-19 (Linux: its sessions' autogroups, else each of its threads; default 10; "
-        "0: leave it)",
-    )
+    ui.add_nice_argument(p, "the relay")
 
 
 def build_cleaner(choice: Choice) -> tuple[Any, str]:
@@ -134,10 +126,9 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.record is not None and not args.record.strip():
         raise FacecleanError("--record: give a file name (.csv or .npz)")
-    from faceclean.ui.priority import MAX_NICE
+    from faceclean.cli import ui
 
-    if not 0 <= args.ui_nice <= MAX_NICE:
-        raise FacecleanError(f"--ui-nice must be in 0..{MAX_NICE} (got {args.ui_nice})")
+    ui.check_nice(args)
     recorder = Recorder(args.record) if args.record else None
     if args.ui:
         return _with_page(args, listen, send, recorder)

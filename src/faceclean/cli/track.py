@@ -72,6 +72,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from faceclean.cli import ui
 
     ui.add_page_arguments(live, "ui-")
+    ui.add_nice_argument(live, "the tracking loop")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -18,7 +18,7 @@ from typing import Any
 from faceclean.cli import options
 
 HELP = "tune a take in the browser: sliders, calibrate, curves and faces; save settings"
-NICE = 10  # track --camera --ui: a page drawn on the CPU lets its browser yield (relay's default)
+NICE = 10  # a page drawn on the CPU lets its browser yield at this nice (--ui-nice's default)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -39,6 +39,28 @@ def add_page_arguments(p: argparse.ArgumentParser, prefix: str = "") -> None:
         f"--{prefix}port", type=int, default=0, metavar="PORT", help="port (default: a free one)"
     )
     p.add_argument("--no-browser", action="store_true", help="print the URL, open no browser")
+
+
+def add_nice_argument(p: Any, loop: str) -> None:
+    """--ui-nice (relay, track --camera): how far a page drawn on the CPU yields."""
+    p.add_argument(
+        "--ui-nice",
+        type=int,
+        default=NICE,
+        metavar="N",
+        help=f"when the page draws on the CPU (no GPU), its browser yields to {loop} at this "
+        f"nice, 1-19 (Linux: its sessions' autogroups, else each of its threads; default {NICE}; "
+        "0: leave it)",
+    )
+
+
+def check_nice(args: argparse.Namespace) -> int:
+    from faceclean.errors import FacecleanError
+    from faceclean.ui.priority import MAX_NICE
+
+    if not 0 <= args.ui_nice <= MAX_NICE:
+        raise FacecleanError(f"--ui-nice must be in 0..{MAX_NICE} (got {args.ui_nice})")
+    return args.ui_nice
 
 
 def tuning(args: argparse.Namespace):
@@ -87,7 +109,7 @@ def camera_page(args: argparse.Namespace, loop: Any, camera: Any, tap: Any) -> I
     from faceclean.ui.camera import CameraPage
 
     session = CameraPage(tuning(args).with_choice(), loop, camera, tap,
-                         f"camera {args.camera}", nice=NICE, say=say)  # fmt: skip
+                         f"camera {args.camera}", nice=check_nice(args), say=say)  # fmt: skip
     session.mesh()  # the face built before the page asks
     loop.on_image = session.image
     session.start()
