@@ -61,7 +61,6 @@ class Panel:
         self.restarted = False  # the sender restarted while recording
         self.result: Any = None  # the last fit (faceclean.guided.fit.Guided)
         self.label = ""
-        self.applied = False
         self.before: tuple[Adjust | None, str | None] | None = None  # what undo puts back
         self._shown = -1.0  # clock s of the last progress message
         self._lock = threading.Lock()
@@ -99,7 +98,8 @@ class Panel:
     def _start(self, seq: int | None) -> None:
         with self._lock:
             if self.phase in BUSY:
-                raise FacecleanError(f"a guided calibration is {self.phase}: stop it first")
+                then = "wait for its result" if self.phase == "fitting" else "stop it first"
+                raise FacecleanError(f"a guided calibration is {self.phase}: {then}")
             self.phase, self.since, self.rows, self.restarted = "countdown", self.clock(), [], False
             if self.take is not None:
                 self.phase = "fitting"
@@ -130,7 +130,7 @@ class Panel:
         calibration, path = self.before
         s = self.session
         s.use(s.tuning.calibrated(calibration, path).with_choice(), seq, "guided")
-        self.before, self.applied = None, False
+        self.before = None
         self._broadcast(self.view())
 
     def _save(self, client: Any, m: dict[str, Any], seq: int | None) -> None:
@@ -142,7 +142,7 @@ class Panel:
         self.result.adjust.save(path)  # what calibrate --guided -o writes
         s = self.session
         with s.lock:
-            if self.applied and s.tuning.calibration is self.result.adjust:
+            if s.tuning.calibration is self.result.adjust:  # applied: the command names it
                 s.tuning = s.tuning.calibrated(self.result.adjust, path)
             tuning = s.tuning
         client.send({"type": "saved", "seq": seq, "what": "guided calibration", "path": path,
@@ -212,7 +212,7 @@ class Panel:
         except Exception as e:  # never a dead panel: one line, as cli.main says it
             self.phase = "idle"
             return self._error(f"internal error: {type(e).__name__}: {e}")
-        self.result, self.label, self.applied = result, label, False
+        self.result, self.label = result, label
         self.phase = "done"
         if result.alignment.shortfall() is None:
             try:
@@ -236,7 +236,12 @@ class Panel:
         s.use(tuning.calibrated(self.result.adjust).with_choice(), seq, "guided")
         if self.before is None:
             self.before = before
-        self.applied = True
+
+    @property
+    def applied(self) -> bool:
+        """Whether the last fit is the session's calibration now (a later Calibrate, load
+        or clear replaces it)."""
+        return self.result is not None and self.session.tuning.calibration is self.result.adjust
 
     def view(self) -> dict[str, Any]:
         """The result for the page: per prompt, per channel, whether it is applied."""
