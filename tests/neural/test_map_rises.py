@@ -19,7 +19,7 @@ from faceclean.neural import tracker_map as fit
 @pytest.fixture(scope="module")
 def fitted():
     train = pairs(1) + pairs(2)
-    rises = map_rises.fit(train, prefilters=PRE, keep=())
+    rises = map_rises.fit(train, prefilters=PRE, own_rise=())
     every = fit.fit(train, [], prefilters=PRE, knees=(None,))
     return rises, every, pairs(3)
 
@@ -64,13 +64,21 @@ def test_the_map_over_every_input_leaves_a_new_look_at_rest_off_rest(fitted):
 
 
 def test_the_runtime_gives_what_the_fit_scored(fitted):
-    # predict (the fit's score) is the runtime before its deadband, on the same features
+    # the folds score tracker_map.predict on features: the runtime's own output, step by step
     rises, _, test = fitted
     feats = fit.features(rises, test[:2])
-    w0 = map_rises.MapWeights(dict(rises.config, deadband=0.0), rises.arrays)
     for f, p in zip(feats, test[:2], strict=True):
-        out = TrackerMap(weights=w0, names=NAMES).clean(p.tracked).values
-        np.testing.assert_allclose(out, map_rises.predict(rises, f.u, f.r, f.e), atol=1e-9)
+        out = TrackerMap(weights=rises, names=NAMES).clean(p.tracked).values
+        np.testing.assert_allclose(out, fit.predict(rises, f.u, f.r, f.e), atol=1e-9)
+
+
+def test_gaze_reads_its_own_rise_only_by_default():
+    # the pairs' eyes do not turn: no fit may mix gaze, but a look's resting reading goes
+    w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, knees=(None,))
+    assert w.config["own_rise"] == ["gaze"]
+    assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
+    assert not np.delete(w.arrays["b"][GAZE], GAZE, axis=1).any()
+    assert not w.arrays["a"][GAZE].any()
 
 
 def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
@@ -81,7 +89,8 @@ def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
         v[:, GAZE] = 1.0 - v[:, GAZE]
         return replace(p, tracked=Animation(p.tracked.times, v, NAMES))
 
-    w = map_rises.fit(pairs(1) + [inverted(p) for p in pairs(2)], prefilters=PRE, keep=())
+    train = pairs(1) + [inverted(p) for p in pairs(2)]
+    w = map_rises.fit(train, prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
     assert "gaze" in w.config["passed"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["b"][GAZE].any()

@@ -140,9 +140,9 @@ def test_the_choice_is_made_leaving_each_source_out():
     assert w.config["detail_scale"] == chosen["detail"]
     assert w.config["deadband"] == fit.DEADBAND
     # a source's score comes from the others' fit: it differs from the score with it in
-    inside = fit._score(w, fit.features(w, pool[:2]))[0]
+    inside = fit.score(w, fit.features(w, pool[:2]))[0]
     alone = fit.fit(pool[2:], [], prefilters=[(2.0, 0.5, 1.0)], lams=(w.config["lam"],), cv=False)
-    held_out = fit._score(alone, fit.features(alone, pool[:2]))[0]
+    held_out = fit.score(alone, fit.features(alone, pool[:2]))[0]
     assert inside < held_out
 
 
@@ -170,7 +170,7 @@ def test_the_detail_gives_back_the_timing_the_pre_filter_took():
     t, y = test.truth.times, test.truth.values
     assert lag_ms(t, out, y) < 0.2 * lag_ms(t, late, y) and lag_ms(t, late, y) > 50
     f = fit.features(w, [test])[0]
-    np.testing.assert_allclose(fit._predict(w, f.u, f.r, f.e), out, atol=1e-12)
+    np.testing.assert_allclose(fit.predict(w, f.u, f.r, f.e), out, atol=1e-12)
 
 
 def test_training_scores_the_deadband_the_runtime_runs():
@@ -183,11 +183,11 @@ def test_training_scores_the_deadband_the_runtime_runs():
     test = pairs(1, 30, noisy)[0]
     t, u, r, _, e = fit.features(w, [test])[0]
     want = TrackerMap(weights=w, names=NAMES).clean(test.tracked).values
-    np.testing.assert_allclose(fit._predict(w, u, r, e), want, atol=1e-12)
+    np.testing.assert_allclose(fit.predict(w, u, r, e), want, atol=1e-12)
     plain = fit.blank(NAMES, 0, (4.0, 1.0, 1.0), True)
     plain.arrays.update({k: w.arrays[k] for k in ("a", "b", "c")})
-    still = np.abs(np.diff(fit._predict(w, u, r), axis=0))
-    assert still.mean() < np.abs(np.diff(fit._predict(plain, u, r), axis=0)).mean()
+    still = np.abs(np.diff(fit.predict(w, u, r), axis=0))
+    assert still.mean() < np.abs(np.diff(fit.predict(plain, u, r), axis=0)).mean()
 
 
 def test_the_blink_lift_is_chosen_leaving_each_source_out():
@@ -232,7 +232,7 @@ def test_the_blink_lift_is_chosen_leaving_each_source_out():
     test = pairs(1, 90, lambda y: 0.25 * y)[0]  # a face whose blinks read at a quarter
     out = TrackerMap(weights=none, names=NAMES).clean(test.tracked).values
     t, u, r, _, e = fit.features(none, [test])[0]
-    np.testing.assert_allclose(fit._predict(none, u, r, e), out, atol=1e-12)
+    np.testing.assert_allclose(fit.predict(none, u, r, e), out, atol=1e-12)
     before = plain.clean(test.tracked).values
     assert (out[:, :2] >= before[:, :2] - 1e-12).all()
     assert out[:, :2].max() > before[:, :2].max() + 0.1  # a lifted blink

@@ -45,7 +45,7 @@ import numpy as np
 
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
-from faceclean.neural import tracker_map
+from faceclean.neural import blink_lift, tracker_map
 from faceclean.neural.map_groups import SELECT, at_rest, group_of
 
 LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
@@ -57,11 +57,17 @@ LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
 # candidates (docs/MODEL.md).
 DETAIL_SCALE = 0.1  # the share of its own raw frame's detail an output gets back by default
 PREFILTERS = ((2.0, 50.0, 4.0), (1.0, 10.0, 2.0))
-# Groups that pass through whatever the folds say: the pairs' eyes do not turn (the
-# renderer moves the lids of eyeLook, not the eyeballs: docs/RESULTS.md's gaze study), so
-# no fit on them can learn gaze, and one did learn it reversed.
-PASS = ("gaze",)
+# Groups whose outputs are their own rise, gain 1, whatever the folds say: the pairs' eyes do
+# not turn (the renderer moves the lids of eyeLook, not the eyeballs: docs/RESULTS.md's
+# gaze study), so no fit on them can learn gaze (one learned it reversed); the rise still
+# takes a look's resting reading off (painted faces read eyeLookDown 0.35 at rest).
+OWN_RISE = ("gaze",)
 JITTER_BUDGET = tracker_map.JITTER_BUDGET  # x the truth's jitter, past which a fit pays
+# The runtime's deadband (weight units): a map that sums 51 inputs' rises gathers their
+# noise; a wider band holds a still output at no cost in MSE on these folds (0.01: jitter
+# 3.2x the truth's, 0.04: 2.1x, 0.06: 1.7x), at a lag of band / speed on slow motions
+# (docs/MODEL.md), so the widest is 0.05.
+DEADBANDS = (0.01, 0.03, 0.05)
 REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
 HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
@@ -70,39 +76,44 @@ Report = Callable[[dict[str, Any]], None]
 
 def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         prefilters: Sequence[tuple[float, float, float]] = PREFILTERS,
-        deadband: float = tracker_map.DEADBAND, keep: Sequence[str] = PASS,
-        report: Report | None = None) -> MapWeights:  # fmt: skip
-    """The map over rises on ``pairs``: the pre-filter, ``lam`` and the groups that pass
-    through chosen on their folds (module docstring) by MSE x raw, times the jitter's
-    price past JITTER_BUDGET x the truth's; then fitted on every pair. The groups in
-    ``keep`` pass through whatever the folds say."""
+        deadbands: Sequence[float] = DEADBANDS, own_rise: Sequence[str] = OWN_RISE,
+        knees: Sequence[float | None] = blink_lift.KNEES, report: Report | None = None
+        ) -> MapWeights:  # fmt: skip
+    """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband, the
+    groups that pass through and the blink lift chosen on their folds (module docstring)
+    by MSE x raw, times the jitter's price past JITTER_BUDGET x the truth's; then fitted
+    on every pair. The groups in ``own_rise`` read their own rise only, whatever the
+    folds say."""
     report = report or (lambda _e: None)
     names = tracker_map.channels(pairs)
     folds = _folds(pairs)
     if not folds:  # one source: nothing to choose on; the first pre-filter, the middle lam
         prefilters, lams = prefilters[:1], [lams[len(lams) // 2]]
+        deadbands = deadbands[:1]
     best = None
-    for pre in prefilters:
-        w = tracker_map.blank(names, 0, pre, rest=True, deadband=deadband)
+    for pre, band in [(p, b) for p in prefilters for b in deadbands]:
+        w = tracker_map.blank(names, 0, pre, rest=True, deadband=band)
         feats = tracker_map.features(w, pairs)
         moments = [_moments(f) for f in feats]
         for lam in lams:
-            score, jitter, per_group, off = _cross_validate(
-                pairs, feats, moments, folds, lam, names
-            )
+            cv = _cross_validate(w, pairs, feats, moments, folds, lam, own_rise)
+            score, jitter, per_group, off = cv
             price = score * (1.0 + max(0.0, jitter / JITTER_BUDGET - 1.0))
             worst = {g: max(v.values()) for g, v in per_group.items()}
-            report({"event": "rises", "pre": pre, "lam": lam, "val_mse": score, "jitter": jitter,
-                    "neutral_off": off, "worst_family": worst})  # fmt: skip
+            report({"event": "rises", "pre": pre, "deadband": band, "lam": lam, "val_mse": score,
+                    "jitter": jitter, "neutral_off": off, "worst_family": worst})  # fmt: skip
             if best is None or not price >= best[0]:  # (a NaN price: no folds, kept)
-                best = (price, pre, lam, score, jitter, per_group, off, moments)
+                best = (price, pre, band, lam, score, jitter, per_group, off, feats, moments)
     assert best is not None
-    _, pre, lam, score, jitter, per_group, off, moments = best
-    passed = sorted({*keep, *(g for g, fam in per_group.items() if max(fam.values()) > HARM)})
-    w = tracker_map.blank(names, 0, pre, rest=True, deadband=deadband)
-    set_rises(w, solve(moments, lam), passed)
-    w.config.update(fitted="rises", lam=lam, passed=passed, val_mse=score, val_jitter=jitter,
-                    neutral_off=off, frames=int(sum(m[4] for m in moments)))  # fmt: skip
+    _, pre, band, lam, score, jitter, per_group, off, feats, moments = best
+    passed = sorted(g for g, fam in per_group.items() if max(fam.values()) > HARM)
+    passed = [g for g in passed if g not in own_rise]
+    w = tracker_map.blank(names, 0, pre, rest=True, deadband=band)
+    set_rises(w, solve(moments, lam), passed, own_rise)
+    w.config.update(fitted="rises", lam=lam, passed=passed, own_rise=list(own_rise),
+                    val_mse=score, val_jitter=jitter, neutral_off=off,
+                    frames=int(sum(m[4] for m in moments)))  # fmt: skip
+    _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report)
     return w
 
 
@@ -126,29 +137,22 @@ def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarra
     return w
 
 
-def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = ()) -> None:
-    """Sets ``w``'s linear part to y = W (u - r) (b = W, a = 0, c = 0), the outputs of the
-    ``passed`` groups to y = u; the detail gain of a mapped output is its own rise's gain
-    (``--set detail=1``: the raw frame's own timing at the map's scale), run at
-    DETAIL_SCALE by default."""
+def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = (),
+              own_rise: Sequence[str] = ()) -> None:  # fmt: skip
+    """Sets ``w``'s linear part to y = W (u - r) (b = W, a = 0, c = 0); the outputs of the
+    ``passed`` groups to y = u, those of ``own_rise`` to their own rise (gain 1). The
+    detail gain of an output is its own rise's gain (``--set detail=1``: the raw frame's
+    own timing at the map's scale), run at DETAIL_SCALE by default."""
     k = len(w.inputs)
     a, b, d = np.zeros((k, k)), coef.copy(), np.zeros(k)
     for j, name in enumerate(w.outputs):
-        if group_of(name) in passed:
-            a[j], b[j] = 0.0, 0.0
-            a[j, j] = 1.0
-        elif name in w.inputs:
-            d[j] = np.clip(coef[j, w.inputs.index(name)], 0.0, MAX_DETAIL)
+        g = group_of(name)
+        if g in passed or g in own_rise:
+            b[j] = 0.0
+            (a if g in passed else b)[j, j] = 1.0
+        d[j] = np.clip(a[j, j] + b[j, j], 0.0, MAX_DETAIL)
     w.arrays.update(a=a, b=b, c=np.zeros(k), detail=d)
     w.config["detail_scale"] = DETAIL_SCALE
-
-
-def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """The runtime's output on features, before its deadband (outputs = inputs here):
-    clip(A u + B (u - r) + s d e, 0, 1), s the config's detail scale."""
-    a = w.arrays
-    detail = w.config.get("detail_scale", 1.0) * a["detail"] * e
-    return np.clip(u @ a["a"].T + (u - r) @ a["b"].T + a["c"] + detail, 0.0, 1.0)
 
 
 def _moments(f) -> tuple:
@@ -176,34 +180,47 @@ def _left_out(p: Pair, key: str) -> bool:
     return p.group == group or (bool(family) and p.family == family)
 
 
-def _cross_validate(pairs, feats, moments, folds, lam, names
-                    ) -> tuple[float, dict[str, dict[str, float]], float]:  # fmt: skip
+def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=()):
+    """fold key -> (A, c, d) of the map fitted without the fold (tracker_map.set_linear's
+    arguments: coef over [u, u - r])."""
+    out = {}
+    for key in folds:
+        left = {i for i, p in enumerate(pairs) if _left_out(p, key)}
+        set_rises(w, solve([m for i, m in enumerate(moments) if i not in left], lam),
+                  passed, own_rise)  # fmt: skip
+        a = w.arrays
+        out[key] = (np.concatenate([a["a"], a["b"]], axis=1), a["c"].copy(), a["detail"].copy())
+    return out
+
+
+def _cross_validate(w, pairs, feats, moments, folds, lam, own_rise
+                    ) -> tuple[float, float, dict[str, dict[str, float]], float]:  # fmt: skip
     """(mean MSE x raw over the folds' performances, their mean jitter x the truth's,
     group -> family -> MSE x raw, the worst channel's mean |y - truth| on the neutral
-    holds after SETTLE_S) for ``lam``."""
+    holds after SETTLE_S) for ``lam``: the runtime's output (tracker_map.predict, its
+    deadband included) of each fold's fit on the fold's pairs."""
     from faceclean.evaluation.metrics import jitter_ratio  # numpy only
 
+    names = w.inputs
     gi = np.array([list(SELECT).index(group_of(n)) for n in names])
-    w = tracker_map.blank(names, 0, PREFILTERS[0], rest=True)  # (its linear part only is used)
     ratios, sse, jitter = [], {}, []
     dev, frames = np.zeros(len(names)), 0
-    for key, idx in folds.items():
-        out = {i for i, p in enumerate(pairs) if _left_out(p, key)}
-        set_rises(w, solve([m for i, m in enumerate(moments) if i not in out], lam))
+    for key, linear in _fold_fits(w, pairs, moments, folds, lam, (), own_rise).items():
+        tracker_map.set_linear(w, *linear)
         fam = key.rpartition("/")[0] or "all"
         s, r = np.zeros(len(SELECT)), np.zeros(len(SELECT))
-        for i in idx:
+        for i in folds[key]:
             f = feats[i]
-            pred = predict(w, f.u, f.r, f.e)
+            pred = tracker_map.predict(w, f.u, f.r, f.e)
             if at_rest(key):
                 keep = f.t - f.t[0] >= SETTLE_S
                 dev += np.abs(pred[keep] - f.y[keep]).sum(0)
                 frames += int(keep.sum())
                 continue
             np.add.at(s, gi, ((pred - f.y) ** 2).sum(0))
+            np.add.at(r, gi, ((f.u + f.e - f.y) ** 2).sum(0))
             if len(f.t) > 3:
                 jitter.append(jitter_ratio(f.t, pred, f.y))
-            np.add.at(r, gi, ((f.u + f.e - f.y) ** 2).sum(0))
         if at_rest(key) or r.sum() <= 0:
             continue
         ratios.append(s.sum() / r.sum())
@@ -215,3 +232,30 @@ def _cross_validate(pairs, feats, moments, folds, lam, names
     off = float((dev / frames).max()) if frames else float("nan")
     mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
     return mean(ratios), mean(jitter), per_group, off
+
+
+def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report) -> None:
+    """The blink lift (neural/blink_lift.py) on this map's folds: its knee and top chosen
+    leaving a look and a source out (each fold's map and gains fitted without it); the
+    gains then fitted on every performance. ``w``'s linear part is kept."""
+    blink_lift.clear(w)
+    perf = [i for key, idx in folds.items() if not at_rest(key) for i in idx]
+    if tuple(knees) == (None,) or not folds:
+        return
+    performed = [feats[i] for i in perf]
+    if not any(blink_lift.gains(w, performed, 0.0)):
+        return  # no blink channel, or none that closes
+    linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
+    fits = _fold_fits(w, pairs, moments, folds, lam, passed, own_rise)
+    w.arrays.update(linear)
+    lift_folds = {}
+    for key, idx in folds.items():
+        if at_rest(key):
+            continue
+        held = [feats[i] for i in idx]
+        train = [feats[i] for i in perf if not _left_out(pairs[i], key)]
+        raw = sum(float(((f.u + f.e - f.y) ** 2).sum()) for f in held)
+        size = sum(f.y.size for f in held)
+        lift_folds[key] = blink_lift.Fold(fits[key], train, held, raw / max(size, 1))
+    blink_lift.choose(w, performed, lift_folds, tracker_map.score, tracker_map.set_linear,
+                      report, JITTER_BUDGET, knees)  # fmt: skip

@@ -204,7 +204,7 @@ def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, n
     return sol[:-1].T, sol[-1]
 
 
-def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray, d: np.ndarray | None = None
+def set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray, d: np.ndarray | None = None
                 ) -> None:  # fmt: skip
     k = len(w.inputs)
     w.arrays["a"], w.arrays["c"] = coef[:, :k], c
@@ -212,14 +212,14 @@ def _set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray, d: np.ndarray | 
     w.arrays["detail"] = np.zeros(len(c)) if d is None else d
 
 
-def _score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tuple[float, ...]:
+def score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tuple[float, ...]:
     """(MSE, jitter ratio vs the truth[, lag ms][, blink closure]) of the map over per-pair
     features, from one prediction per pair; closure is the mean over every true blink."""
     from faceclean.evaluation.metrics import blink_peaks, jitter_ratio, lag_ms  # numpy only
 
     sq, n, jit, lags, peaks = 0.0, 0, [], [], []
     for t, u, r, y, e in feats:
-        pred = _predict(w, u, r, e)
+        pred = predict(w, u, r, e)
         sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
         if len(t) > 3:
             jit.append(jitter_ratio(t, pred, y))
@@ -259,7 +259,7 @@ def _raw_mse(pool, names, rest: bool, scored) -> dict[str, float]:
     """Raw MSE per source over its performances: what a fold's MSE is a ratio to."""
     raw = blank(names, 0, LIGHT, rest, prefilter=False)
     feats = features(raw, pool)
-    return {g: _score(raw, [f for f, s in zip(feats, scored, strict=True) if s == g])[0]
+    return {g: score(raw, [f for f, s in zip(feats, scored, strict=True) if s == g])[0]
             for g in sorted({s for s in scored if s is not None})}  # fmt: skip
 
 
@@ -289,12 +289,12 @@ def fit_ridge(
     z, y = _stack(feats, False)
     best = None
     for lam in lams:
-        _set_linear(w, *ridge(z, y, lam))
-        score = _score(w, vfeats)[0]
-        if best is None or score < best[0]:
-            best = (score, lam)
+        set_linear(w, *ridge(z, y, lam))
+        mse = score(w, vfeats)[0]
+        if best is None or mse < best[0]:
+            best = (mse, lam)
     all_feats = features(w, [*train, *val])  # the chosen shrinkage, on every pair given
-    _set_linear(w, *ridge(*_stack(all_feats, False), best[1]))
+    set_linear(w, *ridge(*_stack(all_feats, False), best[1]))
     w.config.update(fitted="ridge", lam=best[1], frames=int(sum(len(f[0]) for f in all_feats)))
     return w
 
@@ -340,9 +340,9 @@ def fit(
             if structured and rest:  # per output group, on the folds (map_groups.py)
                 _, scored = _sources(pool)
                 folds = _folds(pool, feats, rest, scored)
-                choice = map_groups.choose(w, folds, _predict, _set_linear, report)
+                choice = map_groups.choose(w, folds, predict, set_linear, report)
                 w.config["structure"] = {g: [k, lam] for g, (k, lam) in choice.items()}
-            _set_linear(w, *_fold_solve(w, gram, xty))
+            set_linear(w, *_fold_solve(w, gram, xty))
             _choose_lift(w, pool, rest, knees, report)
         w.config.update(frames=int(sum(len(f[0]) for f in feats)))
         return w
@@ -354,19 +354,19 @@ def fit(
         vfeats = features(w, performances(val)) if performances(val) else feats
         z, y = _stack(feats, rest)
         for lam in lams:
-            _set_linear(w, *ridge(z, y, lam))
+            set_linear(w, *ridge(z, y, lam))
             if hidden:
                 _fit_hidden(w, feats, vfeats, epochs, seed, report)
-            mse, jit = _score(w, vfeats)
-            score = mse * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
+            mse, jit = score(w, vfeats)
+            price = mse * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
             report({"event": "candidate", "pre": pre, "lam": lam, "val_mse": mse, "jitter": jit})
-            if best is None or score < best[0]:
-                best = (score, MapWeights(dict(w.config, lam=lam, val_mse=mse, val_jitter=jit),
+            if best is None or price < best[0]:
+                best = (price, MapWeights(dict(w.config, lam=lam, val_mse=mse, val_jitter=jit),
                                           {k: v.copy() for k, v in w.arrays.items()}))  # fmt: skip
     assert best is not None
     w = best[1]
     if refit and val and not hidden:  # the chosen settings, fitted on every pair given
-        _set_linear(w, *ridge(*_stack(features(w, [*train, *val]), rest), w.config["lam"]))
+        set_linear(w, *ridge(*_stack(features(w, [*train, *val]), rest), w.config["lam"]))
     w.config.update(frames=int(sum(len(f[0]) for f in features(w, [*train, *val]))))
     return w
 
@@ -418,20 +418,20 @@ def _cross_validate(
             for g, (_, _, held) in folds.items():
                 if at_rest(g):
                     continue
-                _set_linear(trial, *solved[g, lam])
-                mse, jit = _score(trial, held)
+                set_linear(trial, *solved[g, lam])
+                mse, jit = score(trial, held)
                 ratios.append(mse / max(raw_mse[g], 1e-12))  # (a perfect tracker: raw 0)
                 jits.append(jit)
             known = np.array(jits)[~np.isnan(jits)]  # NaN: too short to tell
             ratio, jit = float(np.mean(ratios)), float(known.mean()) if known.size else 0.0
             worst = float(known.max()) if known.size else 0.0
-            score = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
+            price = ratio * (1.0 + max(0.0, jit / JITTER_BUDGET - 1.0))
             report({"event": "candidate", "pre": pre, "lam": lam, "detail": kappa,
                     "val_mse": ratio, "jitter": jit, "worst_jitter": worst,
                     "cv": len(groups)})  # fmt: skip
             config = dict(trial.config, lam=lam, val_mse=ratio, val_jitter=jit,
                           selected="leave one source out: " + ", ".join(groups))  # fmt: skip
-            found.append(Candidate(score, jit, worst, pre, lam, kappa, config))
+            found.append(Candidate(price, jit, worst, pre, lam, kappa, config))
     top = min(c.score for c in found)
     tied = [c for c in found if c.score <= top * (1.0 + TIE)]
     calm = [c for c in tied if c.worst <= JITTER_BUDGET]
@@ -449,8 +449,8 @@ def _cross_validate(
             for g, (gram, xty, held) in folds.items():
                 if at_rest(g):
                     continue
-                _set_linear(trial, *_solve_detail(gram, xty, c.lam, own))
-                lags.append(_score(trial, held, lag=True)[2])
+                set_linear(trial, *_solve_detail(gram, xty, c.lam, own))
+                lags.append(score(trial, held, lag=True)[2])
             lag = float(np.nanmean(lags)) if np.isfinite(lags).any() else 0.0
             report({"event": "candidate_lag", "pre": pre, "lam": c.lam, "detail": c.detail,
                     "lag_ms": lag, "cv": len(groups)})  # fmt: skip
@@ -461,7 +461,7 @@ def _cross_validate(
     return best
 
 
-def _predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None
+def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None
              ) -> np.ndarray:  # fmt: skip
     """The runtime's output for one pair's features (F, K), deadband included."""
     a = w.arrays
@@ -518,7 +518,7 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report, tops=TO
         train = [f for f, s, p in zip(feats, scored, pool, strict=True)
                  if s is not None and not _left_out(p, g)]  # fmt: skip
         folds[g] = blink_lift.Fold(_fold_solve(w, gram, xty), train, held, raw_mse[g])
-    blink_lift.choose(w, performed, folds, _score, _set_linear, report, JITTER_BUDGET, knees, tops)
+    blink_lift.choose(w, performed, folds, score, set_linear, report, JITTER_BUDGET, knees, tops)
 
 
 def _fit_hidden(w: MapWeights, feats, vfeats, epochs: int, seed: int, report: Report) -> None:
