@@ -227,9 +227,9 @@ NOTES = (
     "the family nor the source. The fold fits choose among a subset of the shipped fit's "
     "candidates for the map over every input (one pre-filter, one shrinkage; "
     "`FOLD_PREFILTERS` and the rest in evaluation/family_eval.py); the map over rises "
-    "chooses among all of its own (neural/map_rises.py). Folds whose test source has fewer than two pairs in the "
-    "family (jmtechart, sentien) are left out. The neutral column is the worst channel's "
-    "mean |output - 0| over the family's neutral holds after 0.5 s.",
+    "chooses among all of its own (neural/map_rises.py). Folds whose test source has "
+    "fewer than two pairs in the family (jmtechart, sentien) are left out. The neutral "
+    "column is the worst channel's mean |output - 0| over the family's neutral holds after 0.5 s.",
 )
 
 
