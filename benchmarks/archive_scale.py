@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/archive_scale.py              # 60 minutes, 3 rounds
     .venv/bin/python benchmarks/archive_scale.py --minutes 10 --rounds 1
+    .venv/bin/python benchmarks/archive_scale.py --format csv --rounds 1   # plain CSV
 
 One synthetic take (52 ARKit channels, jittered 60 fps, a tracking-loss gap) is written
 once; then, side by side in the same run and interleaved round by round, fresh processes:
@@ -16,6 +17,12 @@ the take's own copies: the same clean in one process under ``tracemalloc`` with 
 imported first (numba's import is a fixed ~45 MB of Python objects and ~160 MB of RSS,
 whatever the take), over the take's own arrays (times + values). The written file is
 checked lossless: bit for bit the in-process clean.
+
+``--format csv``: the same take as a plain CSV (repr-exact numbers, 221 MB for the hour),
+CSV to CSV: a causal cleaner streams the file in blocks (io/stream.py, runs of frames
+compiled), the LSTM reads it whole (plain_csv.read, a block of lines at a time); ``bare``
+is ``io.load`` + ``io.save`` of the CSV. No tracemalloc column (its hooks on the parser's
+many small objects would time something else); peak RSS says the memory.
 """
 
 from __future__ import annotations
@@ -91,17 +98,19 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--format", choices=("npz", "csv"), default="npz")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
-    src, out = tmp / "take.npz", tmp / "out.npz"
+    ext = args.format
+    src, out = tmp / f"take.{ext}", tmp / f"out.{ext}"
     frames = make_take(src, args.minutes)
-    one = tmp / "one.npz"
+    one = tmp / f"one.{ext}"
     make_take(one, 1 / 3600)
     child(RUN, ["clean", str(src), "-o", str(out)])  # numba's cache written, file cached
     runs = {"bare": (["bare", str(src), str(out)], None)}
     for name, flags in CLEANERS.items():
         runs[name] = (["clean", str(src), "-o", str(out), *flags], None)
-    runs["1-frame default"] = (["clean", str(one), "-o", str(tmp / "o1.npz")], None)
+    runs["1-frame default"] = (["clean", str(one), "-o", str(tmp / f"o1.{ext}")], None)
     runs["1-frame default, numba off"] = (runs["1-frame default"][0], {"FACECLEAN_NUMBA": "0"})
     times: dict[str, list[float]] = {k: [] for k in runs}
     rss: dict[str, float] = {}
@@ -110,17 +119,18 @@ def main() -> None:
             s, kb = child(RUN, argv, env)
             times[name].append(s)
             rss[name] = max(rss.get(name, 0.0), kb / 1024)
-    numpy_s = {}
+    numpy_s, traced = {}, {}
     for name, flags in CLEANERS.items():  # the numpy path, once
         numpy_s[name] = child(RUN, ["clean", str(src), "-o", str(out), *flags],
                               {"FACECLEAN_NUMBA": "0"})[0]  # fmt: skip
-    traced = {name: child(TRACE, [str(src), "-o", str(out), *flags])[0]
-              for name, flags in CLEANERS.items()}  # fmt: skip
+    if ext == "npz":
+        traced = {name: child(TRACE, [str(src), "-o", str(out), *flags])[0]
+                  for name, flags in CLEANERS.items()}  # fmt: skip
     lossless = check_lossless(src, out)
     bare = statistics.median(times["bare"])
     print(
         f"{frames} frames ({args.minutes:g} min at 60 fps), {src.stat().st_size / 1e6:.1f} MB "
-        f"npz; median of {args.rounds} rounds; load average {os.getloadavg()[0]:.2f}\n"
+        f"{ext}; median of {args.rounds} rounds; load average {os.getloadavg()[0]:.2f}\n"
     )
     print(
         "| run | time (s) | x bare | numpy path (s) | compiled speed-up | peak RSS (MB) "

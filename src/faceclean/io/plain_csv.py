@@ -65,10 +65,10 @@ def read(path: str | os.PathLike) -> Animation:
             block.append(line.rstrip(b"\r\n"))
             if len(block) == BLOCK:
                 t, v, done = parse_rows(block, done, t_col, len(names) + 1, p.name)
-                parts.append((t, v))
+                parts.append((t.copy(), v))  # t: a column of the block's table (a view)
                 block = []
         t, v, done = parse_rows(block, done, t_col, len(names) + 1, p.name)
-        parts.append((t, v))
+        parts.append((t.copy(), v))
     times = np.concatenate([t for t, _ in parts])
     values = np.concatenate([v for _, v in parts])
     del parts
