@@ -33,6 +33,7 @@ import contextlib
 import json
 import os
 import socket
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
@@ -196,11 +197,14 @@ def hold(folder: Path, what: dict) -> Iterator[bool]:
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
+        except BlockingIOError:
             raise FacecleanError(
                 f"{folder} is being written by another running job: wait for it to end, "
                 "or give another output folder"
             ) from None
+        except OSError as e:  # a file system without locks (an NFS mount without lockd)
+            print(f"faceclean: {folder} cannot be locked ({_reason(e)}): a second job into "
+                  "it would not be refused", file=sys.stderr)  # fmt: skip
         with os.fdopen(os.dup(fd), "r+") as f:
             before = f.read()
             mine = json.dumps(what, sort_keys=True)
