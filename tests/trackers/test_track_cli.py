@@ -99,16 +99,22 @@ def test_track_does_not_import_torch(face_video, tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
 
 
-def test_two_faces_in_view_the_first_largest_is_kept_and_said_once(two_faces, tmp_path,
-                                                                   capsys):  # fmt: skip
+def test_two_faces_in_view_the_first_largest_is_kept_said_once_and_exit_1(two_faces,
+                                                                          face_video, tmp_path,
+                                                                          capsys):  # fmt: skip
     from conftest import two_jaws, write_video
 
     video = write_video(tmp_path / "two.mp4", two_faces, 30)
     out = tmp_path / "two.csv"
-    assert main(["track", video, "-o", str(out), "--keep-raw"]) == 0
+    assert main(["track", video, "-o", str(out), "--keep-raw"]) == 1  # issue 36: not 0
     said = capsys.readouterr().out
     crowd = [ln for ln in said.splitlines() if "faces in view" in ln]
     assert len(crowd) == 1 and "on the left of the picture" in crowd[0], said
+    assert f"wrote {out}: {N_FRAMES} frames" in said  # written all the same
+    for path in (out, tmp_path / "two.raw.csv"):  # whole and loadable
+        anim = io.load(path)
+        assert anim.n_frames == N_FRAMES and anim.valid.all(), path
+        assert np.isfinite(anim.values).all(), path
     from faceclean.channels import ARKIT52
 
     jaw = io.load(tmp_path / "two.raw.csv").arkit()[0][:, ARKIT52.index("jawOpen")]
@@ -119,3 +125,14 @@ def test_two_faces_in_view_the_first_largest_is_kept_and_said_once(two_faces, tm
     assert np.corrcoef(jaw, mine)[0, 1] > 0.9
     assert np.corrcoef(jaw[late], mine[late])[0, 1] > 0.9
     assert np.corrcoef(jaw, other)[0, 1] < -0.5
+
+    # a batch: every video tracked and written whole, exit 1 because one had two faces
+    outdir = tmp_path / "out"
+    assert main(["track", face_video, video, "-o", f"{outdir}/"]) == 1
+    said = capsys.readouterr().out
+    assert "tracked 2 of 2 videos" in said, said
+    crowd = [ln for ln in said.splitlines() if "faces in view" in ln]
+    assert len(crowd) == 1 and crowd[0].startswith(f"{video}: 2 faces in view"), said
+    assert sorted(os.listdir(outdir)) == ["face.csv", "two.csv"]
+    for name in ("face.csv", "two.csv"):
+        assert io.load(outdir / name).n_frames == N_FRAMES, name

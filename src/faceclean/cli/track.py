@@ -7,6 +7,8 @@ format OUT's extension says (Live Link CSV with HeadYaw/HeadPitch/HeadRoll, JSON
 glTF/GLB with a head node). A face lost for some frames leaves missing frames. Several
 videos (or ``-o OUTDIR/``) run as a batch, ``--jobs N`` at once; ``--keep-raw`` writes the
 raw scores beside each take (``take.raw.csv``) to re-clean without re-tracking.
+Two faces in view (issue 36): the take is written whole, following the face the one line
+names, and the command exits 1 (a batch: every video written, exit 1 if any had two).
 
 Live: ``faceclean track --camera 0 --send vmc://127.0.0.1:39539 [--record take.csv]``
 tracks a webcam, stamps each frame at capture, cleans and sends as the relay does;
@@ -100,8 +102,9 @@ def run(args: argparse.Namespace) -> int:
     if not batch:
         if args.jobs != 1:
             raise FacecleanError("--jobs is for a batch (several videos into OUTDIR/)")
-        print(track_one(args, args.input[0], out, progress=True))
-        return 0
+        text, crowded = track_one(args, args.input[0], out, progress=True)
+        print(text)
+        return 1 if crowded else 0  # two faces: written whole, but said and not 0
     return _batch(args)
 
 
@@ -114,8 +117,12 @@ def outputs(args: argparse.Namespace, video: str, out: str) -> tuple[str, str | 
     return out, raw
 
 
-def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = False) -> str:
-    """Track, clean and write one video; the line that says what was written."""
+def track_one(
+    args: argparse.Namespace, video: str, out: str, progress: bool = False
+) -> tuple[str, bool]:
+    """Track, clean and write one video: (the line that says what was written, preceded
+    by the one line naming the face tracked when several were in view; whether several
+    were)."""
     import time
 
     from faceclean import io
@@ -162,13 +169,14 @@ def track_one(args: argparse.Namespace, video: str, out: str, progress: bool = F
         io.save(anim, raw, fmt="livelink")
     lost = int((~anim.valid).sum())
     ms = 1000.0 * tracked / max(anim.n_frames, 1)
-    return "".join(f"{video}: {line}\n" for line in said) + (
+    text = "".join(f"{video}: {line}\n" for line in said) + (
         f"wrote {out}: {anim.n_frames} frames"
         + (f" ({lost} without a face: missing)" if lost else "")
         + f", {len(anim.names)} channels + head yaw/pitch/roll, cleaned with {what}"
         + f"; tracked in {tracked:.1f} s ({ms:.1f} ms/frame)"
         + (f"; raw scores in {raw}" if raw else "")
     )
+    return text, bool(said)
 
 
 def _batch(args: argparse.Namespace) -> int:
@@ -194,13 +202,16 @@ def _batch(args: argparse.Namespace) -> int:
         print(note, file=sys.stderr)
     outdir.mkdir(parents=True, exist_ok=True)
     failed: list[tuple[str, str]] = []
+    crowded: list[str] = []  # videos written with two faces in view: exit 1
     bar = tqdm(total=len(jobs), unit="video", file=sys.stderr, desc="tracking", leave=False)
 
-    def done(video: str, ok: bool, text: str) -> None:
+    def done(video: str, ok: bool, text: str, crowd: bool = False) -> None:
         bar.write(text if ok else f"FAILED {video}: {text}", file=sys.stdout)
         bar.update(1)
         if not ok:
             failed.append((video, text))
+        elif crowd:
+            crowded.append(video)
 
     with bar:
         if n == 1:
@@ -212,23 +223,25 @@ def _batch(args: argparse.Namespace) -> int:
                 for future in as_completed(futures):
                     done(futures[future], *future.result())
     print(f"tracked {len(jobs) - len(failed)} of {len(jobs)} videos into {outdir}")
-    return summary(failed)
+    code = summary(failed)
+    return 1 if crowded else code
 
 
-def _job(args: argparse.Namespace, video: str, out: str) -> tuple[bool, str]:
-    """(True, the written line) or (False, why); never raises for a bad video."""
+def _job(args: argparse.Namespace, video: str, out: str) -> tuple[bool, str, bool]:
+    """(True, the written line, whether two faces were in view) or (False, why, False);
+    never raises for a bad video."""
     import os
 
     from faceclean.io import paths
 
     try:
         with paths.command():  # in a worker too: this video is protected from its outputs
-            return True, track_one(args, video, out)
+            return (True, *track_one(args, video, out))
     except FacecleanError as e:
-        return False, str(e)
+        return False, str(e), False
     except (OSError, MemoryError) as e:
-        return False, str(e) or type(e).__name__
+        return False, str(e) or type(e).__name__, False
     except Exception as e:  # one bad video must not stop the batch
         if os.environ.get("FACECLEAN_DEBUG"):
             raise
-        return False, f"internal error: {type(e).__name__}: {e}"
+        return False, f"internal error: {type(e).__name__}: {e}", False
