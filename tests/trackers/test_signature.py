@@ -134,6 +134,29 @@ def test_watch_warns_once_forgets_warm_up_and_steps_as_its_cleaner():
     assert watch.name == "echo"  # the inner cleaner's attributes show through
 
 
+def test_watch_judges_a_block_as_it_judges_frames_and_cleans_as_its_cleaner():
+    # a long file goes through ``steps`` a block at a time (issue 38): the watch must see
+    # those frames too (once it did not, and a streamed clean of an hour said nothing)
+    from faceclean.filters.one_euro import OneEuro
+
+    x = np.round(mediapipe_like(400), 2)  # quantised: not raw MediaPipe
+    t = np.arange(len(x)) / 30.0
+    said, by_frame = [], []
+    block = Watch(OneEuro(names=NAMES), NAMES, said.append)
+    frames = Watch(OneEuro(names=NAMES), NAMES, by_frame.append)
+    for w in (block, frames):
+        w.reset()
+    out = np.vstack([block.steps(t[:150], x[:150]), block.steps(t[150:], x[150:])])
+    want = np.array([frames.step(row, ti) for row, ti in zip(x, t, strict=True)])
+    assert said == by_frame and len(said) == 1 and "quantised" in said[0]
+    np.testing.assert_array_equal(out, want)
+    quiet = []
+    raw = Watch(OneEuro(names=NAMES), NAMES, quiet.append)
+    raw.reset()
+    raw.steps(t, mediapipe_like(400))
+    assert quiet == []
+
+
 def test_relay_tracker_mediapipe_warns_once_on_a_stream_that_is_not_raw():
     """The relay process, a VMC stream whose tongueOut moves (MediaPipe has none)."""
     import select

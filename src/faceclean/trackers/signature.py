@@ -103,6 +103,23 @@ class Watch:
         self._rows = []  # a new stream (or a warm-up's end) is judged on its own
         self.inner.reset()
 
+    def steps(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """A block (B, M) as ``step`` would take it frame by frame: judged MIN_FRAMES
+        rows at a time, then the inner cleaner's own ``steps`` (its compiled loop)."""
+        rows = np.asarray(values, np.float64)
+        rows = rows[np.isfinite(rows).any(axis=1)]
+        while not self.warned and len(rows):
+            need = MIN_FRAMES - len(self._rows)
+            self._rows.extend(rows[:need].copy())
+            rows = rows[need:]
+            if len(self._rows) >= MIN_FRAMES:
+                why = judge(np.array(self._rows), self.names)
+                self._rows = []
+                if why is not None:
+                    self.warned = True
+                    self.on_warn(why)
+        return self.inner.steps(times, values)
+
     def step(self, frame: np.ndarray, t: float) -> np.ndarray:
         if not self.warned:
             x = np.asarray(frame, np.float64)
