@@ -2186,6 +2186,15 @@ def _children(pid: int) -> dict[int, tuple[str, bytes]]:
     return out
 
 
+def _started(pid: int) -> bool:
+    """A spawned worker has read its start-up data from its parent (it has numpy mapped:
+    it imported the program): a parent killed before that leaves the child an EOFError
+    from multiprocessing itself, which no code of ours runs in time to say in one line."""
+    with contextlib.suppress(OSError):
+        return b"_multiarray_umath" in Path(f"/proc/{pid}/maps").read_bytes()
+    return False
+
+
 def _running(pid: int, start: str) -> bool:
     """The same process (pid and start time) still runs (a zombie does not: the
     container's init may never reap it)."""
@@ -2223,9 +2232,9 @@ def test_batch_workers_die_with_their_parent(tmp_path, sig):
                             preexec_fn=_limits(MEM))  # fmt: skip
     kids: dict[int, tuple[str, bytes]] = {}
 
-    def workers() -> int:  # python processes it started (worker, resource tracker, ...)
+    def workers() -> int:  # python processes it started that are past their start-up
         kids.update(_children(proc.pid))
-        return sum(b"python" in cmd for _, cmd in kids.values())
+        return sum(b"python" in cmd and _started(p) for p, (_, cmd) in kids.items())
 
     try:
         assert _until(lambda: workers() >= 2), kids
