@@ -9,6 +9,7 @@ is writing are refused on one line.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -105,8 +106,11 @@ def test_a_scheduler_file_names_the_cluster(tmp_path, scheduler):
     src = tmp_path / "takes"
     _takes(src)
     (src / "sub" / "broken.csv").unlink()
+    # what ``dask scheduler --scheduler-file`` writes, of which a client reads the address
+    # (Client.write_scheduler_file itself can fail to encode a busy scheduler's identity)
     with distributed.Client(scheduler, set_as_default=False) as client:
-        client.write_scheduler_file(str(tmp_path / "scheduler.json"))
+        info = {"type": "Scheduler", "id": client.scheduler_info()["id"], "address": scheduler}
+    (tmp_path / "scheduler.json").write_text(json.dumps(info))
     r = run("clean", src, "-o", tmp_path / "out", *EMA, "--cluster", tmp_path / "scheduler.json")
     assert r.returncode == 0, r.stderr
     assert "cleaned 4 of 4 files" in r.stdout
