@@ -19,7 +19,7 @@ from faceclean.animation import Animation
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import check_finite
-from faceclean.io import stream
+from faceclean.io import source, stream
 from faceclean.resolve import resolve
 from faceclean.settings import takes_dir
 
@@ -367,7 +367,7 @@ def _edge_files() -> dict[str, bytes]:
 @pytest.mark.parametrize("method", STREAMING)
 def test_streaming_equals_in_memory_byte_for_byte(tmp_path, monkeypatch, method):
     monkeypatch.setattr(stream, "BLOCK", 7)  # many block boundaries
-    monkeypatch.setattr(stream, "CHUNK", 61)  # reads that split lines and "\r\n"
+    monkeypatch.setattr(source, "CHUNK", 61)  # reads that split lines and "\r\n"
     files = {n: tmp_path / n for n in _edge_files()}
     for name, data in _edge_files().items():
         files[name].write_bytes(data)
@@ -424,7 +424,7 @@ def test_iter_lines_matches_splitlines():
 
     data = b"a\r\nb\rc\n\nd\r\r\ne"
     for chunk in (1, 2, 3, 5, 100):
-        assert list(stream.iter_lines(stdio.BytesIO(data), chunk)) == data.splitlines(True)
+        assert list(source.iter_lines(stdio.BytesIO(data), chunk)) == data.splitlines(True)
 
 
 def test_clean_streams_only_when_it_can():

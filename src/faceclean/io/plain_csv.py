@@ -44,8 +44,6 @@ def read(path: str | os.PathLike) -> Animation:
     """Read a plain CSV; empty cells are NaN. The file is read and parsed ``BLOCK`` lines
     at a time (an hour at 60 fps is 220 MB of text: never whole in memory, nor its
     cells), then the blocks' arrays are joined once."""
-    from faceclean.io.stream import iter_lines
-
     p = Path(path)
     size = source.regular(p).st_size
     if size > source.MAX_FILE:
@@ -54,7 +52,7 @@ def read(path: str | os.PathLike) -> Animation:
             "limit"
         )
     with source.open_binary(p) as f:
-        lines = iter_lines(f)
+        lines = source.iter_lines(f)
         head = header_line(next(lines, b""))
         if not head or not sniff(head):
             raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")

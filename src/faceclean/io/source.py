@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import os
 import stat
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -205,3 +206,20 @@ def short_cells(fields: list[bytes], label: str) -> list[bytes]:
 
 def size_text(n: int) -> str:
     return f"{n / MiB:.1f} MiB" if n >= MiB // 10 else f"{n} bytes"
+
+
+CHUNK = 1 << 20  # bytes per read of a text file streamed line by line
+
+
+def iter_lines(f: BinaryIO, chunk: int | None = None) -> Iterator[bytes]:
+    """The lines of a binary file with their endings, exactly as
+    ``f.read().splitlines(keepends=True)`` gives them, reading ``chunk`` bytes at a time."""
+    buf, chunk = b"", chunk or CHUNK  # (CHUNK read now: a test may set it)
+    while data := f.read(chunk):
+        lines = (buf + data).splitlines(keepends=True)
+        buf = b"" if lines[-1].endswith(b"\n") else lines.pop()  # "\r" may precede "\n"
+        if len(buf) > MAX_LINE:
+            raise FacecleanError(f"a line longer than {MAX_LINE} bytes: not a CSV file")
+        yield from lines
+    if buf:
+        yield from buf.splitlines(keepends=True)

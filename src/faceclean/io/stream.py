@@ -35,7 +35,6 @@ from faceclean.io import livelink_csv, plain_csv, source
 from faceclean.io.atomic import atomic_open
 
 BLOCK = 4096  # lines per block
-CHUNK = 1 << 20  # bytes per read
 FORMATS = ("livelink", "csv")
 
 Progress = Callable[[int], None]  # called with the bytes consumed since the last call
@@ -53,7 +52,7 @@ def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
     """The channel names of a row-format file, from its header line alone."""
     p = Path(path)
     with source.open_binary(p) as f:
-        first = next(iter_lines(f), b"")
+        first = next(source.iter_lines(f), b"")
     try:
         if fmt == "livelink":
             if not livelink_csv.sniff(first):
@@ -73,7 +72,7 @@ def angle_names(path: str | os.PathLike, fmt: str = "livelink") -> tuple[str, ..
     """The head/eye angle columns of a row-format file (Live Link spelling, file order)."""
     p = Path(path)
     with source.open_binary(p) as f:
-        first = next(iter_lines(f), b"")
+        first = next(source.iter_lines(f), b"")
     if fmt == "csv":
         names = plain_csv.parse_header(plain_csv.header_line(first))[1]
         return tuple(pose_name(names[j]) for j in plain_csv.angle_columns(names))
@@ -114,25 +113,11 @@ def clean_file(
             raise FacecleanError(f"{p.name}: not UTF-8 text ({e})") from None
 
 
-def iter_lines(f: BinaryIO, chunk: int = CHUNK) -> Iterator[bytes]:
-    """The lines of a binary file with their endings, exactly as
-    ``f.read().splitlines(keepends=True)`` gives them, reading ``chunk`` bytes at a time."""
-    buf = b""
-    while data := f.read(chunk):
-        lines = (buf + data).splitlines(keepends=True)
-        buf = b"" if lines[-1].endswith(b"\n") else lines.pop()  # "\r" may precede "\n"
-        if len(buf) > source.MAX_LINE:
-            raise FacecleanError(f"a line longer than {source.MAX_LINE} bytes: not a CSV file")
-        yield from lines
-    if buf:
-        yield from buf.splitlines(keepends=True)
-
-
 def _counted(f: BinaryIO, progress: Progress | None) -> Iterator[list[bytes]]:
     """Blocks of up to BLOCK lines; reports bytes consumed to ``progress``."""
     block: list[bytes] = []
     size = 0
-    for line in iter_lines(f):
+    for line in source.iter_lines(f):
         block.append(line)
         size += len(line)
         if len(block) == BLOCK:

@@ -110,25 +110,24 @@ class Watch:
         rows = rows[np.isfinite(rows).any(axis=1)]
         while not self.warned and len(rows):
             need = MIN_FRAMES - len(self._rows)
-            self._rows.extend(rows[:need].copy())
+            self._take(rows[:need])
             rows = rows[need:]
-            if len(self._rows) >= MIN_FRAMES:
-                why = judge(np.array(self._rows), self.names)
-                self._rows = []
-                if why is not None:
-                    self.warned = True
-                    self.on_warn(why)
         return self.inner.steps(times, values)
 
     def step(self, frame: np.ndarray, t: float) -> np.ndarray:
         if not self.warned:
             x = np.asarray(frame, np.float64)
             if np.isfinite(x).any():
-                self._rows.append(x.copy())
-            if len(self._rows) >= MIN_FRAMES:
-                why = judge(np.array(self._rows), self.names)
-                self._rows = []
-                if why is not None:
-                    self.warned = True
-                    self.on_warn(why)
+                self._take(x[None])
         return self.inner.step(frame, t)
+
+    def _take(self, rows: np.ndarray) -> None:
+        """Keeps ``rows`` (n, M) face frames; once MIN_FRAMES are kept, judges them (and
+        warns, once) and starts again."""
+        self._rows.extend(rows.copy())
+        if len(self._rows) >= MIN_FRAMES:
+            why = judge(np.array(self._rows), self.names)
+            self._rows = []
+            if why is not None:
+                self.warned = True
+                self.on_warn(why)
