@@ -5,7 +5,7 @@ browInnerUp 0.7, a photographed one browDown 0.3 (docs/RESULTS.md, the neutral c
 A map over the readings themselves learns the training looks' resting readings and gives
 them back as expressions on a new look (issue 34: a face at rest comes out sneering; the
 map over every input 1.02x raw on photo-textured faces). This map reads no level at all:
-per output j, over the causal features of tracker_map.py (u the pre-filtered input, r its
+per output j, over the causal features of map_features.py (u the pre-filtered input, r its
 running minimum since reset, the stream's rest so far):
 
     y_j = clip(sum_k W_jk (u_k - r_k) + s W_jj e_j, 0, 1)   no offset, no u, (M,) from (K,)
@@ -45,7 +45,7 @@ import numpy as np
 
 from faceclean.evaluation.paired import Pair, performances
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
-from faceclean.neural import blink_lift, tracker_map
+from faceclean.neural import blink_lift, map_features, tracker_map
 from faceclean.neural.map_groups import SELECT, at_rest, group_of
 
 LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
@@ -85,15 +85,15 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     on every pair. The groups in ``own_rise`` read their own rise only, whatever the
     folds say."""
     report = report or (lambda _e: None)
-    names = tracker_map.channels(pairs)
+    names = map_features.channels(pairs)
     folds = _folds(pairs)
     if not folds:  # one source: nothing to choose on; the first pre-filter, the middle lam
         prefilters, lams = prefilters[:1], [lams[len(lams) // 2]]
         deadbands = deadbands[:1]
     best = None
     for pre, band in [(p, b) for p in prefilters for b in deadbands]:
-        w = tracker_map.blank(names, 0, pre, rest=True, deadband=band)
-        feats = tracker_map.features(w, pairs)
+        w = map_features.blank(names, 0, pre, rest=True, deadband=band)
+        feats = map_features.features(w, pairs)
         moments = [_moments(f) for f in feats]
         for lam in lams:
             cv = _cross_validate(w, pairs, feats, moments, folds, lam, own_rise)
@@ -108,7 +108,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     _, pre, band, lam, score, jitter, per_group, off, feats, moments = best
     passed = sorted(g for g, fam in per_group.items() if max(fam.values()) > HARM)
     passed = [g for g in passed if g not in own_rise]
-    w = tracker_map.blank(names, 0, pre, rest=True, deadband=band)
+    w = map_features.blank(names, 0, pre, rest=True, deadband=band)
     set_rises(w, solve(moments, lam), passed, own_rise)
     w.config.update(fitted="rises", lam=lam, passed=passed, own_rise=list(own_rise),
                     val_mse=score, val_jitter=jitter, neutral_off=off,
@@ -181,7 +181,7 @@ def _left_out(p: Pair, key: str) -> bool:
 
 
 def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=()):
-    """fold key -> (A, c, d) of the map fitted without the fold (tracker_map.set_linear's
+    """fold key -> (A, c, d) of the map fitted without the fold (map_features.set_linear's
     arguments: coef over [u, u - r])."""
     out = {}
     for key in folds:
@@ -197,7 +197,7 @@ def _cross_validate(w, pairs, feats, moments, folds, lam, own_rise
                     ) -> tuple[float, float, dict[str, dict[str, float]], float]:  # fmt: skip
     """(mean MSE x raw over the folds' performances, their mean jitter x the truth's,
     group -> family -> MSE x raw, the worst channel's mean |y - truth| on the neutral
-    holds after SETTLE_S) for ``lam``: the runtime's output (tracker_map.predict, its
+    holds after SETTLE_S) for ``lam``: the runtime's output (map_features.predict, its
     deadband included) of each fold's fit on the fold's pairs."""
     from faceclean.evaluation.metrics import jitter_ratio  # numpy only
 
@@ -206,12 +206,12 @@ def _cross_validate(w, pairs, feats, moments, folds, lam, own_rise
     ratios, sse, jitter = [], {}, []
     dev, frames = np.zeros(len(names)), 0
     for key, linear in _fold_fits(w, pairs, moments, folds, lam, (), own_rise).items():
-        tracker_map.set_linear(w, *linear)
+        map_features.set_linear(w, *linear)
         fam = key.rpartition("/")[0] or "all"
         s, r = np.zeros(len(SELECT)), np.zeros(len(SELECT))
         for i in folds[key]:
             f = feats[i]
-            pred = tracker_map.predict(w, f.u, f.r, f.e)
+            pred = map_features.predict(w, f.u, f.r, f.e)
             if at_rest(key):
                 keep = f.t - f.t[0] >= SETTLE_S
                 dev += np.abs(pred[keep] - f.y[keep]).sum(0)
@@ -257,5 +257,5 @@ def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, 
         raw = sum(float(((f.u + f.e - f.y) ** 2).sum()) for f in held)
         size = sum(f.y.size for f in held)
         lift_folds[key] = blink_lift.Fold(fits[key], train, held, raw / max(size, 1))
-    blink_lift.choose(w, performed, lift_folds, tracker_map.score, tracker_map.set_linear,
+    blink_lift.choose(w, performed, lift_folds, map_features.score, map_features.set_linear,
                       report, JITTER_BUDGET, knees)  # fmt: skip

@@ -23,15 +23,21 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from faceclean.animation import Animation
-from faceclean.channels import ARKIT52
 from faceclean.evaluation.paired import Pair, performances
-from faceclean.filters.one_euro import OneEuro
-from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_groups
 from faceclean.neural.blink_lift import CLOSURE_BAND as CLOSURE_BAND  # the fit's settings
 from faceclean.neural.blink_lift import KNEES, TOPS
+from faceclean.neural.map_features import (
+    Feature,
+    blank,
+    channels,
+    features,
+    own_inputs,
+    predict,
+    score,
+    set_linear,
+)
 from faceclean.neural.map_groups import at_rest
 
 # (min_cutoff Hz, beta, d_cutoff Hz) pre-filter candidates (None: no pre-filter). The
@@ -61,77 +67,6 @@ DEADBAND = 0.01
 DETAILS = (0.0, 0.25, 0.5, 0.75, 1.0)
 DETAIL_SHRINK = 0.01  # the detail gain's ridge, relative to the detail's own mean square
 Report = Callable[[dict[str, Any]], None]
-
-
-def channels(pairs: Sequence[Pair]) -> tuple[str, ...]:
-    """The tracker's channels that are ARKit channels, in canonical order (inputs = outputs)."""
-    have = set()
-    for p in pairs:
-        _, present = p.tracked.arkit(ARKIT52)
-        have |= {n for n, ok in zip(ARKIT52, present, strict=True) if ok}
-    return tuple(n for n in ARKIT52 if n in have)
-
-
-def blank(names: Sequence[str], hidden: int, pre: tuple[float, float, float], rest: bool,
-          prefilter: bool = True, deadband: float = 0.0) -> MapWeights:  # fmt: skip
-    """An identity map (y = u) of the right shapes: the start of every fit."""
-    k, h = len(names), hidden
-    arrays = {
-        "min_cutoff": np.full(k, pre[0]),
-        "beta": np.full(k, pre[1]),
-        "d_cutoff": np.full(k, pre[2]),
-        "mu": np.zeros(2 * k),
-        "sd": np.ones(2 * k),
-        "w1": np.zeros((h, 2 * k)),
-        "b1": np.zeros(h),
-        "w2": np.zeros((k, h)),
-        "b2": np.zeros(k),
-        "a": np.eye(k),
-        "b": np.zeros((k, k)),
-        "c": np.zeros(k),
-        "lift_gain": np.zeros(k),
-        "lift_knee": np.zeros(k),
-    }
-    config = {"format": TRACKER_MAP, "inputs": list(names), "outputs": list(names),
-              "hidden": h, "rest": rest, "prefilter": prefilter}  # fmt: skip
-    if deadband:
-        config["deadband"] = deadband
-    return MapWeights(config, arrays)
-
-
-class Feature(NamedTuple):
-    """One pair's causal features over its valid frames: times t (F,) s, the pre-filtered
-    input u, the resting level r, the truth y and the detail e = x - u (raw input minus
-    pre-filtered), (F, K) each."""
-
-    t: np.ndarray
-    u: np.ndarray
-    r: np.ndarray
-    y: np.ndarray
-    e: np.ndarray
-
-
-def features(w: MapWeights, pairs: Sequence[Pair]) -> list[Feature]:
-    """Per pair its Feature. u comes from the runtime's own One Euro, stepped as the
-    cleaner steps it (its compiled run: the same bits)."""
-    from faceclean.filters import compiled
-
-    compiled.enable()  # a fit cleans every pair once per candidate pre-filter
-    names, a = w.inputs, w.arrays
-    out = []
-    for p in pairs:
-        pre = OneEuro(names=names, min_cutoff=a["min_cutoff"].tolist(),
-                      beta=a["beta"].tolist(), d_cutoff=a["d_cutoff"].tolist())  # fmt: skip
-        x = p.tracked.arkit(names)[0]
-        y = p.truth.arkit(names)[0]
-        valid = ~np.isnan(x).all(axis=1)
-        t, x, y = p.tracked.times[valid], np.nan_to_num(x[valid]), y[valid]
-        # clean: reset, then step every frame
-        u = pre.clean(Animation(t, x, names)).values if w.config["prefilter"] and len(t) else x
-        r = np.minimum.accumulate(u, axis=0)
-        ok = ~np.isnan(y).any(axis=1)
-        out.append(Feature(t[ok], u[ok], r[ok], y[ok], x[ok] - u[ok]))
-    return out
 
 
 def _stack(feats: Sequence[Feature], rest: bool, detail: bool = False) -> tuple[np.ndarray, ...]:
@@ -188,12 +123,7 @@ def _fold_solve(w: MapWeights, gram: np.ndarray, xty: np.ndarray
     if "structure" in w.config:
         choice = {g: (k, float(lam)) for g, (k, lam) in w.config["structure"].items()}
         return map_groups.solve(gram, xty, w.inputs, choice)
-    return _solve_detail(gram, xty, w.config["lam"], _own(w))
-
-
-def _own(w: MapWeights) -> np.ndarray:
-    """(M,) each output's input of the same name, -1 for none."""
-    return np.array([w.inputs.index(o) if o in w.inputs else -1 for o in w.outputs])
+    return _solve_detail(gram, xty, w.config["lam"], own_inputs(w))
 
 
 def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, np.ndarray]:
@@ -202,34 +132,6 @@ def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, n
     reg[-1, -1] = 0.0  # the offset is not shrunk
     sol = np.linalg.solve(gram + reg, xty)  # (D+1, M)
     return sol[:-1].T, sol[-1]
-
-
-def set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray, d: np.ndarray | None = None
-                ) -> None:  # fmt: skip
-    k = len(w.inputs)
-    w.arrays["a"], w.arrays["c"] = coef[:, :k], c
-    w.arrays["b"] = coef[:, k:] if coef.shape[1] > k else np.zeros((len(c), k))
-    w.arrays["detail"] = np.zeros(len(c)) if d is None else d
-
-
-def score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tuple[float, ...]:
-    """(MSE, jitter ratio vs the truth[, lag ms][, blink closure]) of the map over per-pair
-    features, from one prediction per pair; closure is the mean over every true blink."""
-    from faceclean.evaluation.metrics import blink_peaks, jitter_ratio, lag_ms  # numpy only
-
-    sq, n, jit, lags, peaks = 0.0, 0, [], [], []
-    for t, u, r, y, e in feats:
-        pred = predict(w, u, r, e)
-        sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
-        if len(t) > 3:
-            jit.append(jitter_ratio(t, pred, y))
-            if lag:
-                lags.append(lag_ms(t, pred, y))
-        if closure:
-            peaks.append(blink_peaks(t, pred, y, w.outputs))
-    mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
-    out = (sq / max(n, 1), mean(jit)) + ((mean(lags),) if lag else ())
-    return out + ((mean(np.concatenate(peaks)) if peaks else float("nan"),) if closure else ())
 
 
 def fold_key(p: Pair, families: bool) -> str:
@@ -403,7 +305,7 @@ def _cross_validate(
 
     def folded(pre):  # (weights to fill, each output's own input, the folds) at pre
         w = blank(names, 0, pre or LIGHT, rest, prefilter=pre is not None, deadband=deadband)
-        return w, _own(w), _folds(pool, features(w, pool), rest, scored)
+        return w, own_inputs(w), _folds(pool, features(w, pool), rest, scored)
 
     # Pass 1, every candidate.
     found: list[Candidate] = []
@@ -459,42 +361,6 @@ def _cross_validate(
                 best, least = MapWeights(dict(c.config, val_lag_ms=lag), arrays), lag
     assert best is not None
     return best
-
-
-def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None
-             ) -> np.ndarray:  # fmt: skip
-    """The runtime's output for one pair's features (F, K), deadband included."""
-    a = w.arrays
-    lin = u @ a["a"].T + a["c"]
-    rest = (u - r) if w.config["rest"] else np.zeros_like(u)
-    lin = lin + rest @ a["b"].T
-    d = a.get("detail", np.zeros(0)) * float(w.config.get("detail_scale", 1.0))
-    if e is not None and d.any():  # the detail, on each output's own input
-        on = np.flatnonzero(d)
-        lin[:, on] += d[on] * e[:, _own(w)[on]]
-    if w.config["hidden"]:
-        z = (np.concatenate([u, rest], axis=1) - a["mu"]) / a["sd"]
-        lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
-    m = np.clip(lin, 0.0, 1.0)
-    lo = np.flatnonzero(a.get("lift_gain", np.zeros(0)) > 0)
-    if len(lo):  # the lift: m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (u_j - r_j - k)
-        j = _own(w)[lo]  # each lifted output's own input
-        rise = a["lift_gain"][lo] * (u[:, j] - r[:, j] - a["lift_knee"][lo])
-        if w.config.get("lift_top"):  # the largest lift so far, from the pair's first frame
-            rise = rise / np.maximum(np.maximum.accumulate(rise, axis=0), 1.0)
-        m[:, lo] = np.maximum(m[:, lo], np.clip(rise, 0.0, 1.0))
-    band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), m.shape[1:])
-    if not band.any() or len(m) < 2:
-        return m
-    from faceclean.filters import compiled
-
-    y = compiled.deadband(m, band)  # the loop below, compiled (numba), when it is on
-    if y is not None:
-        return y
-    y = m.copy()  # y[n] = m[n] - clip(m[n] - y[n-1], -eps, eps), frame after frame
-    for i in range(1, len(m)):
-        y[i] -= np.clip(m[i] - y[i - 1], -band, band)
-    return y
 
 
 _lift_gains, _set_lift = blink_lift.gains, blink_lift.set_gains  # as the tests reach them
