@@ -29,3 +29,16 @@ def takes_root():
 def shipped_model():
     """The shipped default model file (models/default.npz)."""
     return MODELS / "default.npz"
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """A headless Chromium (tests/headless.py's pinned build and flags), one per module;
+    a module that uses it skips itself where ``headless.browser_missing()`` says so."""
+    from headless import BROWSER_ARGS, CHROMIUM
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
+        yield b
+        b.close()

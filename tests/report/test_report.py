@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 import pytest
-from headless import BROWSER_ARGS, CHROMIUM, Page, browser_missing
+from headless import Page, browser_missing
 
 from faceclean import report
 from faceclean.animation import Animation
@@ -112,16 +112,6 @@ def test_cli_refuses_bad_output_and_bad_mesh(tmp_path, capsys):
 
 
 # ---- in a real browser ------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")

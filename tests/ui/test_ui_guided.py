@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 import pytest
-from headless import BROWSER_ARGS, CHROMIUM, browser_missing
+from headless import browser_missing
 from helpers import free_port, interrupt, reaped
 from test_guided import SCRIPT, arkit_face, performed
 from test_ui_page import ENV, Receiver, Tab, start
@@ -26,16 +26,6 @@ from faceclean.cli import main
 pytest.importorskip("websockets")
 pytestmark = pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
 SQUINT = ARKIT52.index("eyeSquintLeft")  # the performer rests at 0.12 on it (arkit_face)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")

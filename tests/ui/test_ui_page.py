@@ -25,16 +25,6 @@ ENV = dict(os.environ, PYTHONPATH=str(REPO / "src"))
 URL = re.compile(r"tuning page: (http://\S+)")
 
 
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
-        yield b
-        b.close()
-
-
 def start(args: list[str], stderr=subprocess.PIPE) -> tuple[subprocess.Popen, str]:
     """A faceclean command that serves the page, and the URL it printed."""
     proc = subprocess.Popen(

@@ -174,18 +174,12 @@ def _folds(pairs: Sequence[Pair]) -> dict[str, list[int]]:
     return folds if len({k.rpartition("/")[2] for k in folds}) >= 3 else {}
 
 
-def _left_out(p: Pair, key: str) -> bool:
-    """Whether fold ``key`` ("family/source" or "source") keeps ``p`` out of its fit."""
-    family, _, group = key.rpartition("/")
-    return p.group == group or (bool(family) and p.family == family)
-
-
 def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=()):
     """fold key -> (A, c, d) of the map fitted without the fold (map_features.set_linear's
     arguments: coef over [u, u - r])."""
     out = {}
     for key in folds:
-        left = {i for i, p in enumerate(pairs) if _left_out(p, key)}
+        left = {i for i, p in enumerate(pairs) if tracker_map.left_out(p, key)}
         set_rises(w, solve([m for i, m in enumerate(moments) if i not in left], lam),
                   passed, own_rise)  # fmt: skip
         a = w.arrays
@@ -253,7 +247,7 @@ def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, 
         if at_rest(key):
             continue
         held = [feats[i] for i in idx]
-        train = [feats[i] for i in perf if not _left_out(pairs[i], key)]
+        train = [feats[i] for i in perf if not tracker_map.left_out(pairs[i], key)]
         raw = sum(float(((f.u + f.e - f.y) ** 2).sum()) for f in held)
         size = sum(f.y.size for f in held)
         lift_folds[key] = blink_lift.Fold(fits[key], train, held, raw / max(size, 1))

@@ -136,11 +136,11 @@ def _solve(gram: np.ndarray, xty: np.ndarray, lam: float) -> tuple[np.ndarray, n
 
 def fold_key(p: Pair, families: bool) -> str:
     """The fold a pair is scored in: its source, or with ``families`` its appearance family
-    and source ("photo/neurosync"): a fold held out leaves both out (``_left_out``)."""
+    and source ("photo/neurosync"): a fold held out leaves both out (``left_out``)."""
     return f"{p.family}/{p.group}" if families else p.group
 
 
-def _left_out(p: Pair, key: str) -> bool:
+def left_out(p: Pair, key: str) -> bool:
     """Whether ``key``'s fold keeps ``p`` out of its training: the same source, or (a
     family fold) the same look."""
     family, _, group = key.rpartition("/")
@@ -173,7 +173,7 @@ def _folds(pool, feats, rest: bool, scored) -> dict[str, tuple]:
     total = [sum(m[i] for m in moments) for i in (0, 1)]
     folds = {}
     for g in sorted({s for s in scored if s is not None}):
-        out = [i for i, p in enumerate(pool) if _left_out(p, g)]
+        out = [i for i, p in enumerate(pool) if left_out(p, g)]
         folds[g] = (*(total[j] - sum(moments[i][j] for i in out) for j in (0, 1)),
                     [feats[i] for i in out if scored[i] == g])  # fmt: skip
     return folds
@@ -382,7 +382,7 @@ def _choose_lift(w: MapWeights, pool, rest: bool, knees, report: Report, tops=TO
     folds = {}
     for g, (gram, xty, held) in _folds(pool, feats, rest, scored).items():
         train = [f for f, s, p in zip(feats, scored, pool, strict=True)
-                 if s is not None and not _left_out(p, g)]  # fmt: skip
+                 if s is not None and not left_out(p, g)]  # fmt: skip
         folds[g] = blink_lift.Fold(_fold_solve(w, gram, xty), train, held, raw_mse[g])
     blink_lift.choose(w, performed, folds, score, set_linear, report, JITTER_BUDGET, knees, tops)
 
