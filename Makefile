@@ -38,7 +38,7 @@ bench: $(STAMP)
 	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md
 
 PAIRS ?= $(HOME)/.cache/faceclean/pairs
-FAMILIES ?= $(HOME)/.cache/faceclean/families
+FAMILIES ?= $(HOME)/.cache/faceclean/families-gaze
 PORTRAITS ?= $(HOME)/.cache/faceclean/portraits
 
 eval: $(STAMP)
@@ -57,12 +57,12 @@ portraits:
 # Rendered faces tracked by MediaPipe in three appearance families (about an hour on 2
 # cores; resumable, rerun to continue).
 pairs: $(STAMP) portraits
-	$(BIN)/faceclean pairs --shared --synthetic 24 --independent 24 --neutral 3 --seconds 10 \
+	$(BIN)/faceclean pairs --shared --synthetic 24 --independent 24 --neutral 3 --seconds 10 --eyes turn \
 	  --families painted,photo,dressed --settings studio,webcam,window -o $(FAMILIES) --jobs 2
 
 # The earlier set (painted faces, the window setting held out) of the tracker table.
 pairs-window: $(STAMP)
-	$(BIN)/faceclean pairs --shared --synthetic 24 --held-out window --rom -o $(PAIRS) --jobs 2
+	$(BIN)/faceclean pairs --shared --synthetic 24 --held-out window --rom --eyes still -o $(PAIRS) --jobs 2
 
 clean-venv:
 	rm -rf $(VENV)

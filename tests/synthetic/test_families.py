@@ -107,6 +107,28 @@ def test_the_plan_deals_every_source_into_every_family_and_holds_each_face_at_re
     assert pose is None and not w.any() and t[-1] == pytest.approx(2.0)
 
 
+def test_turning_eyes_are_a_job_of_their_own_and_older_pairs_keep_their_names():
+    takes = [("/takes/a/0.csv", "a", 20.0)]
+    still = engine.plan(takes, 1, 10.0, ("studio",), (30.0,))
+    turn = engine.plan(takes, 1, 10.0, ("studio",), (30.0,), gaze=True)
+    assert [j.gaze for j in turn] == [True] * len(still) and not any(j.gaze for j in still)
+    # the name of a pair made before the eyes turned: its fields without gaze, hashed
+    old = engine.Job("/takes/a/0.csv", "a", 0.0, 10.0, 5, "studio", 30.0, False)
+    assert old.name == "a-0-0s-painted-studio-30fps-" + _digest(old)
+    for s, t in zip(still, turn, strict=True):
+        assert "-gaze-" in t.name and "-gaze-" not in s.name
+        assert t.name.replace("gaze-", "")[:-8] == s.name[:-8] and t.name[-8:] != s.name[-8:]
+
+
+def _digest(job) -> str:
+    import hashlib
+    import json
+    from dataclasses import asdict
+
+    fields = {k: v for k, v in asdict(job).items() if k != "gaze"}
+    return hashlib.sha1(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:8]
+
+
 def test_pairs_skips_a_bad_portrait_and_makes_the_rest(portrait_file, tmp_path):
     bad = tmp_path / "blank.png"
     Image.fromarray(np.full((200, 200, 3), 128, np.uint8)).save(bad)

@@ -95,6 +95,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="S",
         help="also hold every scene's face at rest for S seconds (group 'neutral')",
     )
+    p.add_argument(
+        "--eyes",
+        choices=("turn", "still"),
+        default="turn",
+        help="turn: the eyeballs follow the eyeLook weights (default); still: they look ahead "
+        "and the lids alone move (the pairs made before; docs/MODEL.md)",
+    )
     p.add_argument("--list", action="store_true", help="print this shard's jobs and stop")
 
 
@@ -243,7 +250,7 @@ def _plan(args: argparse.Namespace, families: tuple[str, ...] = ("painted",),
     return engine.plan(
         takes, args.synthetic, args.seconds, names, rates, args.seed, args.webcam_share, held,
         families=families, portraits=portraits, independent=args.independent,
-        neutral=args.neutral,
+        neutral=args.neutral, gaze=args.eyes == "turn",
     )  # fmt: skip
 
 

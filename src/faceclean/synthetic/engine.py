@@ -53,6 +53,7 @@ class Job:
     webcam: bool  # irregular timing with dropped frames, as a webcam delivers
     family: str = "painted"  # appearance family (scene.FAMILIES)
     portrait: str = ""  # the photo family's portrait
+    gaze: bool = False  # the eyeballs turn with the eyeLook weights (gaze.py); off: ahead
 
     @property
     def name(self) -> str:
@@ -60,10 +61,13 @@ class Job:
         for prefix in (SYNTH, INDEPENDENT, NEUTRAL):
             src = src.removeprefix(prefix)
         stem = re.sub(r"[^A-Za-z0-9_-]+", "-", Path(src or "hold").stem)
-        key = json.dumps(asdict(self), sort_keys=True).encode()
-        digest = hashlib.sha1(key).hexdigest()[:8]
+        fields = asdict(self)
+        if not self.gaze:  # pairs made before the eyes turned keep their names
+            del fields["gaze"]
+        digest = hashlib.sha1(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:8]
         timing = "webcam" if self.webcam else f"{self.rate:g}fps"
         look = f"{self.family}-" + (f"{self.portrait}-" if self.portrait else "")
+        look += "gaze-" if self.gaze else ""
         return f"{self.group}-{stem}-{self.start:g}s-{look}{self.setting}-{timing}-{digest}"
 
 
@@ -80,6 +84,7 @@ def plan(
     portraits: tuple[str, ...] = (),
     independent: int = 0,
     neutral: float = 0.0,
+    gaze: bool = False,
 ) -> list[Job]:
     """Jobs over ``takes`` [(path, group, duration s)] cut into ``seconds`` clips,
     ``synthetic`` full-range performers and ``independent`` performers whose channels move
@@ -88,7 +93,8 @@ def plan(
     (identity, light, camera) and a rate and timing drawn from ``seed``; its appearance
     family is dealt in turn within its source (every source in every family), and a photo
     clip's portrait in turn among ``portraits``. ``neutral`` > 0: each scene also holds a
-    neutral face that many seconds (source ``neutral:``, group ``neutral``). Clips are
+    neutral face that many seconds (source ``neutral:``, group ``neutral``). ``gaze``: the
+    eyeballs turn with the eyeLook weights (off: they look ahead, the lids alone move). Clips are
     dealt round-robin over the sources (``_round_robin``). Same arguments, same list."""
     if not (0.5 <= seconds <= 3600):
         raise FacecleanError(f"--seconds must be in [0.5, 3600], got {seconds}")
@@ -123,6 +129,7 @@ def plan(
                 webcam=bool(rng.random() < webcam_share),
                 family=family,
                 portrait=portrait,
+                gaze=gaze,
             )
             jobs.append(job)
             if neutral > 0:  # the same face, light and camera, at rest
@@ -307,7 +314,7 @@ class Worker:
             pose = np.nan_to_num(resample(src_t, src_pose, times))
         else:
             pose = drift(times, scene.pose_drift, job.seed)
-        tracked = self._track(scene, times, truth, pose)
+        tracked = self._track(scene, times, truth, pose, job.gaze)
         return write_pair(
             out,
             job.name,
@@ -333,18 +340,19 @@ class Worker:
         times, truth = rom.clip(job.rate)
         scene = self.scene(job)
         pose = drift(times, 0.3 * scene.pose_drift, job.seed + 1)
-        tracked = self._track(scene, times, truth, pose)
+        tracked = self._track(scene, times, truth, pose, job.gaze)
         io.save(Animation(times, truth, ARKIT52, {"format": "csv"}), rom_path(out, job, "truth"),
                 fmt="csv")  # fmt: skip
         io.save(tracked, rom_path(out, job, "tracked"), fmt="csv")  # the clip's done mark
         return {"frames": len(times), "lost": int((~tracked.valid).sum())}
 
-    def _track(self, scene, times: np.ndarray, truth: np.ndarray, pose: np.ndarray) -> Animation:
+    def _track(self, scene, times: np.ndarray, truth: np.ndarray, pose: np.ndarray,
+               gaze: bool = False) -> Animation:  # fmt: skip
         """The tracker's scores of the rendered frames (K, C: MediaPipe's 51); a lost face
         is a NaN row."""
         from faceclean.synthetic.render import Renderer
 
-        renderer = Renderer(self.head, scene, self.skin(scene))
+        renderer = Renderer(self.head, scene, self.skin(scene), gaze=gaze)
         frames = ((renderer.frame(truth[k], pose[k], k), float(t)) for k, t in enumerate(times))
         tracker = self.tracker()
         try:
