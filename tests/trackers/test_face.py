@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from conftest import BLANK, N_FRAMES, VFR_TIMES, YAW, yaw_of
 
-from faceclean.trackers.face import HEAD, head_angles
+from faceclean.synthetic.tracker import head_angles
+from faceclean.trackers.face import HEAD
 from faceclean.trackers.signature import judge
 
 
@@ -81,16 +82,39 @@ def _face(cx: float, cy: float, size: float) -> np.ndarray:
 def test_follow_takes_the_largest_first_then_the_nearest_and_says_so_once():
     from faceclean.trackers.face import Follow
 
-    follow = Follow()
+    said: list[str] = []
+    follow = Follow(said.append)
     assert follow.choose([_face(500, 200, 80), _face(150, 200, 120)], 0.5, 640) == 1
     assert follow.crowd.startswith("2 faces in view at 0.50 s: tracking the largest, on the left")
+    assert said == [follow.crowd]  # given to on_crowd once, when first said
     first = follow.crowd
     # the other face grows larger and the followed one moves a little: still the same one
     assert follow.choose([_face(170, 210, 118), _face(480, 200, 300)], 0.6, 640) == 0
     assert follow.choose([_face(480, 200, 300)], 0.7, 640) == 0  # alone in view: followed
+    assert said == [first]
     follow = Follow()
     follow.choose([_face(150, 200, 120)], 0.0, 640)  # one face: nothing to say
     assert follow.crowd is None
     assert follow.choose([_face(600, 50, 200), _face(160, 205, 100)], 0.1, 640) == 1
     assert "tracking the one followed so far" in follow.crowd
     assert follow.crowd != first
+
+
+def test_the_track_tracker_is_the_one_tracker_interface(face_video, rendered):
+    """FaceTracker is a tracking.Tracker (MediaPipe's one implementation, with the head's
+    angles): a whole video tracked is that interface's scores, frame by frame."""
+    from faceclean import tracking
+    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.face import FaceTracker, track_video
+    from faceclean.trackers.video import Video
+
+    with FaceTracker() as tracker:
+        assert isinstance(tracker, tracking.Tracker) and tracker.names == NAMES
+        assert tracker.name.startswith("mediapipe ")
+        reading = tracker.read(rendered[0], 0.0)
+        assert reading.landmarks.shape == (478, 3) and reading.pose.shape == (3,)
+        assert np.degrees(reading.pose[0]) < -0.5 * YAW  # frame 0 turned: negative yaw
+        assert tracker.read(np.zeros_like(rendered[0]), 1 / 30) is None  # no face
+    with Video(face_video) as video, FaceTracker() as tracker:
+        scores = tracking.scores(tracker, video)
+    np.testing.assert_array_equal(scores, track_video(face_video).values)

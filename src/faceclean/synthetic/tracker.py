@@ -1,13 +1,21 @@
-"""The tracker in the loop: Google's MediaPipe Face Landmarker, in VIDEO mode.
+"""The one MediaPipe tracker: Google's Face Landmarker in VIDEO mode.
 
 ``Tracker(model_path)`` loads the ``face_landmarker.task`` bundle from a file (never
 downloaded: ``settings.tracker_model()``, ``../shared/models`` by default). It is a
 faceclean.tracking ``Tracker``: ``read(frame, t)`` gives the 51 ARKit scores of one RGB
 frame at ``t`` seconds, in MediaPipe's names mapped onto canonical ARKit (``_neutral``
-dropped; MediaPipe has no ``tongueOut``), with the 478 landmarks (no head pose: it does not
-ask MediaPipe for the matrix), or None when no face is found: a lost face is a missing
-frame. ``track(frame, t)`` gives the scores alone. VIDEO mode needs increasing integer
-millisecond timestamps; real frame times are rounded to ms and forced to increase.
+dropped; MediaPipe has no ``tongueOut``), with the 478 landmarks, or None when no face is
+found: a lost face is a missing frame. ``track(frame, t)`` gives the scores alone. VIDEO
+mode needs increasing integer millisecond timestamps; real frame times are rounded to ms
+and forced to increase. The pairs engine uses it as built (one face, no head pose);
+``faceclean track`` (trackers/face.py) builds it with ``pose`` (the head's angles) and
+``faces``/``choose`` (several faces looked for, one followed).
+
+Rotation (``pose``): MediaPipe's matrix maps its canonical face (right-handed: +X the
+subject's left as the camera sees it, +Y up, +Z out of the face) into camera space. Live
+Link's frame is that one with X mirrored (faceclean.pose), so its rotation is ``S R S``,
+S = diag(-1, 1, 1), read in the Y-X-Z order: yaw = atan2(-R02, R22), pitch = asin(-R12),
+roll = atan2(-R10, R11). The matrix's columns are normalised first (it may carry a scale).
 
 The bundle is a zip of TFLite models (``MEMBERS``); ``check_bundle`` refuses, in one line,
 one that is not a zip, lacks a model, claims more than ``MAX_MODEL`` unpacked or holds a
@@ -20,6 +28,7 @@ import io
 import os
 import zipfile
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -40,14 +49,34 @@ _NOT_A_ZIP = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, Run
               NotImplementedError)  # fmt: skip
 
 
+# which of several faces to follow: (faces, each (L, 2) landmark px; t s; frame width px)
+# -> index into faces
+Choose = Callable[[list[np.ndarray], float, int], int]
+
+
 class Tracker:
-    """MediaPipe Face Landmarker, VIDEO mode, one face (faceclean.tracking's interface)."""
+    """MediaPipe Face Landmarker, VIDEO mode (faceclean.tracking's interface). ``pose``:
+    ask for the facial transformation matrix and give the head's angles (``head_angles``;
+    NaN when MediaPipe gives no matrix), else ``Reading.pose`` is None. ``faces``: how many
+    MediaPipe looks for; ``choose`` picks the one read (None: MediaPipe's first).
+    ``extra``: the install extra a missing mediapipe is told to come with."""
 
     names = NAMES
 
-    def __init__(self, model_path: str | os.PathLike, threads: int = 1) -> None:
+    def __init__(
+        self,
+        model_path: str | os.PathLike,
+        threads: int = 1,
+        *,
+        pose: bool = False,
+        faces: int = 1,
+        choose: Choose | None = None,
+        extra: str = "pairs",
+    ) -> None:
         del threads  # MediaPipe's CPU graph picks its own; the job pool spreads the work
-        self._landmarker = landmarker(model_path, video=True, blendshapes=True)
+        self._landmarker = landmarker(model_path, video=True, blendshapes=True, pose=pose,
+                                      extra=extra, faces=faces)  # fmt: skip
+        self._pose, self._choose = pose, choose
         self._last_ms = -1
         self._map: tuple[tuple[str, ...], ChannelMap] | None = None
 
@@ -56,30 +85,37 @@ class Tracker:
         return version()
 
     def read(self, frame: np.ndarray, t: float) -> Reading | None:
-        """The (51,) scores in ``NAMES`` order and the (478, 3) landmarks (px, as
-        ``landmarks``) of an (H, W, 3) uint8 RGB frame, or None (no face)."""
-        result = self._detect(frame, t)
-        if result is None:
-            return None
-        return Reading(self._scores(result), _pixels(result.face_landmarks[0], frame.shape))
-
-    def track(self, frame: np.ndarray, t: float) -> np.ndarray | None:
-        """(51,) scores in ``NAMES`` order for an (H, W, 3) uint8 RGB frame, or None (no face)."""
-        result = self._detect(frame, t)
-        return None if result is None else self._scores(result)
-
-    def _detect(self, frame: np.ndarray, t: float):
-        """MediaPipe's result for the frame, or None (no face)."""
+        """The (51,) scores in ``NAMES`` order, the (478, 3) landmarks (px, as
+        ``landmarks``) and, with ``pose``, the (3,) head yaw/pitch/roll (rad) of the face
+        followed in an (H, W, 3) uint8 RGB frame, or None (no face)."""
         import mediapipe as mp
 
         ms = max(int(round(t * 1000.0)), self._last_ms + 1)
         self._last_ms = ms
         image = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(frame))
         result = self._landmarker.detect_for_video(image, ms)
-        return result if result.face_blendshapes else None
+        if not result.face_blendshapes:
+            return None
+        k = 0  # which face, of those found
+        if self._choose is None:
+            points = _pixels(result.face_landmarks[0], frame.shape)
+        else:
+            found = [_pixels(lm, frame.shape) for lm in result.face_landmarks]
+            k = self._choose([f[:, :2] for f in found], t, frame.shape[1])
+            points = found[k]
+        angles = None
+        if self._pose:
+            matrices = result.facial_transformation_matrixes
+            angles = head_angles(matrices[k]) if len(matrices) > k else np.full(3, np.nan)
+        return Reading(self._scores(result.face_blendshapes[k]), points, angles)
 
-    def _scores(self, result) -> np.ndarray:
-        cats = result.face_blendshapes[0]
+    def track(self, frame: np.ndarray, t: float) -> np.ndarray | None:
+        """(51,) scores in ``NAMES`` order for an (H, W, 3) uint8 RGB frame, or None (no face)."""
+        reading = self.read(frame, t)
+        return None if reading is None else reading.scores
+
+    def _scores(self, cats) -> np.ndarray:
+        """(51,) in ``NAMES`` order of one face's MediaPipe categories."""
         names = tuple(c.category_name for c in cats)
         if self._map is None or self._map[0] != names:
             self._map = (names, ChannelMap(NAMES, names))
@@ -97,6 +133,17 @@ class Tracker:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def head_angles(matrix: np.ndarray) -> np.ndarray:
+    """(3,) Live Link yaw, pitch, roll (rad) of MediaPipe's (4, 4) facial transformation
+    (the module docstring's rotation)."""
+    r = np.asarray(matrix, np.float64)[:3, :3]
+    r = r / np.linalg.norm(r, axis=0, keepdims=True)  # columns: drop any scale
+    yaw = np.arctan2(-r[0, 2], r[2, 2])
+    pitch = np.arcsin(np.clip(-r[1, 2], -1.0, 1.0))
+    roll = np.arctan2(-r[1, 0], r[1, 1])
+    return np.array([yaw, pitch, roll])
 
 
 def version() -> str:

@@ -2,8 +2,10 @@
 
 ``Live(camera, tracker, cleaner, send)`` takes the camera's newest frame (never a queue:
 a loop that falls behind skips frames, and the camera counts them as dropped), tracks it
-at its capture time, cleans the 52 scores (``cleaner.step``) and the head angles
-(``pose.step``, the rotation filter), and sends one datagram to ``send`` (VMC or Live
+at its capture time (``tracker``: a faceclean.tracking ``Tracker`` whose ``names`` are
+ARKit channels, trackers/face.py's ``FaceTracker`` for ``track --camera``), cleans the 52
+scores (``cleaner.step``) and the head angles (``pose.step``, the rotation filter; a
+tracker without ``pose`` leaves them NaN), and sends one datagram to ``send`` (VMC or Live
 Link, the relay's encoders). A lost face is a missing frame for the cleaner (it holds);
 nothing is sent before the first face. ``run()`` serves until ``stop()`` or until the
 camera ends; ``stats`` counts frames and times what the loop adds to MediaPipe.
@@ -26,10 +28,8 @@ from faceclean.channels import ARKIT52, POSE
 from faceclean.errors import FacecleanError
 from faceclean.relay.frame import Frame
 from faceclean.relay.url import Endpoint
-from faceclean.synthetic.tracker import NAMES
 
 WINDOW = 8192  # timing samples kept for the percentiles
-_COLS = np.array([ARKIT52.index(n) for n in NAMES])  # NAMES -> their ARKit-52 columns
 
 
 @dataclass
@@ -70,6 +70,7 @@ class Live:
         self.camera, self.tracker, self.cleaner, self.pose = camera, tracker, cleaner, pose
         self.send, self.recorder, self.clock = send, recorder, clock
         self.stats = Stats()
+        self._cols = np.array([ARKIT52.index(n) for n in tracker.names])  # -> ARKit-52 columns
         self.encoder = send.encoder()
         self._stopping = False
         self._seen = False  # a face has been found: from then on every frame is sent
@@ -126,7 +127,7 @@ class Live:
             with self._swap_lock:
                 self.cleaner, self._pending = self._pending, None
         start = self.clock()
-        found = self.tracker.track(rgb, t)
+        found = self.tracker.read(rgb, t)
         tracked = self.clock()
         self.stats.tracked += 1
         x = np.full(len(ARKIT52), np.nan)  # (52,) canonical order; a lost face: all NaN
@@ -134,8 +135,9 @@ class Live:
         if found is None:
             self.stats.lost += 1
         else:
-            x[_COLS] = found[0]
-            head[:3] = found[1]
+            x[self._cols] = found.scores
+            if found.pose is not None:
+                head[:3] = found.pose
             self._seen = True
         y = np.asarray(self.cleaner.step(x, t), np.float64)  # (52,)
         pose = head
