@@ -7,10 +7,12 @@ Per cleaner, in one process (the CLI pins it to one core with one BLAS thread):
 - hour: seconds to clean one hour of 60 fps animation offline (``clean``), measured on a
   20 s clip (best of 5) and scaled linearly (the cost per frame is constant), said so;
 - state: bytes of per-stream state the cleaner holds (all per-stream arrays).
-The references are faceclean.neural.reference (the same weights, eager PyTorch): the
-paper's LSTM, and the shipped default's adaptive network with its core run; every figure
-also appears as a cost ratio to the reference on the same network (the row's ``ref``):
-our time / its time (< 1 is faster).
+The references are eager PyTorch on the same weights (faceclean.neural.reference: the
+paper's LSTM, the shipped default's adaptive network with its core run, FC and GBT;
+faceclean.neural.map_reference: the shipped MediaPipe map); every figure also appears as
+a cost ratio to the reference on the same network (the row's ``ref``): our time / its
+time (< 1 is faster). Without torch our rows run alone and the result says why
+(``references``).
 Inputs are a seeded random walk in [0, 1] at 60 fps; speed does not depend on values.
 """
 
@@ -167,6 +169,9 @@ def _state_bytes(cleaner: Any, S: int) -> int:
     kept = (cleaner._y.nbytes + cleaner._t.nbytes) // S
     if hasattr(cleaner, "state_bytes"):  # the learned runtimes report theirs
         return int(cleaner.state_bytes + kept)
+    if getattr(cleaner, "_state", None) is None:  # a step of its own (the tracker map):
+        held = [a for a in vars(cleaner).values() if isinstance(a, np.ndarray)]  # every
+        return int(sum(a.nbytes for a in held if a.ndim and len(a) == S) // S)  # row/stream
     return int(sum(a.nbytes for a in cleaner._state) // S + kept)
 
 
@@ -180,6 +185,17 @@ def _reference_clean(make: Callable[[], Any]) -> Callable[[Animation], None]:
             ref.step(x[i], dt[i - 1])
 
     return clean
+
+
+MAP = "tracker map (mediapipe)"  # the row of the MediaPipe cleaner
+
+
+def tracker_map() -> Any:
+    """The MediaPipe cleaner as ``faceclean clean --tracker mediapipe`` builds it for an
+    ARKit take: the shipped map (models/mediapipe.npz) on the 52 ARKit columns."""
+    from faceclean.resolve import resolve, tracker_words
+
+    return resolve(tracker_words("mediapipe")).build(ARKIT52)
 
 
 def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
@@ -206,9 +222,11 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
     default = AdaptiveWeights.load(MODELS / "default.npz")
     kind = "inert network: One Euro form" if Adaptive(weights=default).inert else "GRU core"
     out["default (adaptive)"] = (lambda: Adaptive(weights=default), f"shipped; {kind}, numpy")
+    fc = "shipped FC baseline, numpy (numba features and blend from 2 streams)"
     gbt = "shipped GBT, numba trees a step when installed"
-    for name, note in (("fc", "shipped FC baseline, numpy"), ("gbt", gbt)):
+    for name, note in (("fc", fc), ("gbt", gbt)):
         out[name] = (lambda n=name: make(n), note)
+    out[MAP] = (tracker_map, "shipped, `clean --tracker mediapipe`, numpy")
     try:
         from faceclean.learned.export import build
         from faceclean.learned.onnx import OnnxLearned
@@ -247,33 +265,23 @@ def run(
     for name in ("gaussian", "savgol"):
         rows[name] = Row(name, note="offline, default parameters")
         cleans[name] = make(name).clean
-    reference = None
+    reference, skipped = None, None
     try:
-        from faceclean.learned.adaptive import AdaptiveWeights
-        from faceclean.neural.reference import AdaptiveReference, NaiveReference, single_thread
-        from faceclean.settings import MODELS
+        from faceclean.neural.reference import single_thread
+    except ImportError as e:  # our rows run alone; the result says why
+        skipped = f"eager torch references not run: {e} (pip install 'faceclean[neural]')"
+    else:
+        from faceclean.neural.reference import NaiveReference
 
         reference = Row(NaiveReference.name, note=f"torch {single_thread()}, 1 thread")
         steppers["reference"] = _Stepper(lambda: NaiveReference(model), reference=True)
         cleans["reference"] = _reference_clean(lambda: NaiveReference(model))
-        default = AdaptiveWeights.load(MODELS / "default.npz")
-        name = "reference-adaptive"
-        rows[name] = Row(AdaptiveReference.name, note="the default's network, core run")
-        rows[name].ref = rows[name].key = name
-        steppers[name] = _Stepper(lambda: AdaptiveReference(default), reference=True)
-        cleans[name] = _reference_clean(lambda: AdaptiveReference(default))
-        rows["default (adaptive)"].ref = name
-        from faceclean.neural.reference import DerivativeReference
-
-        for base in ("fc", "gbt"):
-            name = f"reference-{base}"
-            probe = DerivativeReference(make(base))
-            rows[name] = Row(probe.name, note=f"the shipped {base}'s model, float64")
-            rows[name].ref = rows[name].key = rows[base].ref = name
-            steppers[name] = _Stepper(lambda b=base: DerivativeReference(make(b)), reference=True)
-            cleans[name] = _reference_clean(lambda b=base: DerivativeReference(make(b)))
-    except ImportError:
-        pass
+        for key, (ours, make_ref, note) in _references().items():
+            probe = make_ref()
+            rows[key] = Row(probe.name, note=note)
+            rows[key].ref = rows[key].key = rows[ours].ref = key
+            steppers[key] = _Stepper(make_ref, reference=True)
+            cleans[key] = _reference_clean(make_ref)
     row_of = dict(rows, reference=reference)
 
     for name, st in steppers.items():
@@ -296,7 +304,35 @@ def run(
         "sizes": asdict(sizes),
         "rows": [asdict(r) for r in rows.values()],
         "reference": asdict(reference) if reference else None,
+        "references": skipped or "eager torch, one thread, in this run",
         "hour_extrapolated_from_s": sizes.clip_s,
+    }
+
+
+def _references() -> dict[str, tuple[str, Callable[[], Any], str]]:
+    """The references besides the LSTM's: key -> (our row, factory, note). Needs torch."""
+    from faceclean.filters import make
+    from faceclean.learned.adaptive import AdaptiveWeights
+    from faceclean.neural.map_reference import MapReference
+    from faceclean.neural.reference import AdaptiveReference, DerivativeReference
+    from faceclean.settings import MODELS
+
+    default = AdaptiveWeights.load(MODELS / "default.npz")
+    return {
+        "reference-adaptive": (
+            "default (adaptive)",
+            lambda: AdaptiveReference(default),
+            "the default's network, core run",
+        ),
+        **{
+            f"reference-{base}": (
+                base,
+                lambda b=base: DerivativeReference(make(b)),
+                f"the shipped {base}'s model, float64",
+            )
+            for base in ("fc", "gbt")
+        },
+        "reference-map": (MAP, lambda: MapReference(tracker_map()), "the shipped map, float64"),
     }
 
 

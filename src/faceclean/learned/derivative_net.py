@@ -250,6 +250,7 @@ class FullyConnected(_DerivativeNet):
     name = "fc"
     fmt = formats.FC
     default_file = "fc.npz"
+    jit_min_streams: int = 2  # compiled features and blend from here (docs/BENCHMARKS.md)
 
     def _load(self, a: dict) -> None:
         n = len([k for k in a if k.startswith("fc.") and k.endswith(".w")])
@@ -265,6 +266,7 @@ class FullyConnected(_DerivativeNet):
         w0 = self._w[0].astype(np.float64)  # (F M, H)
         self._w0 = np.ascontiguousarray(w0 / fs[:, None]).astype(np.float32)
         self._b0 = (self._b[0] - (fm / fs) @ w0).astype(np.float32)
+        self._jit: bool | None = None  # numba for many streams: unknown until then
 
     def _setup(self, config: dict, names, alpha, per_frame: bool = False) -> None:
         (fm, fs), c = self._feat_scaling, float(config.get("feat_clip", np.inf))
@@ -284,6 +286,46 @@ class FullyConnected(_DerivativeNet):
                 np.maximum(h, 0.0, out=h)
         out = h.astype(np.float64) * self._os + self._om  # (n, K·M) order-major
         return out.reshape(n, self.K, m).transpose(0, 2, 1)
+
+    def _advance(self, state: State, x: np.ndarray, dt: np.ndarray) -> tuple[State, np.ndarray]:
+        """From ``jit_min_streams`` streams on, with numba: the features and the blend
+        compiled (learned/jit.py ``fc_features``, ``fc_blend``: one pass each instead of
+        some 30 numpy calls over arrays out of cache), the products numpy's; the same
+        numbers as the numpy step (tests/learned/test_baselines.py). One stream, and so
+        ``clean``, stays numpy: no numba load for a take."""
+        if len(x) < self.jit_min_streams or self._record is not None or not self._jit_ready():
+            return super()._advance(state, x, dt)
+        from faceclean.learned import jit
+
+        f_old, r_old, age = state
+        f = np.empty_like(f_old)
+        h = np.empty((len(f), f.shape[1] * f.shape[2]), np.float32)
+        jit.fc_features(f_old, self._model_frame(x), dt, BIG, self._lo, self._hi, f, h)
+        biases = (self._b0, *self._b[1:])
+        for w, b in zip((self._w0, *self._w[1:-1]), biases[:-1], strict=True):
+            h = h @ w
+            h += b
+            np.maximum(h, 0.0, out=h)
+        h = h @ self._w[-1] if len(self._w) > 1 else h @ self._w0
+        alpha = self.alpha ** (dt[:, 0] * ALPHA_RATE)  # (S,)
+        if self.per_frame:
+            alpha = np.full(len(f), self.alpha)
+        r_new = np.empty_like(r_old)
+        jit.fc_blend(h, biases[-1], self._os, self._om, f, r_old, dt, alpha, self.lo, self.hi,
+                     r_new)  # fmt: skip
+        if self._same:
+            y = r_new[:, 0].copy()
+        else:
+            y = x.copy()
+            y[:, self._dst] = r_new[:, 0, self._have]
+        return (f, r_new, age + 1.0), y
+
+    def _jit_ready(self) -> bool:
+        if self._jit is None:  # loaded at the first step of many streams
+            from faceclean.learned import jit
+
+            self._jit = jit.available()
+        return self._jit
 
 
 class BoostedTrees(_DerivativeNet):

@@ -1,5 +1,6 @@
 """Optional numba kernels for the learned runtime's step (used when numba is installed):
-the LSTM's step (``step``, ``run``) and the GBT baseline's trees (``trees``).
+the LSTM's step (``step``, ``run``), the GBT baseline's trees (``trees``) and the FC
+baseline's elementwise passes around its matrix products (``fc_features``, ``fc_blend``).
 
 Why: for one stream the numpy step (28 us on an idle core) spends about as long in ~30
 small ufunc calls as in its two matrix-vector products, so one compiled function that
@@ -16,6 +17,13 @@ The trees: a numpy step descends every tree one level per pass, some eight calls
 on (S M, T) index arrays; compiled, a descent is a few loads. Each order's leaves are
 added one tree after another from 0, which is what the numpy path's sequential sums
 (``cumsum``) give too: the same bits with or without numba.
+
+FC, many streams: its numpy step makes some 30 passes over (S, 52)-(S, 468) arrays, 4 MB
+of features at 1024 streams, out of cache; the two kernels make one pass before the
+products and one after, with numpy's arithmetic in numpy's order (no fastmath: the same
+bits; the products stay numpy's BLAS calls). ``_max``/``_min`` are numpy's maximum and
+minimum against a bound (a NaN value stays NaN; of two equal values the second, the
+bound, as numpy's SIMD loops give).
 """
 
 from __future__ import annotations
@@ -169,10 +177,65 @@ def _trees(f, groups, feat, thr, val, order, depth, out):
                 out[s, order[t], m] += val[t, node - n_in]
 
 
+def _max(a, b):
+    return a if not a <= b else b  # b a bound, never NaN: a NaN a stays
+
+
+def _min(a, b):
+    return a if not a >= b else b
+
+
+def _fc_features(f_old, x, dt, big, lo, hi, f, h):
+    """FC's features of a step (derivative_net.FullyConnected), for S streams: f_old, f
+    (S, 1 + 2K, M) the last and the new feature-major state [d^(0..K)[n], d^(1..K)[n-1]]
+    (float64), x (S, M) the new frames in model order, dt (S, 1) s; d^(k) the backward
+    difference clipped to +-big. h (S, (1 + 2K) M) float32 gets the features clipped to
+    [lo, hi] (F M,) float32, compared in float64, as layer 0 reads them."""
+    S, F, M = f.shape
+    K = (F - 1) // 2
+    for s in range(S):
+        for m in range(M):
+            f[s, 0, m] = x[s, m]
+        for k in range(1, K + 1):
+            for m in range(M):
+                d = (f[s, k - 1, m] - f_old[s, k - 1, m]) / dt[s, 0]
+                f[s, k, m] = _min(_max(d, -big), big)
+                f[s, K + k, m] = f_old[s, k, m]
+        for j in range(F):
+            for m in range(M):
+                v = np.float32(_max(f[s, j, m], np.float64(lo[j * M + m])))
+                h[s, j * M + m] = _min(v, hi[j * M + m])
+
+
+def _fc_blend(o, b, os_, om, f, r_old, dt, alpha, lo, hi, r_new):
+    """FC's output and blend, for S streams: o (S, K M) float32 the last layer's product,
+    b its bias; the prediction X̂^(k+1) = float64(o + b) os_ + om (K M,) order-major;
+    r_new[s, k] = a (r_old + dt X̂^(k+1)) + (1 - a) X̂^(k) (derivative_net.blend),
+    X̂^(0) = f[s, 0], a = alpha[s]; X_r^(0) clipped to [lo, hi]. r_old, r_new (S, K, M)."""
+    S, K, M = r_new.shape
+    below = np.empty(M)  # X̂^(k) of the stream, then X̂^(k+1)
+    for s in range(S):
+        a, d = alpha[s], dt[s, 0]
+        for m in range(M):
+            below[m] = f[s, 0, m]
+        for k in range(K):
+            for m in range(M):
+                j = k * M + m
+                p = np.float64(o[s, j] + b[j]) * os_[j] + om[j]
+                r_new[s, k, m] = a * (r_old[s, k, m] + d * p) + (1.0 - a) * below[m]
+                below[m] = p
+        for m in range(M):
+            r_new[s, 0, m] = _min(_max(r_new[s, 0, m], lo), hi)
+
+
 if njit is not None:
     trees = njit(boundscheck=False, nogil=True, cache=True)(_trees)
+    _max = njit(inline="always", cache=True)(_max)
+    _min = njit(inline="always", cache=True)(_min)
+    fc_features = njit(boundscheck=False, nogil=True, cache=True)(_fc_features)
+    fc_blend = njit(boundscheck=False, nogil=True, cache=True)(_fc_blend)
     _tanh = njit(fastmath=_FAST, inline="always", cache=True)(_tanh)
     step = njit(fastmath=_FAST, boundscheck=False, nogil=True, cache=True)(_step)
     run = njit(boundscheck=False, nogil=True, cache=True)(_run)
 else:  # pragma: no cover
-    step = run = trees = None
+    step = run = trees = fc_features = fc_blend = None
