@@ -159,3 +159,19 @@ def test_fc_compiled_step_of_many_streams_gives_numpys_bits(per_frame, names):
         for u, v in zip(fast._state, slow._state, strict=True):
             np.testing.assert_array_equal(u.view(np.uint64), v.view(np.uint64))
     assert fast._jit is True and slow._jit is None  # the compiled kernels did run
+
+
+def test_lstm_compiled_gates_of_many_streams_give_numpys_bits():
+    from faceclean.learned import jit
+    from faceclean.learned.lstm import Learned
+
+    if not jit.available():
+        pytest.skip("numba not installed: the LSTM steps in numpy only")
+    fast, slow = Learned(kernel="numba"), Learned(kernel="numpy")
+    S = fast.jit_max_streams + 3  # numpy's products, the compiled gates
+    x, t = _walk(120, S, 52, 13)
+    for n in range(len(x)):
+        a, b = fast.step(x[n], t[n]), slow.step(x[n], t[n])
+        np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+    for u, v in zip(fast._ws.state(), slow._ws.state(), strict=True):
+        np.testing.assert_array_equal(u.view(np.uint32), v.view(np.uint32))

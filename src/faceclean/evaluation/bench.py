@@ -213,7 +213,7 @@ def cleaners(model: Any) -> dict[str, tuple[Callable[[], Any], str]]:
     if jit.available():
         out["lstm"] = (
             lambda: Learned(weights=model),
-            f"numba kernel <= {Learned.jit_max_streams} streams, numpy above",
+            f"numba kernel <= {Learned.jit_max_streams} streams, numpy + compiled gates above",
         )
     out["lstm-numpy"] = (lambda: Learned(weights=model, kernel="numpy"), "numpy + BLAS only")
     from faceclean.learned.adaptive import Adaptive, AdaptiveWeights

@@ -1,6 +1,8 @@
 """Optional numba kernels for the learned runtime's step (used when numba is installed):
-the LSTM's step (``step``, ``run``), the GBT baseline's trees (``trees``) and the FC
-baseline's elementwise passes around its matrix products (``fc_features``, ``fc_blend``).
+the LSTM's step (``step``, ``run``) and, for many streams, its gate arithmetic between
+numpy's products and tanh (``lstm_cell``, ``lstm_out``); the GBT baseline's trees
+(``trees``); the FC baseline's elementwise passes around its products (``fc_features``,
+``fc_blend``).
 
 Why: for one stream the numpy step (28 us on an idle core) spends about as long in ~30
 small ufunc calls as in its two matrix-vector products, so one compiled function that
@@ -12,6 +14,11 @@ The gate nonlinearity uses a rational tanh (Eigen's float approximation: max abs
 error 3.3e-7 against float64 tanh, tested), which vectorises; libm's scalar tanh would
 cost more than the products. Without numba, ``available()`` is False and the runtime
 uses its numpy kernel only.
+
+Above ``Learned.jit_max_streams`` the numpy kernel runs, its products and tanh numpy's;
+``lstm_cell`` and ``lstm_out`` do the gate arithmetic between them (seven numpy passes
+over (H, S) arrays) in two, the same float32 operations in the same order (no fastmath):
+the same bits as the numpy kernel.
 
 The trees: a numpy step descends every tree one level per pass, some eight calls a level
 on (S M, T) index arrays; compiled, a descent is a few loads. Each order's leaves are
@@ -177,6 +184,31 @@ def _trees(f, groups, feat, thr, val, order, depth, out):
                 out[s, order[t], m] += val[t, node - n_in]
 
 
+def _lstm_cell(g, c):
+    """kernel.step_numpy's gate arithmetic after tanh, in its order (the same bits): g
+    (4H, S) tanh of the (i, f, o) logits / 2 and of g's; sigmoid = tanh * 1/2 + 1/2 for
+    i, f, o (o written back into g); c (H, S) = c f + i g in place."""
+    H, S = c.shape
+    half = np.float32(0.5)
+    for j in range(H):
+        for s in range(S):
+            i = g[j, s] * half + half
+            f = g[H + j, s] * half + half
+            g[2 * H + j, s] = g[2 * H + j, s] * half + half
+            c[j, s] = c[j, s] * f + i * g[3 * H + j, s]
+
+
+def _lstm_out(g, th, h, nxt, z, layer):
+    """h = o tanh(c) (th (H, S) = tanh(c)); nxt = h, plus the layer's input z[:H] (the
+    residual) for layer >= 1, as kernel.step_numpy."""
+    H, S = th.shape
+    for j in range(H):
+        for s in range(S):
+            v = g[2 * H + j, s] * th[j, s]
+            h[j, s] = v
+            nxt[j, s] = v + z[j, s] if layer > 0 else v
+
+
 def _max(a, b):
     return a if not a <= b else b  # b a bound, never NaN: a NaN a stays
 
@@ -233,9 +265,11 @@ if njit is not None:
     _max = njit(inline="always", cache=True)(_max)
     _min = njit(inline="always", cache=True)(_min)
     fc_features = njit(boundscheck=False, nogil=True, cache=True)(_fc_features)
+    lstm_cell = njit(boundscheck=False, nogil=True, cache=True)(_lstm_cell)
+    lstm_out = njit(boundscheck=False, nogil=True, cache=True)(_lstm_out)
     fc_blend = njit(boundscheck=False, nogil=True, cache=True)(_fc_blend)
     _tanh = njit(fastmath=_FAST, inline="always", cache=True)(_tanh)
     step = njit(fastmath=_FAST, boundscheck=False, nogil=True, cache=True)(_step)
     run = njit(boundscheck=False, nogil=True, cache=True)(_run)
 else:  # pragma: no cover
-    step = run = trees = fc_features = fc_blend = None
+    step = run = trees = fc_features = fc_blend = lstm_cell = lstm_out = None

@@ -78,13 +78,15 @@ def step_numpy(
     lo: float,
     hi: float,
     mode: int = 0,
+    fused: tuple | None = None,
 ) -> None:
     """Advance every stream by ws.dt with frames ws.x, in place, allocating nothing.
 
     wts[l]: (4H, rows of z[l]) fused weights, the (i, f, o) rows pre-scaled by 1/2;
     head_t: (M, H + 1) with out_scale folded in, or (2M, H + 1) for a gated output
     head (gain logits a, then out_scale b); [lo, hi]: the value range; ``mode``: the
-    output head (HEADS).
+    output head (HEADS); ``fused``: learned/jit.py's (lstm_cell, lstm_out), the gate
+    arithmetic after each tanh in one compiled pass each (the same bits), or None.
     """
     H, M = ws.H, ws.M
     half = np.float32(0.5)
@@ -99,6 +101,12 @@ def step_numpy(
         z, c, h = ws.z[layer], ws.c[layer], ws.h[layer]
         np.matmul(wts[layer], z, out=g)  # (4H, S) = W^T [in | h | 1]
         np.tanh(g, out=g)  # the (i, f, o) rows were pre-scaled by 1/2:
+        nxt = ws.z[layer + 1][:H] if layer + 1 < n else ws.top[:H]
+        if fused is not None:  # the lines below, two passes instead of seven
+            fused[0](g, c)
+            np.tanh(c, out=ws.tmp)
+            fused[1](g, ws.tmp, h, nxt, z, layer)
+            continue
         np.multiply(sig, half, out=sig)
         np.add(sig, half, out=sig)  # sigmoid(a) = (1 + tanh(a / 2)) / 2
         np.multiply(c, f, out=c)
@@ -106,7 +114,6 @@ def step_numpy(
         np.add(c, ws.tmp, out=c)  # c = f c + i g
         np.tanh(c, out=ws.tmp)
         np.multiply(o, ws.tmp, out=h)  # h = o tanh(c)
-        nxt = ws.z[layer + 1][:H] if layer + 1 < n else ws.top[:H]
         if layer == 0:
             np.copyto(nxt, h)
         else:

@@ -86,6 +86,8 @@ class Learned(StreamCleaner):
         if kernel == "numba" and not jit.available():
             raise FacecleanError("kernel='numba' needs numba (pip install 'faceclean[fast]')")
         self.kernel = kernel if kernel != "auto" else "numba" if jit.available() else "numpy"
+        # many streams, numba: numpy's products and tanh, the gates compiled (same bits)
+        self._fused = (jit.lstm_cell, jit.lstm_out) if self.kernel == "numba" else None
         self.weights = weights
         fused = weights.fused(half_sigmoid=True)
         self._wts = tuple(np.ascontiguousarray(w.T) for w in fused.layers)  # (4H, in + H + 1)
@@ -116,7 +118,7 @@ class Learned(StreamCleaner):
         if not _sane(flat):  # NaN/inf/absurd: base rules
             return False
         np.copyto(ws.x, x.T, casting="unsafe")
-        step_numpy(ws, self._wts, self._head_t, self.lo, self.hi, self._mode)
+        step_numpy(ws, self._wts, self._head_t, self.lo, self.hi, self._mode, self._fused)
         np.copyto(out, ws.y.T)
         return True
 
