@@ -161,6 +161,27 @@ def test_fc_compiled_step_of_many_streams_gives_numpys_bits(per_frame, names):
     assert fast._jit is True and slow._jit is None  # the compiled kernels did run
 
 
+@pytest.mark.parametrize("hidden", [(), (16, 8)])
+def test_fc_compiled_step_of_any_depth_gives_numpys_bits(tmp_path, hidden):
+    torch = pytest.importorskip("torch")
+    from faceclean.learned import jit
+    from faceclean.learned.derivative_net import FullyConnected
+    from faceclean.neural import baselines
+
+    if not jit.available():
+        pytest.skip("numba not installed: FC steps in numpy only")
+    torch.manual_seed(0)
+    net = baselines.FCNet(52, hidden=hidden).eval()
+    baselines.save_fc(net, tmp_path / "fc.npz", {"val_sources": ["x"]})
+    fast, slow = (FullyConnected(model=tmp_path / "fc.npz") for _ in range(2))
+    slow.jit_min_streams = 10**9
+    x, t = _walk(60, 3, 52, 17)
+    for n in range(len(x)):
+        a, b = fast.step(x[n], t[n]), slow.step(x[n], t[n])
+        np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
+    assert fast._jit is True
+
+
 def test_lstm_compiled_gates_of_many_streams_give_numpys_bits():
     from faceclean.learned import jit
     from faceclean.learned.lstm import Learned

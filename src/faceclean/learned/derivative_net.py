@@ -291,8 +291,8 @@ class FullyConnected(_DerivativeNet):
         """From ``jit_min_streams`` streams on, with numba: the features and the blend
         compiled (learned/jit.py ``fc_features``, ``fc_blend``: one pass each instead of
         some 30 numpy calls over arrays out of cache), the products numpy's; the same
-        numbers as the numpy step (tests/learned/test_baselines.py). One stream, and so
-        ``clean``, stays numpy: no numba load for a take."""
+        bits as the numpy step (tests/learned/test_bench_rows.py). One stream, and so
+        ``clean``, stays numpy: no numba load (~1.8 s) for a take."""
         if len(x) < self.jit_min_streams or self._record is not None or not self._jit_ready():
             return super()._advance(state, x, dt)
         from faceclean.learned import jit
@@ -301,15 +301,16 @@ class FullyConnected(_DerivativeNet):
         f = np.empty_like(f_old)
         h = np.empty((len(f), f.shape[1] * f.shape[2]), np.float32)
         jit.fc_features(f_old, self._model_frame(x), dt, BIG, self._lo, self._hi, f, h)
-        biases = (self._b0, *self._b[1:])
-        for w, b in zip((self._w0, *self._w[1:-1]), biases[:-1], strict=True):
+        weights, biases = (self._w0, *self._w[1:]), (self._b0, *self._b[1:])
+        for w, b in zip(weights[:-1], biases[:-1], strict=True):  # ``predict``'s layers
             h = h @ w
             h += b
             np.maximum(h, 0.0, out=h)
-        h = h @ self._w[-1] if len(self._w) > 1 else h @ self._w0
-        alpha = self.alpha ** (dt[:, 0] * ALPHA_RATE)  # (S,)
+        h = h @ weights[-1]  # its bias is added in fc_blend
         if self.per_frame:
             alpha = np.full(len(f), self.alpha)
+        else:  # (S,), as ``_DerivativeNet._advance``
+            alpha = self.alpha ** (dt[:, 0] * ALPHA_RATE)
         r_new = np.empty_like(r_old)
         jit.fc_blend(h, biases[-1], self._os, self._om, f, r_old, dt, alpha, self.lo, self.hi,
                      r_new)  # fmt: skip
