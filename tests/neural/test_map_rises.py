@@ -72,18 +72,20 @@ def test_the_runtime_gives_what_the_fit_scored(fitted):
         np.testing.assert_allclose(out, fit.predict(rises, f.u, f.r, f.e), atol=1e-9)
 
 
-def test_gaze_reads_its_own_rise_only_by_default():
-    # the pairs' eyes do not turn: no fit may mix gaze, but a look's resting reading goes
-    w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, knees=(None,))
-    assert w.config["own_rise"] == ["gaze"]
+def test_groups_told_to_read_their_own_rise_do_whatever_the_folds_say():
+    # pairs whose eyes do not turn (pairs --eyes still): gaze is not fitted, but a look's
+    # resting reading still goes
+    w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, knees=(None,), own_rise=("gaze",))
+    assert "gaze" in w.config["own_rise"]
     assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not np.delete(w.arrays["b"][GAZE], GAZE, axis=1).any()
     assert not w.arrays["a"][GAZE].any()
 
 
-def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
+def test_a_group_made_worse_than_raw_on_the_folds_passes_through_levelled():
     # look 2's tracker reads gaze upside down (1 - reading): a gaze map fitted on either
-    # look is worse than raw on the other, so gaze passes through, and the mouth need not
+    # look is worse than raw on the other, so gaze reads its own rise (no worse than raw
+    # here), and the mouth is still mapped
     def inverted(p):
         v = p.tracked.values.copy()
         v[:, GAZE] = 1.0 - v[:, GAZE]
@@ -91,7 +93,24 @@ def test_a_group_made_worse_than_raw_on_the_folds_passes_through():
 
     train = pairs(1) + [inverted(p) for p in pairs(2)]
     w = map_rises.fit(train, prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
-    assert "gaze" in w.config["passed"]
+    assert "gaze" in w.config["own_rise"] and "gaze" not in w.config["passed"]
+    assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
+    assert not w.arrays["a"][GAZE].any()
+    assert "mouth" not in w.config["passed"] + w.config["own_rise"]
+
+
+def test_a_group_whose_own_rise_is_worse_too_passes_through_as_read():
+    # every face holds its gaze 0.5 off centre, and the tracker reads it: a rise (the map's
+    # or its own) drops that level, raw keeps it, so gaze passes through as read
+    def held(p):
+        x, y = p.tracked.values.copy(), p.truth.values.copy()
+        x[:, GAZE] = np.clip(x[:, GAZE] + 0.5, 0, 1)
+        y[:, GAZE] = np.clip(y[:, GAZE] + 0.5, 0, 1)
+        return replace(p, tracked=Animation(p.tracked.times, x, NAMES),
+                       truth=Animation(p.truth.times, y, NAMES))  # fmt: skip
+
+    train = [held(p) for p in pairs(1) + pairs(2) if p.group != "neutral"]
+    w = map_rises.fit(train, prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
+    assert "gaze" in w.config["passed"] and "gaze" not in w.config["own_rise"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["b"][GAZE].any()
-    assert "mouth" not in w.config["passed"]

@@ -103,10 +103,10 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)  # fmt: skip
         elif e.get("event") == "rises":
             worst = max(e["worst_family"].values(), default=float("nan"))
-            print(f"rises, pre-filter {e['pre']}, deadband {e['deadband']:g}, shrinkage "
-                  f"{e['lam']:g}: leaving a look and "
-                  f"a source out, MSE {e['val_mse']:.3f}x raw, jitter {e['jitter']:.2f}x, worst "
-                  f"group {worst:.2f}x, at rest {e['neutral_off']:.3f} off",
+            print(f"rises, pre-filter {e['pre']}, deadband {e['deadband']:g}, detail "
+                  f"{e['detail']:g}, shrinkage {e['lam']:g}: leaving a look and a source out, "
+                  f"MSE {e['val_mse']:.3f}x raw, jitter {e['jitter']:.2f}x, lag {e['lag']:.0f} "
+                  f"ms, worst group {worst:.2f}x, at rest {e['neutral_off']:.3f} off",
                   file=sys.stderr)  # fmt: skip
         elif e.get("event") == "epoch" and arch == "lstm":
             print(f"epoch {e['epoch']}: validation MSE {e['val_mse']:.5f}", file=sys.stderr)

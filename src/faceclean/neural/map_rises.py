@@ -39,7 +39,7 @@ one family, a source), the held-out pairs never seen by the fit they score.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -55,65 +55,91 @@ LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
 # same curve at 30 and 120 fps 0.045 and 0.066 apart, over its 0.03: One Euro's
 # discretisation at a low cut-off; (1, 10, 1) 0.030, (1, 10, 2) 0.020), so they are not
 # candidates (docs/MODEL.md).
-DETAIL_SCALE = 0.1  # the share of its own raw frame's detail an output gets back by default
 PREFILTERS = ((2.0, 50.0, 4.0), (1.0, 10.0, 2.0))
-# Groups whose outputs are their own rise, gain 1, whatever the folds say: the pairs' eyes do
-# not turn (the renderer moves the lids of eyeLook, not the eyeballs: docs/RESULTS.md's
-# gaze study), so no fit on them can learn gaze (one learned it reversed); the rise still
-# takes a look's resting reading off (painted faces read eyeLookDown 0.35 at rest).
-OWN_RISE = ("gaze",)
+# The share of its own raw frame's detail an output gets back: the timing of its own
+# channel (less lag) at the price of its noise (more jitter).
+DETAILS = (0.1, 0.5)
+# Groups whose outputs are their own rise, gain 1, whatever the folds say (none by
+# default: since pairs --eyes turn the pairs' eyes turn, and gaze is fitted and judged as
+# every group is; on the pairs made before, whose eyes did not, a fit learned gaze
+# reversed: pass ("gaze",) for those).
+OWN_RISE: tuple[str, ...] = ()
 JITTER_BUDGET = tracker_map.JITTER_BUDGET  # x the truth's jitter, past which a fit pays
+LAG_BUDGET = 25.0  # ms of lag (issue 34's target at 30 fps), past which a fit pays
 # The runtime's deadband (weight units): a map that sums 51 inputs' rises gathers their
 # noise; a wider band holds a still output at no cost in MSE on these folds (0.01: jitter
-# 3.2x the truth's, 0.04: 2.1x, 0.06: 1.7x), at a lag of band / speed on slow motions
-# (docs/MODEL.md), so the widest is 0.05.
-DEADBANDS = (0.01, 0.03, 0.05)
+# 3.2x the truth's, 0.05: 1.9x), at a lag of band / speed on slow motions (0.01: 21 ms,
+# 0.05: 60 ms on the families' pairs, docs/MODEL.md), so both are priced.
+DEADBANDS = (0.01, 0.02, 0.03, 0.05)
 REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
 HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
 Report = Callable[[dict[str, Any]], None]
 
 
+class Scored(NamedTuple):
+    """One candidate's scores over the folds (``_cross_validate``)."""
+
+    mse: float  # mean MSE x raw over the folds' performances
+    jitter: float  # their mean jitter x the truth's
+    lag: float  # their mean lag, ms
+    per_group: dict[str, dict[str, float]]  # group -> family -> MSE x raw
+    own: dict[str, dict[str, float]]  # the same for every output its own rise (gain 1)
+    off: float  # the worst channel's mean |y - truth| on the neutral holds after SETTLE_S
+
+    @property
+    def price(self) -> float:
+        """MSE x raw, times the jitter's price past JITTER_BUDGET and the lag's past
+        LAG_BUDGET (1 + how far over, as a share)."""
+        over = lambda v, budget: 1.0 + max(0.0, v / budget - 1.0)  # noqa: E731
+        return self.mse * over(self.jitter, JITTER_BUDGET) * over(self.lag, LAG_BUDGET)
+
+
 def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         prefilters: Sequence[tuple[float, float, float]] = PREFILTERS,
         deadbands: Sequence[float] = DEADBANDS, own_rise: Sequence[str] = OWN_RISE,
-        knees: Sequence[float | None] = blink_lift.KNEES, report: Report | None = None
-        ) -> MapWeights:  # fmt: skip
-    """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband, the
-    groups that pass through and the blink lift chosen on their folds (module docstring)
-    by MSE x raw, times the jitter's price past JITTER_BUDGET x the truth's; then fitted
-    on every pair. The groups in ``own_rise`` read their own rise only, whatever the
-    folds say."""
+        knees: Sequence[float | None] = blink_lift.KNEES, report: Report | None = None,
+        details: Sequence[float] = DETAILS) -> MapWeights:  # fmt: skip
+    """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband, the detail,
+    the groups that pass through and the blink lift chosen on their folds (module
+    docstring) by ``Scored.price``; then fitted on every pair. A group worse than raw in
+    any family passes through levelled (its own rise) where that is no worse than raw in
+    every family, else as read. The groups in ``own_rise`` read their own rise, whatever
+    the folds say."""
     report = report or (lambda _e: None)
     names = map_features.channels(pairs)
     folds = _folds(pairs)
-    if not folds:  # one source: nothing to choose on; the first pre-filter, the middle lam
+    if not folds:  # one source: nothing to choose on; the first candidates, the middle lam
         prefilters, lams = prefilters[:1], [lams[len(lams) // 2]]
-        deadbands = deadbands[:1]
+        deadbands, details = deadbands[:1], details[:1]
     best = None
-    for pre, band in [(p, b) for p in prefilters for b in deadbands]:
-        w = map_features.blank(names, 0, pre, rest=True, deadband=band)
+    for pre in prefilters:
+        w = map_features.blank(names, 0, pre, rest=True)
         feats = map_features.features(w, pairs)
         moments = [_moments(f) for f in feats]
         for lam in lams:
-            cv = _cross_validate(w, pairs, feats, moments, folds, lam, own_rise)
-            score, jitter, per_group, off = cv
-            price = score * (1.0 + max(0.0, jitter / JITTER_BUDGET - 1.0))
-            worst = {g: max(v.values()) for g, v in per_group.items()}
-            report({"event": "rises", "pre": pre, "deadband": band, "lam": lam, "val_mse": score,
-                    "jitter": jitter, "neutral_off": off, "worst_family": worst})  # fmt: skip
-            if best is None or not price >= best[0]:  # (a NaN price: no folds, kept)
-                best = (price, pre, band, lam, score, jitter, per_group, off, feats, moments)
+            fits = _fold_fits(w, pairs, moments, folds, lam, (), own_rise)
+            for band, detail in [(b, d) for b in deadbands for d in details]:
+                w.config.update(deadband=band, detail_scale=detail)
+                cv = _cross_validate(w, feats, folds, fits)
+                worst = {g: max(v.values()) for g, v in cv.per_group.items()}
+                report({"event": "rises", "pre": pre, "deadband": band, "detail": detail,
+                        "lam": lam, "val_mse": cv.mse, "jitter": cv.jitter, "lag": cv.lag,
+                        "neutral_off": cv.off, "worst_family": worst})  # fmt: skip
+                if best is None or not cv.price >= best[0].price:  # (NaN: no folds, kept)
+                    best = (cv, pre, band, detail, lam, feats, moments)
     assert best is not None
-    _, pre, band, lam, score, jitter, per_group, off, feats, moments = best
-    passed = sorted(g for g, fam in per_group.items() if max(fam.values()) > HARM)
-    passed = [g for g in passed if g not in own_rise]
+    cv, pre, band, detail, lam, feats, moments = best
+    harmful = sorted(g for g, fam in cv.per_group.items() if max(fam.values()) > HARM)
+    levelled = [g for g in harmful if g in cv.own and max(cv.own[g].values()) <= HARM]
+    passed = [g for g in harmful if g not in levelled and g not in own_rise]
+    own = sorted({*own_rise, *levelled})
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
-    set_rises(w, solve(moments, lam), passed, own_rise)
-    w.config.update(fitted="rises", lam=lam, passed=passed, own_rise=list(own_rise),
-                    val_mse=score, val_jitter=jitter, neutral_off=off,
+    set_rises(w, solve(moments, lam), passed, own, detail)
+    w.config.update(fitted="rises", lam=lam, passed=passed, own_rise=own, val_mse=cv.mse,
+                    val_jitter=cv.jitter, val_lag=cv.lag, neutral_off=cv.off,
                     frames=int(sum(m[4] for m in moments)))  # fmt: skip
-    _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report)
+    _choose_lift(w, pairs, feats, moments, folds, lam, passed, own, knees, report)
     return w
 
 
@@ -138,11 +164,11 @@ def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarra
 
 
 def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = (),
-              own_rise: Sequence[str] = ()) -> None:  # fmt: skip
+              own_rise: Sequence[str] = (), detail: float | None = None) -> None:  # fmt: skip
     """Sets ``w``'s linear part to y = W (u - r) (b = W, a = 0, c = 0); the outputs of the
     ``passed`` groups to y = u, those of ``own_rise`` to their own rise (gain 1). The
     detail gain of an output is its own rise's gain (``--set detail=1``: the raw frame's
-    own timing at the map's scale), run at DETAIL_SCALE by default."""
+    own timing at the map's scale), run at ``detail`` (the config's scale, kept when None)."""
     k = len(w.inputs)
     a, b, d = np.zeros((k, k)), coef.copy(), np.zeros(k)
     for j, name in enumerate(w.outputs):
@@ -152,7 +178,8 @@ def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = (),
             (a if g in passed else b)[j, j] = 1.0
         d[j] = np.clip(a[j, j] + b[j, j], 0.0, MAX_DETAIL)
     w.arrays.update(a=a, b=b, c=np.zeros(k), detail=d)
-    w.config["detail_scale"] = DETAIL_SCALE
+    if detail is not None:
+        w.config["detail_scale"] = detail
 
 
 def _moments(f) -> tuple:
@@ -187,22 +214,19 @@ def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=()
     return out
 
 
-def _cross_validate(w, pairs, feats, moments, folds, lam, own_rise
-                    ) -> tuple[float, float, dict[str, dict[str, float]], float]:  # fmt: skip
-    """(mean MSE x raw over the folds' performances, their mean jitter x the truth's,
-    group -> family -> MSE x raw, the worst channel's mean |y - truth| on the neutral
-    holds after SETTLE_S) for ``lam``: the runtime's output (map_features.predict, its
-    deadband included) of each fold's fit on the fold's pairs."""
-    from faceclean.evaluation.metrics import jitter_ratio  # numpy only
+def _cross_validate(w, feats, folds, fits) -> Scored:
+    """The runtime's output (map_features.predict, ``w``'s deadband and detail included) of
+    each fold's fit (``fits``: ``_fold_fits``) on the fold's pairs, scored (``Scored``)."""
+    from faceclean.evaluation.metrics import jitter_ratio, lag_ms  # numpy only
 
     names = w.inputs
     gi = np.array([list(SELECT).index(group_of(n)) for n in names])
-    ratios, sse, jitter = [], {}, []
+    ratios, sse, jitter, lags = [], {}, [], []
     dev, frames = np.zeros(len(names)), 0
-    for key, linear in _fold_fits(w, pairs, moments, folds, lam, (), own_rise).items():
+    for key, linear in fits.items():
         map_features.set_linear(w, *linear)
         fam = key.rpartition("/")[0] or "all"
-        s, r = np.zeros(len(SELECT)), np.zeros(len(SELECT))
+        s, o, r = (np.zeros(len(SELECT)) for _ in range(3))
         for i in folds[key]:
             f = feats[i]
             pred = map_features.predict(w, f.u, f.r, f.e)
@@ -211,21 +235,24 @@ def _cross_validate(w, pairs, feats, moments, folds, lam, own_rise
                 dev += np.abs(pred[keep] - f.y[keep]).sum(0)
                 frames += int(keep.sum())
                 continue
+            own = np.clip(f.u - f.r, 0.0, 1.0)  # every output its own rise
             np.add.at(s, gi, ((pred - f.y) ** 2).sum(0))
+            np.add.at(o, gi, ((own - f.y) ** 2).sum(0))
             np.add.at(r, gi, ((f.u + f.e - f.y) ** 2).sum(0))
             if len(f.t) > 3:
                 jitter.append(jitter_ratio(f.t, pred, f.y))
+                lags.append(lag_ms(f.t, pred, f.y))
         if at_rest(key) or r.sum() <= 0:
             continue
         ratios.append(s.sum() / r.sum())
         for g, group in enumerate(SELECT):
-            sse.setdefault(group, {}).setdefault(fam, [0.0, 0.0])
-            sse[group][fam][0] += s[g]
-            sse[group][fam][1] += r[g]
-    per_group = {g: {f: v[0] / max(v[1], 1e-12) for f, v in fam.items()} for g, fam in sse.items()}
+            cell = sse.setdefault(group, {}).setdefault(fam, np.zeros(3))
+            cell += (s[g], o[g], r[g])
+    per_group = {g: {f: v[0] / max(v[2], 1e-12) for f, v in fam.items()} for g, fam in sse.items()}
+    own = {g: {f: v[1] / max(v[2], 1e-12) for f, v in fam.items()} for g, fam in sse.items()}
     off = float((dev / frames).max()) if frames else float("nan")
     mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
-    return mean(ratios), mean(jitter), per_group, off
+    return Scored(mean(ratios), mean(jitter), mean(lags), per_group, own, off)
 
 
 def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report) -> None:
