@@ -168,6 +168,65 @@ def test_a_new_value_moves_its_slider_and_only_a_new_cleaner_rebuilds_the_panel(
         interrupt(proc)
 
 
+def test_the_curves_window_and_playhead_follow_their_controls(browser):
+    """The curve pickers add and remove plot rows; the window pages the take (a new page
+    asks the server for its part); the scrubber, a click on a curve, play and Space move
+    the playhead; clamp and off are the scope's --set items."""
+    take = first_take("jmtechart")
+    anim = io.load(take)
+    duration = float(anim.times[-1] - anim.times[0])  # s
+    proc, url = start(["ui", str(take), "--method", "one-euro"])
+    with reaped(proc):
+        tab = Tab(browser, url)
+        tab.settled(0)
+        rows = "[...document.querySelectorAll('#fc-curves .name')].map((e) => e.firstChild.data)"
+        assert tab.js(rows) == ["jawOpen", "eyeBlinkLeft", "mouthSmileLeft", "browInnerUp"]
+        tab.page.select_option("#fc-group", "-")  # none
+        assert tab.js(rows) == []
+        tab.page.select_option("#fc-group", "jaw")
+        tab.page.select_option("#fc-channel", "cheekPuff")
+        tab.page.click("#fc-curves .plot:first-child .name button")  # x: jawForward goes
+        assert tab.js(rows) == ["jawLeft", "jawRight", "jawOpen", "cheekPuff"]
+        assert tab.js("document.querySelector('#fc-group').value") == ""  # back to its prompt
+
+        assert duration > 4.5  # two pages of 4 s
+        tab.page.select_option("#fc-span", "4")
+        sent = tab.js("window.faceclean.sentSeq")
+        tab.page.fill("#fc-scrub", "2000")
+        tab.page.dispatch_event("#fc-scrub", "input")
+        assert abs(tab.js("window.faceclean.time") - 0.2 * duration) < 1e-3
+        assert tab.js("window.faceclean.sentSeq") == sent  # the same page: nothing asked
+        tab.page.fill("#fc-scrub", "9000")
+        tab.page.dispatch_event("#fc-scrub", "input")
+        assert tab.js("window.faceclean.sentSeq") == sent + 1  # the second page's part
+        assert tab.page.inner_text("#fc-time") == f"{0.9 * duration:.2f} / {duration:.2f} s"
+        box = tab.page.locator("#fc-curves canvas").first.bounding_box()
+        tab.page.mouse.click(box["x"] + 0.25 * box["width"], box["y"] + box["height"] / 2)
+        assert abs(tab.js("window.faceclean.time") - 5.0) < 0.05  # 4 s + a quarter of 4 s
+        tab.page.click("#fc-play")
+        assert tab.page.inner_text("#fc-play") == "❚❚ pause"
+        tab.until("window.faceclean.time < 4.9")  # played on past the end: from the start
+        tab.page.click("#fc-play")
+        assert tab.page.inner_text("#fc-play") == "▶ play"
+        tab.js("document.activeElement.blur()")
+        tab.page.keyboard.press("Space")
+        assert tab.page.inner_text("#fc-play") == "❚❚ pause"
+        tab.page.keyboard.press("Space")
+        assert tab.page.inner_text("#fc-play") == "▶ play"
+
+        tab.page.select_option("#fc-scope", "jawOpen")
+        tab.page.fill("#fc-clamp", "0,0.8")
+        tab.page.press("#fc-clamp", "Tab")  # its change, as a user's leaving it
+        tab.settled(tab.js("window.faceclean.setSeq"))
+        tab.page.check("#fc-off")
+        tab.settled(tab.js("window.faceclean.setSeq"))
+        assert tab.js("window.faceclean.state.items") == ["jawOpen.clamp=0,0.8", "jawOpen.off"]
+        assert tab.page.input_value("#fc-items") == "jawOpen.clamp=0,0.8\njawOpen.off"
+        assert tab.errors() == []
+        tab.page.close()
+        interrupt(proc)
+
+
 class Receiver:
     """A Live Link UDP receiver on loopback: every frame the relay sends, in order."""
 

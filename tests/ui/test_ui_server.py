@@ -70,6 +70,27 @@ def test_the_page_needs_the_token_and_sets_it_as_a_strict_cookie(server):
     assert len(json.loads(body)["targets"]) == 52  # the face, beside the live channel
 
 
+def test_the_pages_script_modules_are_all_served_and_each_is_small(server):
+    """ui.js and every module it imports, by the import lines the browser reads: each
+    served (the same cookie), each a file in static/, none over ~300 lines."""
+    import re
+
+    from faceclean.ui.server import SCRIPTS, STATIC
+
+    assert sorted(SCRIPTS) == sorted(p.name for p in STATIC.glob("*.js"))
+    cookie = {"Cookie": f"{server.cookie}={server.token}"}
+    seen, todo = set(), ["ui.js"]
+    while todo:
+        name = todo.pop()
+        status, headers, body = _get(server, f"/{name}", cookie)
+        assert status == 200 and headers["Content-Type"].startswith("text/javascript"), name
+        assert body == (STATIC / name).read_bytes() and len(body.splitlines()) <= 300, name
+        seen.add(name)
+        found = re.findall(rb'^import [^;]*? from "/([\w.]+\.js)";$', body, re.M)
+        todo += [m.decode() for m in found if m.decode() not in seen]
+    assert seen == set(SCRIPTS)  # every module reached from the page, none left over
+
+
 def test_another_host_or_another_site_is_refused_even_with_the_token(server):
     ok = f"/?token={server.token}"
     assert _get(server, ok, {"Host": f"evil.example:{server.port}"})[0] == 403  # DNS rebinding

@@ -40,17 +40,21 @@ MESH = "/mesh.json"  # the face the page draws (Session.mesh), besides the files
 ONCE = ("Host", "Origin", "Sec-Fetch-Site")  # headers a request carries once at most
 
 
+# the page's script modules in static/, each served at /NAME: ui.js (the page loads it)
+# imports the others, one part of the page each
+SCRIPTS = ("ui.js", "page.js", "channel.js", "controls.js", "sliders.js", "plots.js",
+           "curves.js", "faces.js", "playback.js", "live.js", "status.js", "guided.js")  # fmt: skip
+
+
 def files() -> dict[str, Path]:
-    """URL path -> the file served there: the page, its script and style, the report's
+    """URL path -> the file served there: the page, its scripts and style, the report's
     face view (report/face.js) and the pinned three.js the report uses."""
     from faceclean.report import build
 
     three = build.node_modules() / "three" / "build"
     return {
         "/": STATIC / "index.html",
-        "/ui.js": STATIC / "ui.js",
-        "/curves.js": STATIC / "curves.js",
-        "/guided.js": STATIC / "guided.js",
+        **{f"/{name}": STATIC / name for name in SCRIPTS},
         "/ui.css": STATIC / "ui.css",
         "/face.js": build.FACE_JS,
         "/three/three.module.js": three / "three.module.js",
