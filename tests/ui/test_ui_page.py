@@ -42,12 +42,43 @@ def start(args: list[str], stderr=subprocess.PIPE) -> tuple[subprocess.Popen, st
     raise AssertionError(f"no URL printed: {proc.stderr.read()[-2000:]}")
 
 
+class Held:
+    """The live channel through Playwright: the server's messages reach the page as they
+    come, or, while ``on``, wait until ``release()`` (the page's go out as they come)."""
+
+    def __init__(self) -> None:
+        self.on = False
+        self.waiting: list[str | bytes] = []
+        self.page_end = None
+
+    def route(self, page) -> None:
+        page.route_web_socket(re.compile(r"/live"), self._connect)
+
+    def _connect(self, ws) -> None:
+        self.page_end = ws
+        ws.connect_to_server().on_message(self._down)
+
+    def _down(self, message: str | bytes) -> None:
+        if self.on:
+            self.waiting.append(message)
+        else:
+            self.page_end.send(message)
+
+    def release(self) -> None:
+        self.on = False
+        for message in self.waiting:
+            self.page_end.send(message)
+        self.waiting.clear()
+
+
 class Tab:
     """One page: console errors kept, waits frame by frame on a JS condition."""
 
-    def __init__(self, browser, url: str) -> None:
+    def __init__(self, browser, url: str, held: Held | None = None) -> None:
         self.messages: list[tuple[str, str]] = []
         self.page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        if held is not None:
+            held.route(self.page)
         self.page.on("console", lambda m: self.messages.append((m.type, m.text)))
         self.page.on("pageerror", lambda e: self.messages.append(("pageerror", str(e))))
         self.page.goto(url)
@@ -223,6 +254,67 @@ def test_the_curves_window_and_playhead_follow_their_controls(browser):
         assert tab.js("window.faceclean.state.items") == ["jawOpen.clamp=0,0.8", "jawOpen.off"]
         assert tab.page.input_value("#fc-items") == "jawOpen.clamp=0,0.8\njawOpen.off"
         assert tab.errors() == []
+        tab.page.close()
+        interrupt(proc)
+
+
+def test_off_clicked_while_the_clamp_is_on_its_way_is_kept(browser, tmp_path):
+    """Type a clamp value and click off at once: leaving the box sends the clamp, and the
+    click comes before the server has answered it (its answer held back until then, so
+    always). The newest intent wins: both items stay, on the page, in what the server
+    holds (a new page's state) and in a saved preset (the items it keeps as --set)."""
+    take = first_take("jmtechart")
+    proc, url = start(["ui", str(take), "--method", "one-euro"])
+    with reaped(proc):
+        held = Held()
+        tab = Tab(browser, url, held)
+        tab.settled(0)
+        tab.page.select_option("#fc-scope", "jawOpen")
+        tab.page.fill("#fc-clamp", "0,0.8")
+        before = tab.js("window.faceclean.setSeq")
+        held.on = True
+        tab.page.click("#fc-off")  # the clamp box's change, then the click
+        clamp = tab.js("window.faceclean.setSeq")
+        assert clamp > before and tab.js("window.faceclean.state.seq") < clamp  # unanswered
+        assert tab.page.is_checked("#fc-off")
+        held.release()  # the answer to the clamp alone, after the click
+        tab.until(
+            "window.faceclean.state.seq >= window.faceclean.setSeq"
+            " && window.faceclean.fullSeq >= window.faceclean.setSeq"
+            " || window.faceclean.errors.length"
+        )
+        assert tab.js("window.faceclean.errors") == []
+        both = ["jawOpen.clamp=0,0.8", "jawOpen.off"]
+        assert tab.js("window.faceclean.state.items") == both
+        assert tab.page.is_checked("#fc-off")
+        assert tab.page.input_value("#fc-clamp") == "0,0.8"
+        assert tab.page.input_value("#fc-items") == "\n".join(both)
+        tab.page.fill("#fc-path", str(tmp_path / "preset.json"))
+        tab.note_after("#fc-save-preset", "saved preset")
+        assert tab.js("window.faceclean.notes.at(-1)").endswith(f"keep as --set: {' '.join(both)})")
+        assert (tmp_path / "preset.json").is_file()
+        fresh = Tab(browser, url)  # what the server holds, as a new page is told it
+        assert fresh.js("window.faceclean.state.items") == both
+        fresh.page.select_option("#fc-scope", "jawOpen")
+        assert fresh.page.is_checked("#fc-off")
+        assert tab.errors() == [] and fresh.errors() == []
+        fresh.page.close()
+
+        # a clamp the server refuses, then off unticked at once: the refusal takes back
+        # the clamp alone, and the untick goes after it
+        tab.page.fill("#fc-clamp", "low,high")
+        held.on = True
+        tab.page.click("#fc-off")
+        assert tab.js("window.faceclean.state.seq") < tab.js("window.faceclean.setSeq")
+        held.release()
+        tab.until(
+            "window.faceclean.errors.length"
+            " && window.faceclean.state.seq >= window.faceclean.setSeq"
+        )
+        assert "clamp" in tab.js("window.faceclean.errors.at(-1)")
+        assert tab.js("window.faceclean.state.items") == ["jawOpen.clamp=0,0.8"]
+        assert not tab.page.is_checked("#fc-off")
+        assert tab.page.input_value("#fc-clamp") == "0,0.8"
         tab.page.close()
         interrupt(proc)
 

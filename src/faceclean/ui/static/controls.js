@@ -7,16 +7,23 @@ import { isOpen, send } from "/channel.js";
 import { $, api, page, play } from "/page.js";
 import { LEVELS, moveSlider, OTHER, RANGES, slider } from "/sliders.js";
 
+// What the controls show: the server's items with the edits it has not answered yet on
+// top, so a state that comes while the user is still changing things never takes a
+// change back: `sent` went in the "set" in flight (seq inFlight), `queued` came since and
+// go, whole, once it is answered. With nothing pending the server's state is what shows.
 let items = [];
-let inFlight = null, dirty = false; // one "set" at a time; the newest wins
+let inFlight = null, sent = [], queued = [];
+const replay = (base, edits) => edits.reduce((its, edit) => edit(its), [...base]);
 
 export function onState(s) {
   page.state = s;
   api.state = s;
-  if (inFlight !== null && (s.seq === undefined || s.seq === null || s.seq >= inFlight)) inFlight = null;
-  items = [...s.items];
-  if (document.activeElement !== $("fc-words")) $("fc-words").value = s.words || "";
-  if (s.tracker) $("fc-tracker").value = s.tracker;
+  if (inFlight !== null && (s.seq === undefined || s.seq === null || s.seq >= inFlight)) {
+    inFlight = null;
+    sent = [];
+  }
+  items = replay(s.items, [...sent, ...queued]);
+  if (inFlight === null && !queued.length) showChoice(s);
   $("fc-source").textContent = `cleaning with ${s.source}`;
   $("fc-command").textContent = s.command;
   const cal = s.calibration;
@@ -30,10 +37,21 @@ export function onState(s) {
   flush();
 }
 
-// The server refused the last "set": the controls go back to the state it holds.
-export function refused() {
+// The cleaner's words and tracker as the server holds them (not while the user types).
+function showChoice(s) {
+  if (document.activeElement !== $("fc-words")) $("fc-words").value = s.words || "";
+  if (s.tracker) $("fc-tracker").value = s.tracker;
+}
+
+// The server refused "set" seq (none said: the one in flight): its edits go, the controls
+// show the state the server holds with the edits made since on top (they go next). An
+// older one (offline, the whole take refused it later) is followed by its state, if any.
+export function refused(seq) {
+  if (inFlight === null || (seq !== undefined && seq !== null && seq !== inFlight)) return;
   inFlight = null;
-  items = page.state ? [...page.state.items] : [];
+  sent = [];
+  items = replay(page.state ? page.state.items : [], queued);
+  if (!queued.length && page.state) showChoice(page.state);
   render();
   flush();
 }
@@ -46,17 +64,20 @@ function itemValue(lhs) {
 }
 
 function setItem(key, text) {
-  const lhs = scopeKey(key);
-  items = items.filter((i) => lhsOf(i) !== lhs);
-  if (text !== null) items.push(text === "" ? lhs : `${lhs}=${text}`);
-  $("fc-items").value = items.join("\n");
-  requestSet();
+  const lhs = scopeKey(key), item = text === "" ? lhs : `${lhs}=${text}`;
+  edit((its) => [...its.filter((i) => lhsOf(i) !== lhs), ...(text === null ? [] : [item])]);
 }
 
-function requestSet() { dirty = true; flush(); }
+// A change of the items (its(items) -> items): shown at once, sent with the next "set".
+function edit(change) {
+  items = change(items);
+  queued.push(change);
+  $("fc-items").value = items.join("\n");
+  flush();
+}
 function flush() {
-  if (!dirty || inFlight !== null || !isOpen()) return;
-  dirty = false;
+  if (!queued.length || inFlight !== null || !isOpen()) return;
+  [sent, queued] = [queued, []];
   const words = $("fc-words").value.trim();
   const tracker = $("fc-tracker").value || null;
   inFlight = send({ type: "set", words: words && words !== "default" ? words : null, items, tracker });
@@ -134,12 +155,12 @@ function render() {
 }
 
 export function bindControls() {
-  $("fc-words").addEventListener("change", () => { items = []; requestSet(); });
-  $("fc-tracker").addEventListener("change", () => { $("fc-words").value = ""; items = []; requestSet(); });
+  $("fc-words").addEventListener("change", () => edit(() => []));
+  $("fc-tracker").addEventListener("change", () => { $("fc-words").value = ""; edit(() => []); });
   $("fc-scope").addEventListener("change", render);
   $("fc-apply").addEventListener("click", () => {
-    items = $("fc-items").value.split("\n").map((s) => s.trim()).filter(Boolean);
-    requestSet();
+    const typed = $("fc-items").value.split("\n").map((s) => s.trim()).filter(Boolean);
+    edit(() => typed);
   });
   const path = () => $("fc-path").value.trim();
   $("fc-save-preset").addEventListener("click", () => send({ type: "save", what: "preset", path: path() }));

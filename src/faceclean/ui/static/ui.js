@@ -37,7 +37,7 @@ function onMessage(m) {
   if (m.type === "state") return onState(m);
   if (m.type === "error") {
     note(m.message, true);
-    if (m.for === "set") refused();
+    if (m.for === "set") refused(m.seq);
     return;
   }
   if (m.type === "frames") { api.pushes++; return onFrames(m); }
