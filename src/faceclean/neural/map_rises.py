@@ -71,6 +71,7 @@ LAG_BUDGET = 25.0  # ms of lag (issue 34's target at 30 fps), past which a fit p
 # 3.2x the truth's, 0.05: 1.9x), at a lag of band / speed on slow motions (0.01: 21 ms,
 # 0.05: 60 ms on the families' pairs, docs/MODEL.md), so both are priced.
 DEADBANDS = (0.01, 0.02, 0.03, 0.05)
+MSE_TOL = 0.01  # candidates within 1 % of the best MSE x raw are as accurate: price decides
 REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
 HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
@@ -102,7 +103,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         details: Sequence[float] = DETAILS) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
-    docstring) by ``Scored.price``; then fitted on every pair. A group worse than raw in
+    docstring), accuracy first, then jitter and lag (``_choose``); then fitted on every pair. A group worse than raw in
     any family passes through levelled (its own rise) where that is no worse than raw in
     every family, else as read. The groups in ``own_rise`` read their own rise, whatever
     the folds say."""
@@ -112,13 +113,13 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     if not folds:  # one source: nothing to choose on; the first candidates, the middle lam
         prefilters, lams = prefilters[:1], [lams[len(lams) // 2]]
         deadbands, details = deadbands[:1], details[:1]
-    best = None
+    found, data = [], {}  # (Scored, pre, band, detail, lam); pre -> (features, moments)
     for pre in prefilters:
         w = map_features.blank(names, 0, pre, rest=True)
         feats = map_features.features(w, pairs)
-        moments = [_moments(f) for f in feats]
+        data[pre] = feats, [_moments(f) for f in feats]
         for lam in lams:
-            fits = _fold_fits(w, pairs, moments, folds, lam, (), own_rise)
+            fits = _fold_fits(w, pairs, data[pre][1], folds, lam, (), own_rise)
             for band, detail in [(b, d) for b in deadbands for d in details]:
                 w.config.update(deadband=band, detail_scale=detail)
                 cv = _cross_validate(w, feats, folds, fits)
@@ -126,10 +127,9 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
                 report({"event": "rises", "pre": pre, "deadband": band, "detail": detail,
                         "lam": lam, "val_mse": cv.mse, "jitter": cv.jitter, "lag": cv.lag,
                         "neutral_off": cv.off, "worst_family": worst})  # fmt: skip
-                if best is None or not cv.price >= best[0].price:  # (NaN: no folds, kept)
-                    best = (cv, pre, band, detail, lam, feats, moments)
-    assert best is not None
-    cv, pre, band, detail, lam, feats, moments = best
+                found.append((cv, pre, band, detail, lam))
+    cv, pre, band, detail, lam = _choose(found)
+    feats, moments = data[pre]
     harmful = sorted(g for g, fam in cv.per_group.items() if max(fam.values()) > HARM)
     levelled = [g for g in harmful if g in cv.own and max(cv.own[g].values()) <= HARM]
     passed = [g for g in harmful if g not in levelled and g not in own_rise]
@@ -141,6 +141,16 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
                     frames=int(sum(m[4] for m in moments)))  # fmt: skip
     _choose_lift(w, pairs, feats, moments, folds, lam, passed, own, knees, report)
     return w
+
+
+def _choose(found: Sequence[tuple]) -> tuple:
+    """Accuracy first: of the candidates within MSE_TOL of the best MSE x raw, the one of
+    the lowest price (jitter and lag priced); with no folds (NaN scores), the first."""
+    best = min((c[0].mse for c in found if np.isfinite(c[0].mse)), default=float("nan"))
+    if not np.isfinite(best):
+        return found[0]
+    near = [c for c in found if c[0].mse <= best * (1.0 + MSE_TOL)]
+    return min(near, key=lambda c: c[0].price)
 
 
 def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarray:
