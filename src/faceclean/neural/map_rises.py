@@ -57,8 +57,10 @@ LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
 # candidates (docs/MODEL.md).
 PREFILTERS = ((2.0, 50.0, 4.0), (1.0, 10.0, 2.0))
 # The share of its own raw frame's detail an output gets back: the timing of its own
-# channel (less lag) at the price of its noise (more jitter).
-DETAILS = (0.1, 0.5)
+# channel (less lag) at the price of its noise (more jitter). 0.5 bought 3-5 ms of lag
+# for 15-35 % more jitter on every candidate of the families' pairs, never the better
+# price, so one share is tried (``details`` takes others).
+DETAILS = (0.1,)
 # Groups whose outputs are their own rise, gain 1, whatever the folds say (none by
 # default: since pairs --eyes turn the pairs' eyes turn, and gaze is fitted and judged as
 # every group is; on the pairs made before, whose eyes did not, a fit learned gaze
