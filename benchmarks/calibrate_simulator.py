@@ -16,7 +16,7 @@ import argparse
 
 import numpy as np
 
-from faceclean.evaluation import dataset, simulate
+from faceclean.datasets import dataset, simulate
 from faceclean.settings import data_dir
 
 BANDS = [(0.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 30.0)]  # Hz

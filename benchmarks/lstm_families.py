@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from faceclean.evaluation import paired
-from faceclean.evaluation.paired import Pair
+from faceclean.datasets import paired
+from faceclean.datasets.paired import Pair
 from faceclean.learned.lstm import Learned
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import tracker_map as fit

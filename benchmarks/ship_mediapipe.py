@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import sys
 
+from faceclean.datasets import paired
 from faceclean.evaluation import family_eval as fe
-from faceclean.evaluation import paired
 from faceclean.neural import tracker_map as fit
 
 

@@ -34,7 +34,7 @@ FPS = 30.0  # Hz
 
 def frames_of(face: int, seconds: float) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """(times (N,) s, truth (N, 52), rendered RGB frames)."""
-    from faceclean.evaluation.performer import perform
+    from faceclean.datasets.performer import perform
     from faceclean.settings import mesh_file
     from faceclean.synthetic.engine import drift
     from faceclean.synthetic.head import Head

@@ -17,8 +17,8 @@ import argparse
 import time
 from pathlib import Path
 
-from faceclean.evaluation.dataset import load_takes
-from faceclean.evaluation.simulate import corrupt
+from faceclean.datasets.dataset import load_takes
+from faceclean.datasets.simulate import corrupt
 from faceclean.filters import tune
 from faceclean.settings import PRESETS
 

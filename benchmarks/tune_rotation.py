@@ -33,7 +33,7 @@ from scipy.signal import savgol_filter
 
 from faceclean.animation import Animation
 from faceclean.channels import POSE, POSE_GROUPS
-from faceclean.evaluation.dataset import load_takes
+from faceclean.datasets.dataset import load_takes
 from faceclean.evaluation.metrics import jitter_ratio, lag_ms
 from faceclean.filters import make, tune
 from faceclean.filters.rotation import wrap

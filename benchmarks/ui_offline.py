@@ -41,7 +41,7 @@ def main() -> None:
     from playwright.sync_api import sync_playwright
 
     from faceclean import io
-    from faceclean.evaluation.performer import perform
+    from faceclean.datasets.performer import perform
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--minutes", type=float, default=5.0)

@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 
 from faceclean.channels import GROUPS, INDEX
-from faceclean.evaluation import dataset, performer
+from faceclean.datasets import dataset, performer
 
 
 def blinks(t: np.ndarray, b: np.ndarray) -> list[tuple[float, float, float]]:

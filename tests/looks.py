@@ -9,8 +9,8 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.evaluation import paired
-from faceclean.evaluation.performer import independent
+from faceclean.datasets import paired
+from faceclean.datasets.performer import independent
 from faceclean.learned.tracker_map import TrackerMap
 
 NAMES = tuple(n for n in ARKIT52 if n != "tongueOut")

@@ -40,18 +40,22 @@ MAY_IMPORT: dict[str, set[str]] = {
     "relay": {"io", "faceclean", "filters"},
     "evaluation": {
         *("filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"),
+        "datasets",  # the takes, splits and pairs it judges on
         "synthetic",  # the still real face is tracked by the tracker in the loop
         "calibration",  # the tracker table's calibration row (a pair's own clip)
         "ui",  # the fuzz of the tuning page's messages (fuzz_surfaces.py, inside functions)
     },
-    "synthetic": {"io", "evaluation"},  # takes read and pairs written; the performer
+    "synthetic": {"io", "datasets"},  # takes read and pairs written; the performer
+    # training and evaluation data: pair folders check values as the filters bound them
+    # and know the engine's pair format; the simulator wraps angles as rotation does
+    "datasets": {"io", "filters", "synthetic"},
     "trackers": {"synthetic", "relay", "io"},  # the model bundle check; the live send
     "report": {"evaluation", "face", "io", "faceclean"},
     "ui": {
         *("resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"),
         "guided",  # the page's guided calibration (the fit calibrate --guided uses)
     },
-    "neural": {"filters", "learned", "evaluation", "face", "io", "cli"},
+    "neural": {"filters", "learned", "datasets", "evaluation", "face", "io", "cli"},
     "cli": {"*"},  # the command line may use anything (heavy imports inside run)
     "faceclean": {"io", "cleaner"},  # the package's public face
     "__main__": {"cli"},

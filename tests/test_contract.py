@@ -106,7 +106,7 @@ def _held_face_settles(cleaner) -> None:
     under-shoot and crosstalk), but a face held still settles: no drift, and a small
     correction. Poses are a face's (a synthetic performer's frames): 52 channels all
     half-active at once is no face, and a model of faces owes it nothing."""
-    from faceclean.evaluation import performer
+    from faceclean.datasets import performer
 
     face = performer.perform(20.0, seed=2, fps=60.0)
     t = np.arange(600) / 60.0  # 10 s held
@@ -130,7 +130,7 @@ def test_constant_in_constant_out(backend, build):
 def _same_face_at_30_60_120_fps_agrees(cleaner) -> None:
     """A learned cleaner sees faces, not 52 sines at once: the same synthetic
     performance sampled at 30, 60 and 120 fps must agree at shared instants."""
-    from faceclean.evaluation import performer
+    from faceclean.datasets import performer
 
     face = performer.perform(6.0, seed=1, fps=240.0)
     shared = {}
@@ -387,7 +387,7 @@ def real_take(takes_root) -> Animation:
     """The shortest take of settings.takes_dir() with all 52 ARKit channels, at most
     600 frames of it (tracking-loss rows kept)."""
     from faceclean import load
-    from faceclean.evaluation.dataset import SUFFIXES
+    from faceclean.datasets.dataset import SUFFIXES
 
     root = takes_root
     paths = [p for p in root.rglob("*") if p.suffix.lower() in SUFFIXES and p.is_file()]

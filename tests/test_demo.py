@@ -17,7 +17,8 @@ import numpy as np
 
 from faceclean import io
 from faceclean.cli import demo, main
-from faceclean.evaluation import metrics, paired
+from faceclean.datasets import paired
+from faceclean.evaluation import metrics
 
 PNG = b"\x89PNG\r\n\x1a\n"
 REPO = Path(__file__).resolve().parents[1]

@@ -9,7 +9,7 @@ from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
-from faceclean.evaluation.performer import perform
+from faceclean.datasets.performer import perform
 
 EMA = ("--method", "ema")
 

@@ -21,7 +21,7 @@ import pytest
 
 from faceclean import io
 from faceclean.animation import Animation
-from faceclean.evaluation.performer import perform
+from faceclean.datasets.performer import perform
 
 distributed = pytest.importorskip("distributed")
 

@@ -12,7 +12,8 @@ import pytest
 
 from faceclean import io
 from faceclean.cli import main
-from faceclean.evaluation import evaluate, performer
+from faceclean.datasets import performer
+from faceclean.evaluation import evaluate
 from faceclean.evaluation import results as report
 
 
@@ -153,7 +154,8 @@ def test_the_second_artefact_model_drives_the_verdict(results):
 def test_the_trainers_validation_draws_the_results_streams(data, results):
     """One harness: for the same (condition, take, seed), the stream the trainers validate
     on (harness.streams) is the one RESULTS scores: fold "one"'s raw-input figures."""
-    from faceclean.evaluation import dataset, degrade, harness, metrics
+    from faceclean.datasets import dataset
+    from faceclean.evaluation import degrade, harness, metrics
 
     assert tuple(harness.CONDITIONS) == degrade.CONDITIONS  # one naming for both models
     val = [

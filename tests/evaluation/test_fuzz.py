@@ -95,7 +95,7 @@ def test_the_mutation_fuzzer_is_seeded_and_edits_real_seeds():
 def test_the_page_and_pairs_checks_catch_what_they_are_for(tmp_path, monkeypatch):
     """An answer with NaN, an internal error, or a refused change kept, fails the page
     check; a stray exception from the pairs reader fails the pairs check."""
-    from faceclean.evaluation import paired
+    from faceclean.datasets import paired
     from faceclean.ui import session
 
     page = fuzz.Checker("page", tmp_path)

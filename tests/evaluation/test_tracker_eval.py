@@ -87,7 +87,7 @@ def test_every_fold_scores_every_row_and_level_rows_beat_the_filters(result):
 
 
 def test_calibration_clips_with_their_truth_train_as_pairs_of_their_own(folder):
-    from faceclean.evaluation import paired
+    from faceclean.datasets import paired
 
     pairs = paired.load(folder, require_meta=True)
     with_truth = [p for p in pairs if p.rom_truth is not None]

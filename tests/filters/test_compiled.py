@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceclean.evaluation.performer import perform
+from faceclean.datasets.performer import perform
 from faceclean.filters import compiled
 from faceclean.filters.one_euro import OneEuro
 from faceclean.resolve import resolve

@@ -11,8 +11,8 @@ import pytest
 
 from faceclean import io
 from faceclean.animation import Animation
+from faceclean.datasets.performer import perform
 from faceclean.errors import FacecleanError
-from faceclean.evaluation.performer import perform
 from faceclean.filters import compiled
 from faceclean.filters.base import check_finite
 from faceclean.io import plain_csv, stream

@@ -134,7 +134,8 @@ def test_fine_tuning_never_writes_a_worse_model(tmp_path):
         synthetic_minutes=0.0, resume=str(start), preset="mixed", batch=4,
     )  # fmt: skip
     record = train(cfg)
-    from faceclean.evaluation import dataset, harness
+    from faceclean.datasets import dataset
+    from faceclean.evaluation import harness
 
     _, val = dataset.split(dataset.load_takes(), val_sources=("jmtechart",))
     streams = harness.streams(val)

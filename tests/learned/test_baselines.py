@@ -148,7 +148,7 @@ def test_features_are_backward_derivatives_in_seconds():
 def test_tiny_training_run_writes_a_working_model(tmp_path):
     from faceclean import io
     from faceclean.cli import main
-    from faceclean.evaluation import performer
+    from faceclean.datasets import performer
 
     for source in ("one", "two"):
         (tmp_path / source).mkdir()

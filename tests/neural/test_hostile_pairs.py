@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from test_redteam import ARKIT, fc, no_temp_files, ok, plain_text, refused
 
+from faceclean.datasets import paired
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import paired
 from faceclean.learned.tracker_map import MapWeights
 from faceclean.neural import tracker_map as fit
 

@@ -139,7 +139,7 @@ def test_train_command_refuses_bad_arguments(tmp_path, capsys):
 def tiny_takes(tmp_path):
     """Two sources of two 3 s synthetic takes each (train --data layout)."""
     from faceclean import io
-    from faceclean.evaluation.performer import perform
+    from faceclean.datasets.performer import perform
 
     for source, seeds in (("a", (1, 2)), ("b", (3, 4))):
         (tmp_path / source).mkdir()

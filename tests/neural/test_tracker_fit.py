@@ -10,9 +10,9 @@ import numpy as np
 
 from faceclean import io
 from faceclean.animation import Animation
-from faceclean.evaluation import paired
+from faceclean.datasets import paired
+from faceclean.datasets.performer import perform
 from faceclean.evaluation.metrics import lag_ms
-from faceclean.evaluation.performer import perform
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import tracker_map as fit
 

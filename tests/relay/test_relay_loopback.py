@@ -496,7 +496,7 @@ def test_relay_passes_every_frame_from_its_first_packet_on():
     leaves room for a loaded machine; a compile at the start is ten times longer.)"""
     import time
 
-    from faceclean.evaluation.performer import perform
+    from faceclean.datasets.performer import perform
 
     take = perform(1.0, 11, fps=60.0).values.astype(np.float32).astype(np.float64)
     with vmc_peer() as peer:

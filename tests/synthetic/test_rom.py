@@ -27,7 +27,8 @@ def test_a_pairs_calibration_clip_is_rendered_loaded_and_calibrates(tmp_path):
     pytest.importorskip("mediapipe")
     from faceclean import io
     from faceclean.animation import Animation
-    from faceclean.evaluation import paired, tracker_eval
+    from faceclean.datasets import paired
+    from faceclean.evaluation import tracker_eval
     from faceclean.settings import mesh_file, tracker_model
     from faceclean.synthetic import engine
 

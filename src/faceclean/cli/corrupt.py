@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from faceclean import io
-    from faceclean.evaluation import simulate
+    from faceclean.datasets import simulate
 
     io.paths.distinct(args.output, args.truth_out)
     clean = io.load(args.input)

@@ -1,7 +1,7 @@
 """``faceclean demo``: what faceclean does, on two takes the project made itself.
 
-1. An iPhone-like take: a synthetic performance (faceclean.evaluation.performer) degraded
-   the way an iPhone tracker degrades it (faceclean.evaluation.simulate), written as a Live
+1. An iPhone-like take: a synthetic performance (faceclean.datasets.performer) degraded
+   the way an iPhone tracker degrades it (faceclean.datasets.simulate), written as a Live
    Link Face CSV and cleaned with the shipped default, beside the raw input and the tuned
    One Euro filter. The default *is* that filter today (docs/MODEL.md), so their rows match.
 2. A MediaPipe pair shipped in faceclean/data/demo (its README says how ``faceclean pairs``
@@ -87,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
 def iphone(out: Path, seconds: float, seed: int) -> None:
     """Table (a): the iPhone-like take, raw / the shipped default / the tuned One Euro."""
     from faceclean import io
-    from faceclean.evaluation import comparison, performer, simulate
+    from faceclean.datasets import performer, simulate
+    from faceclean.evaluation import comparison
     from faceclean.resolve import DEFAULT
 
     out.mkdir(parents=True, exist_ok=True)
@@ -111,7 +112,8 @@ def iphone(out: Path, seconds: float, seed: int) -> None:
 def mediapipe(out: Path) -> None:
     """Table (b): the shipped MediaPipe pair, raw / ``--tracker mediapipe`` / tuned One Euro."""
     from faceclean import io
-    from faceclean.evaluation import comparison, paired
+    from faceclean.datasets import paired
+    from faceclean.evaluation import comparison
     from faceclean.resolve import resolve, tracker_words
 
     out.mkdir(parents=True, exist_ok=True)

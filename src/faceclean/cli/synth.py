@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from faceclean import io
-    from faceclean.evaluation import performer
+    from faceclean.datasets import performer
 
     anim = performer.perform(args.seconds, args.seed, args.fps)
     io.save(anim, args.output, fmt=args.fmt)

@@ -206,7 +206,8 @@ def _report(args: argparse.Namespace) -> str:
     other kind through the runtime that cleans with it."""
     from faceclean.animation import Animation
     from faceclean.channels import ARKIT52
-    from faceclean.evaluation import dataset, harness
+    from faceclean.datasets import dataset
+    from faceclean.evaluation import harness
     from faceclean.learned import formats
     from faceclean.neural import checkpoint
     from faceclean.neural.validate import evaluate, measure, table

@@ -27,8 +27,8 @@ import sys
 
 
 def run(args: argparse.Namespace) -> int:
+    from faceclean.datasets import paired
     from faceclean.errors import FacecleanError
-    from faceclean.evaluation import paired
 
     if args.arch and args.arch not in ("map", "rises", "ridge", "lstm"):
         raise FacecleanError(

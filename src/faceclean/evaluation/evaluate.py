@@ -38,8 +38,9 @@ from typing import Any
 import numpy as np
 
 from faceclean.animation import Animation
+from faceclean.datasets import dataset
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import dataset, harm, metrics
+from faceclean.evaluation import harm, metrics
 from faceclean.evaluation.harness import (
     ARTEFACTS,
     CONDITIONS,

@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from faceclean.channels import GROUPS
-from faceclean.evaluation import paired
-from faceclean.evaluation.paired import Pair
+from faceclean.datasets import paired
+from faceclean.datasets.paired import Pair
 from faceclean.evaluation.tracker_eval import Build, outputs, tune_one_euro
 
 GAZE = tuple(n for n in GROUPS["eyes"] if n.startswith("eyeLook"))

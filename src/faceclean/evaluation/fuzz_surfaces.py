@@ -280,7 +280,7 @@ class Pairs:
         self.folder = folder / "pairs"
 
     def __call__(self, data: bytes) -> bool:
-        from faceclean.evaluation import paired
+        from faceclean.datasets import paired
         from faceclean.filters.base import MAX_ABS
 
         shutil.rmtree(self.folder, ignore_errors=True)

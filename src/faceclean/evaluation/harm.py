@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from faceclean.channels import ARKIT52
+from faceclean.datasets.dataset import Take
 from faceclean.evaluation import metrics
-from faceclean.evaluation.dataset import Take
 from faceclean.filters.base import Stepper
 
 TARGET_SHIFT = 0.005  # weight units: no channel's mean may move more (issue 11)

@@ -19,8 +19,9 @@ from typing import NamedTuple
 import numpy as np
 
 from faceclean.animation import Animation
+from faceclean.datasets import dataset, simulate
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import dataset, degrade, simulate
+from faceclean.evaluation import degrade
 from faceclean.filters import Stepper
 
 # condition -> (simulator preset, fps or None for the preset's own draw); degrade has

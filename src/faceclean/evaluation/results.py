@@ -169,7 +169,7 @@ def markdown(results: dict[str, Any]) -> str:
         "coloured noise that grows mid-range and with speed, per-channel dead zone, power "
         "and knee, 36 delayed crosstalk leaks, mean-reverting drift with re-detection "
         "steps, outliers, bursts, frozen and late frames) and **simulate** "
-        "(`faceclean.evaluation.simulate`, what the learned models train with), each at "
+        "(`faceclean.datasets.simulate`, what the learned models train with), each at "
         "30, 60 and 120 fps (the same artefact draw at each rate) and on webcam timing "
         "(24–30 fps, irregular timestamps, dropped frames, heavier noise).",
     ]

@@ -40,9 +40,9 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.channels import GROUPS
-from faceclean.evaluation import paired
+from faceclean.datasets import paired
+from faceclean.datasets.paired import Pair
 from faceclean.evaluation.metrics import summary
-from faceclean.evaluation.paired import Pair
 from faceclean.filters.base import Stepper
 
 ONE_EURO_GRID = [(mc, b) for mc in (0.5, 1.0, 2.0, 4.0) for b in (0.0, 0.3, 1.0, 3.0)]

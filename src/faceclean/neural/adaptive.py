@@ -36,7 +36,8 @@ from torch import Tensor
 
 from faceclean import strict_json
 from faceclean.channels import ARKIT52
-from faceclean.evaluation import dataset, harness, metrics
+from faceclean.datasets import dataset
+from faceclean.evaluation import harness, metrics
 from faceclean.filters import make
 from faceclean.learned.adaptive import (
     A_MAX,

@@ -38,8 +38,8 @@ from torch import nn
 
 from faceclean import strict_json
 from faceclean.channels import ARKIT52
+from faceclean.datasets import dataset, simulate
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import dataset, simulate
 from faceclean.io.atomic import atomic_write
 from faceclean.learned import formats
 from faceclean.learned.derivative_net import GROUP_NAMES, DerivativeFeatures, group_index

@@ -1,4 +1,4 @@
-"""Torch views of the numpy training data (faceclean.evaluation.dataset): map- and stream-style."""
+"""Torch views of the numpy training data (faceclean.datasets.dataset): map- and stream-style."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from faceclean.evaluation.dataset import Chunks, Take, batches, epoch_chunks
+from faceclean.datasets.dataset import Chunks, Take, batches, epoch_chunks
 
 Batch = dict[str, torch.Tensor]  # noisy, truth (B, T, M) f32; times (B, T) f64; valid, observed
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.evaluation.paired import Pair
+from faceclean.datasets.paired import Pair
 from faceclean.filters.one_euro import OneEuro
 from faceclean.learned.formats import TRACKER_MAP
 from faceclean.learned.map_weights import MapWeights

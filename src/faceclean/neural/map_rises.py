@@ -43,7 +43,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from faceclean.evaluation.paired import Pair, performances
+from faceclean.datasets.paired import Pair, performances
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_features, tracker_map
 from faceclean.neural.map_groups import SELECT, at_rest, group_of
@@ -105,10 +105,10 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         details: Sequence[float] = DETAILS) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
-    docstring), accuracy first, then jitter and lag (``_choose``); then fitted on every pair. A group worse than raw in
-    any family passes through levelled (its own rise) where that is no worse than raw in
-    every family, else as read. The groups in ``own_rise`` read their own rise, whatever
-    the folds say."""
+    docstring), accuracy first, then jitter and lag (``_choose``); then fitted on every
+    pair. A group worse than raw in any family passes through levelled (its own rise)
+    where that is no worse than raw in every family, else as read. The groups in
+    ``own_rise`` read their own rise, whatever the folds say."""
     report = report or (lambda _e: None)
     names = map_features.channels(pairs)
     folds = _folds(pairs)

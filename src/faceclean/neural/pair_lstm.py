@@ -18,8 +18,8 @@ import numpy as np
 import torch
 
 from faceclean.channels import ARKIT52
-from faceclean.evaluation.dataset import Chunks, batches, concat
-from faceclean.evaluation.paired import Pair, performances
+from faceclean.datasets.dataset import Chunks, batches, concat
+from faceclean.datasets.paired import Pair, performances
 from faceclean.face.vertex_pairs import load_face
 from faceclean.neural import checkpoint
 from faceclean.neural.losses import Loss, Weights

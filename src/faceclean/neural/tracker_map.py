@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from faceclean.evaluation.paired import Pair, performances
+from faceclean.datasets.paired import Pair, performances
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_groups
 from faceclean.neural.blink_lift import CLOSURE_BAND as CLOSURE_BAND  # the fit's settings

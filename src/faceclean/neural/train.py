@@ -3,7 +3,7 @@
     faceclean train --val-sources neurosync --epochs 40 --out model.npz
     torchrun --nproc_per_node 2 -m faceclean.neural.train --epochs 40 --out model.npz
 
-Every epoch draws fresh augmented, corrupted chunks (faceclean.evaluation.dataset); the
+Every epoch draws fresh augmented, corrupted chunks (faceclean.datasets.dataset); the
 model unrolls closed loop over each chunk from x̂[0] = x[0] and gradients flow through
 it all. Adam (lr 1e-3), gradient clipping, seeded. After every epoch the model runs over
 whole validation takes (sources never trained on; evaluation/harness.py's streams); the
@@ -30,7 +30,8 @@ import numpy as np
 import torch
 
 from faceclean.channels import ARKIT52
-from faceclean.evaluation import dataset, harness
+from faceclean.datasets import dataset
+from faceclean.evaluation import harness
 from faceclean.face.vertex_pairs import load_face
 from faceclean.neural import checkpoint, distributed
 from faceclean.neural.data import EpochStream

@@ -170,12 +170,12 @@ def performance(
     from faceclean import io
 
     if job.source.startswith(SYNTH):
-        from faceclean.evaluation.performer import perform
+        from faceclean.datasets.performer import perform
 
         anim = perform(job.seconds, int(job.source[len(SYNTH) :]), fps=60.0, full_range=True)
         return anim.times, anim.values, None
     if job.source.startswith(INDEPENDENT):
-        from faceclean.evaluation.performer import independent
+        from faceclean.datasets.performer import independent
 
         anim = independent(job.seconds, int(job.source[len(INDEPENDENT) :]), fps=60.0)
         return anim.times, anim.values, None
@@ -360,6 +360,12 @@ class Worker:
         finally:
             tracker.close()
         return Animation(times, tracked, tracker.names, {"format": "csv"})
+
+
+def portrait_cache() -> Path:
+    """The folder ``make portraits`` fills: the portraits ``faceclean pairs`` reads when
+    given no ``--portraits`` (docs/DATA.md)."""
+    return Path.home() / ".cache" / "faceclean" / "portraits"
 
 
 def rom_path(out: Path, job: Job, kind: str) -> Path:

@@ -9,9 +9,9 @@ from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
 from faceclean.cli import main
+from faceclean.datasets import performer, simulate
+from faceclean.datasets.simulate import Params
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import performer, simulate
-from faceclean.evaluation.simulate import Params
 from faceclean.settings import takes_dir
 from faceclean.timing import resample, runs
 

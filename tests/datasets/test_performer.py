@@ -8,8 +8,8 @@ import pytest
 from faceclean import io
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.cli import main
+from faceclean.datasets import performer
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import performer
 
 
 @pytest.fixture(scope="module")

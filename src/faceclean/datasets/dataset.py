@@ -23,8 +23,8 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, INDEX
+from faceclean.datasets import simulate
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import simulate
 from faceclean.settings import takes_dir
 from faceclean.timing import hold_last
 
@@ -311,7 +311,7 @@ def synthetic_takes(
 ) -> list[Take]:
     """``minutes`` of synthetic performer takes (source ``"synthetic"``), 60 fps;
     ``full_range``: every channel through its whole range (performer's range of motion)."""
-    from faceclean.evaluation import performer
+    from faceclean.datasets import performer
 
     takes, left, i = [], minutes * 60.0, 0
     while left > 1.0:

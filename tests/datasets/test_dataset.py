@@ -8,9 +8,9 @@ import pytest
 from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import INDEX
+from faceclean.datasets import dataset, performer
+from faceclean.datasets.dataset import Augmentation, Take
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import dataset, performer
-from faceclean.evaluation.dataset import Augmentation, Take
 from faceclean.settings import takes_dir
 
 

@@ -12,8 +12,8 @@ import pytest
 from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
+from faceclean.datasets import paired
 from faceclean.errors import FacecleanError
-from faceclean.evaluation import paired
 
 
 def _take(t, v, names=("jawOpen", "eyeBlinkLeft")):
