@@ -1,20 +1,38 @@
-"""Guided calibration on held-out rendered faces: does a face's own script clip help?
+"""Guided calibration on held-out faces, rendered and photo-textured (issue 35's table).
 
-For each face (``Scene.draw(seed, 'studio', family=...)``), render and track (MediaPipe)
-the guided script performed late and slow (``performed``: a 1 s late start, then 0.8x
-speed, uneven), calibrate from it (``faceclean.guided.fit.guided``), and score on the
-same face's other performances: ``--seconds`` s windows of the shared iPhone takes,
-rendered with the same face. Rows (MSE over the 51 MediaPipe channels, as x raw):
+For each face (``Scene.draw(seed, 'studio', family=..., portraits=(name,))``; a photo
+face's skin is its portrait's fit, ``engine.Worker.skin``), every clip is rendered with
+turning eyes (``Renderer(..., gaze=True)``, as the pairs are now) and tracked by
+MediaPipe at 24 fps, the head still:
+
+- the guided script performed late and slow (``performed``: 1 s late, then 0.8x speed,
+  uneven), calibrated as ``calibrate --guided TAKE --tracker mediapipe`` does
+  (``faceclean.guided.fit.guided``);
+- the range-of-motion clip the pairs engine renders (``synthetic/rom.py clip``),
+  calibrated as ``calibrate --rom --tracker mediapipe`` does (``calibration.calibrate``);
+- the test: ``--seconds`` s windows of ``--takes`` shared iPhone takes on the same face.
+
+Rows (scored over the test windows, MediaPipe's 51 channels; ``clean --calibration``'s
+order: levels before the cleaner, an adaptation after it):
 
     shipped   the shipped MediaPipe cleaner alone
-    guided    the shipped cleaner + the face's guided adaptation
-    oracle    the shipped cleaner + a per-channel gain and offset fitted on the test
-              performances themselves (the most a per-face level fix can do)
+    rom       levels from the ROM clip, then the shipped cleaner
+    guided    the shipped cleaner, then the face's guided adaptation
+    oracle    the shipped cleaner, then a per-channel gain and offset fitted on the test
+              windows themselves (the most a per-face level fix can do)
 
-Renders are cached under ``--cache`` (a face's frames are a pure function of its seed,
-family and the weights), so a rerun only refits. Run:
+Columns: MSE as x raw, over all channels and per group (``family_eval.TABLE_GROUPS``),
+blink closure (``metrics.blink_peaks``: output peak / true peak, pooled over the test's
+blinks), prompts seen, fit seconds. Do no harm: in place of the script, a face held still
+and one moving at random (``performer.perform``) for the live recording's length; what
+the command says of it (``Alignment.shortfall``: it writes nothing unless ``--partial``)
+and the test MSE of its ``--partial`` calibration / the shipped cleaner's.
 
-    .venv/bin/python benchmarks/guided_eval.py --faces painted:7 dressed:5 --takes 3
+Renders are cached under ``--cache`` (a clip's scores are a pure function of its face,
+weights, times and gaze), so a rerun only refits. Run (``--table JSON``: the markdown again):
+
+    .venv/bin/python benchmarks/guided_eval.py --faces painted:23 dressed:29 \\
+        photo:41:biden photo:43:takeo --takes 2 --seconds 10 --json docs/results_guided.json
 """
 
 from __future__ import annotations
@@ -23,7 +41,9 @@ import argparse
 import glob
 import hashlib
 import json
+import subprocess
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,11 +51,90 @@ import numpy as np
 from faceclean import io, settings
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
-from faceclean.guided.fit import guided, shipped_cleaner
-from faceclean.guided.script import load
+from faceclean.errors import FacecleanError
 
 RATE = 24.0  # Hz
 TAKES = "../shared/data/arkit_takes/*/*.csv"
+MODEL = "src/faceclean/models/mediapipe.npz"
+ROWS = ("shipped", "rom", "guided", "oracle")
+
+
+@dataclass(frozen=True)
+class Face:
+    family: str
+    seed: int
+    portrait: str = ""  # the photo family's portrait
+
+    @classmethod
+    def parse(cls, spec: str) -> Face:
+        """``FAMILY:SEED`` or ``photo:SEED:PORTRAIT``."""
+        from faceclean.synthetic.portrait import RESERVED
+
+        parts = spec.split(":")
+        if len(parts) not in (2, 3) or (parts[0] == "photo") != (len(parts) == 3):
+            raise FacecleanError(f"face {spec!r}: FAMILY:SEED, or photo:SEED:PORTRAIT")
+        if len(parts) == 3 and any(r in parts[2].lower() for r in RESERVED):
+            raise FacecleanError(f"portrait {parts[2]!r} is reserved for independent checks")
+        return cls(parts[0], int(parts[1]), parts[2] if len(parts) == 3 else "")
+
+    @property
+    def spec(self) -> str:
+        return f"{self.family}:{self.seed}" + (f":{self.portrait}" if self.portrait else "")
+
+
+class Studio:
+    """Renders and tracks clips on faces, each clip's scores cached under ``cache``."""
+
+    def __init__(self, cache: Path, gaze: bool = True) -> None:
+        self.cache, self.gaze = cache, gaze
+        self._worker = None
+
+    def worker(self, face: Face):
+        """The pairs engine's worker (head, tracker, portraits), made on the first render."""
+        from faceclean.synthetic import engine
+
+        if self._worker is None:
+            portraits = [str(engine.portrait_cache())] if engine.portrait_cache().is_dir() else []
+            self._worker = engine.Worker(
+                settings.mesh_file("ict_full.npz"), settings.tracker_model(), portraits
+            )
+        if face.portrait:
+            ok, skipped = self._worker.usable()
+            if face.portrait not in ok:
+                raise FacecleanError(
+                    f"portrait {face.portrait!r} is not usable (usable: {', '.join(ok)}; "
+                    f"{'; '.join(skipped) or 'run make portraits'})"
+                )
+        return self._worker
+
+    def render(self, face: Face, times: np.ndarray, weights: np.ndarray, tag: str) -> Animation:
+        """MediaPipe's scores (N, 51) of ``weights`` (N, 52) at ``times`` on ``face``."""
+        from faceclean.synthetic.tracker import NAMES
+
+        what = f"{face.spec} gaze={self.gaze}".encode()
+        key = hashlib.sha256(what + weights.tobytes() + times.tobytes()).hexdigest()[:10]
+        look = f"{face.family}{face.seed}" + (f"-{face.portrait}" if face.portrait else "")
+        path = self.cache / f"{look}_{tag}{'_gaze' if self.gaze else ''}_{key}.npz"
+        if path.is_file():
+            return Animation(times, np.load(path)["tracked"], NAMES)
+        from faceclean.synthetic.render import Renderer
+        from faceclean.synthetic.scene import Scene
+        from faceclean.tracking import scores
+
+        w = self.worker(face)
+        portraits = (face.portrait,) if face.portrait else ()
+        scene = Scene.draw(face.seed, "studio", w.head.n_identity, face.family, portraits)
+        renderer = Renderer(w.head, scene, w.skin(scene), gaze=self.gaze)
+        still = np.zeros(3)  # deg: the head does not move
+        tracker = w.tracker()
+        try:
+            frames = ((renderer.frame(weights[k], still, k), float(t)) for k, t in enumerate(times))
+            out = scores(tracker, frames)  # (N, 51), NaN rows: no face
+        finally:
+            tracker.close()
+        self.cache.mkdir(parents=True, exist_ok=True)
+        np.savez(path, tracked=out)
+        return Animation(times, out, NAMES)
 
 
 def performed(rate: float, seconds: float, late: float = 1.0, speed: float = 0.8):
@@ -48,32 +147,6 @@ def performed(rate: float, seconds: float, late: float = 1.0, speed: float = 0.8
     return tau, s
 
 
-def render(face: tuple[str, int], times: np.ndarray, weights: np.ndarray, cache: Path, tag: str):
-    """MediaPipe's scores (N, 51) of ``weights`` (N, 52) rendered on ``face``; cached."""
-    from faceclean.synthetic.tracker import NAMES
-
-    key = hashlib.sha256(weights.tobytes() + times.tobytes()).hexdigest()[:10]
-    path = cache / f"{face[0]}{face[1]}_{tag}_{key}.npz"
-    if path.is_file():
-        return Animation(times, np.load(path)["tracked"], NAMES)
-    from faceclean.synthetic.head import Head
-    from faceclean.synthetic.render import Renderer
-    from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import Tracker
-
-    head = Head.load(settings.mesh_file("ict_full.npz"))
-    renderer = Renderer(head, Scene.draw(face[1], "studio", head.n_identity, family=face[0]))
-    out = np.full((len(times), len(NAMES)), np.nan)
-    with Tracker(settings.tracker_model()) as tracker:
-        for k, t in enumerate(times):
-            y = tracker.track(renderer.frame(weights[k], np.zeros(3), k), float(t))
-            if y is not None:
-                out[k] = y
-    cache.mkdir(parents=True, exist_ok=True)
-    np.savez(path, tracked=out)
-    return Animation(times, out, NAMES)
-
-
 def window(path: str, seconds: float, start: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
     """(times, weights (N, 52)) ``seconds`` of a shared take from ``start`` s, at RATE."""
     anim = io.load(path)
@@ -84,70 +157,230 @@ def window(path: str, seconds: float, start: float = 5.0) -> tuple[np.ndarray, n
     return t, np.clip(np.stack(w, axis=1), 0.0, 1.0)
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--faces", nargs="+", default=["painted:7", "dressed:5"])
-    p.add_argument("--takes", type=int, default=3, help="how many shared takes to test on")
-    p.add_argument("--seconds", type=float, default=10.0)
-    p.add_argument("--cache", default="/tmp/faceclean-guided-cache")
-    p.add_argument("--json", help="write the numbers here")
-    args = p.parse_args()
+@dataclass
+class Test:
+    """The test windows of one face, concatenated: (N, 51) each, and each window's rows."""
+
+    times: list[np.ndarray]
+    truth: np.ndarray
+    raw: np.ndarray
+    spans: list[slice]
+
+    @property
+    def ok(self) -> np.ndarray:
+        return np.isfinite(self.raw).all(axis=1)
+
+
+def score(test: Test, y: np.ndarray, ok: np.ndarray) -> dict:
+    """MSE x raw overall and per group, and blink closure, of output ``y`` (N, 51)."""
+    from faceclean.evaluation.family_eval import TABLE_GROUPS
+    from faceclean.evaluation.metrics import blink_peaks
+    from faceclean.synthetic.tracker import NAMES
+
+    ok = ok & np.isfinite(y).all(axis=1)
+    out: dict = {"groups": {}}
+    for g, members in (("all", NAMES), *TABLE_GROUPS.items()):
+        cols = [j for j, n in enumerate(NAMES) if n in members]
+        if not cols:
+            continue
+        raw = np.mean((test.raw[ok][:, cols] - test.truth[ok][:, cols]) ** 2)
+        err = np.mean((y[ok][:, cols] - test.truth[ok][:, cols]) ** 2)
+        ratio = float(err / raw) if raw > 0 else float("nan")
+        if g == "all":
+            out["mse_x_raw"], out["mse"] = ratio, float(err)
+        else:
+            out["groups"][g] = ratio
+    peaks = [blink_peaks(t, y[s], test.truth[s], NAMES)
+             for t, s in zip(test.times, test.spans, strict=True)]  # fmt: skip
+    cat = np.concatenate(peaks)
+    out["blink_closure"] = float(cat.mean()) if cat.size else float("nan")
+    out["blinks"] = int(cat.size)
+    return out
+
+
+def oracle(test: Test, y: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """``y`` (N, 51) with a per-channel gain and offset fitted on the test itself."""
+    out = np.empty_like(y)
+    for j in range(y.shape[1]):
+        x = np.c_[y[ok, j], np.ones(ok.sum())]
+        b = np.linalg.lstsq(x, test.truth[ok, j], rcond=None)[0]
+        out[:, j] = np.clip(y[:, j] * b[0] + b[1], 0, 1)
+    return out
+
+
+def cleaned(tracked: Animation, adjust=None) -> np.ndarray:
+    """What ``clean --tracker mediapipe [--calibration]`` writes for ``tracked``: (N, 51)."""
+    from faceclean.guided.fit import shipped_cleaner
+
+    cleaner, _ = shipped_cleaner("mediapipe", tracked.names)
+    if adjust is not None and not adjust.is_identity:
+        tracked = tracked.with_values(adjust.apply(tracked.values, tracked.names))
+    y = cleaner.clean(tracked).values
+    if adjust is not None and adjust.adaptation is not None:
+        y = adjust.adapt(y, tracked.names)
+    return y
+
+
+def fitted(take: Animation) -> dict:
+    """``calibrate --guided TAKE --tracker mediapipe`` on ``take``: its fit and verdict."""
+    from faceclean.guided.fit import guided
+
+    started = time.perf_counter()
+    try:
+        fit = guided(take, "mediapipe")
+    except FacecleanError as e:
+        return {"adjust": None, "refused": str(e), "follows": False, "seen": 0, "prompts": 0}
+    return {
+        "adjust": fit.adjust,
+        "fit_s": time.perf_counter() - started,
+        "seen": fit.alignment.seen,
+        "prompts": len(fit.alignment.segments),
+        "follows": bool(fit.alignment.follows),
+        "refused": fit.alignment.shortfall(),  # None: the command writes the file
+    }
+
+
+def evaluate(face: Face, studio: Studio, takes: list[str], seconds: float) -> dict:
+    """One face's rows and do-no-harm clips (module docstring)."""
+    from faceclean.calibration import calibrate
+    from faceclean.datasets.performer import perform
+    from faceclean.guided.script import TAIL, load
+    from faceclean.synthetic import rom
     from faceclean.synthetic.tracker import NAMES
 
     cols = [ARKIT52.index(n) for n in NAMES]
     script = load()
+    tau, s = performed(RATE, script.seconds)
+    guide = fitted(studio.render(face, tau, script.weights(s), "script"))
+    rt, rw = rom.clip(RATE)
+    started = time.perf_counter()
+    rom_adjust = calibrate(studio.render(face, rt, rw, "rom"), rom=True, tracker="mediapipe")
+    rom_s = time.perf_counter() - started
+    clips = []
+    for path in takes:
+        t, w = window(path, seconds)
+        clips.append((t, w[:, cols], studio.render(face, t, w, Path(path).stem)))
+    edges = np.cumsum([0, *(len(c[0]) for c in clips)])
+    test = Test([c[0] for c in clips], np.concatenate([c[1] for c in clips]),
+                np.concatenate([c[2].values for c in clips]),
+                [slice(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)])  # fmt: skip
+    ok = test.ok
+
+    def out(adjust=None) -> np.ndarray:
+        return np.concatenate([cleaned(c[2], adjust) for c in clips])
+
+    shipped = out()
+    ys = {"raw": test.raw, "shipped": shipped, "rom": out(rom_adjust)}
+    ys["guided"] = out(guide["adjust"])
+    ys["oracle"] = oracle(test, shipped, ok & np.isfinite(shipped).all(axis=1))
+    rows = {k: score(test, y, ok) for k, y in ys.items()}
+    rows["rom"]["fit_s"] = rom_s
+    rows["guided"].update({k: guide[k] for k in ("seen", "prompts", "fit_s", "refused")})
+    harm = {}
+    n = int((script.seconds + TAIL) * RATE)
+    t = np.arange(n) / RATE
+    for kind in ("still", "random"):
+        if kind == "still":
+            w = np.zeros((n, len(ARKIT52)))
+        else:
+            w = perform(n / RATE, seed=1000 + face.seed, fps=RATE).values[:n]
+        fit = fitted(studio.render(face, t, w, kind))
+        y = out(fit["adjust"]) if fit["adjust"] is not None else shipped
+        harm[kind] = {
+            "follows": fit["follows"],
+            "says": fit["refused"],
+            "seen": fit["seen"],
+            "prompts": fit["prompts"],
+            "partial_x_shipped": score(test, y, ok)["mse"] / rows["shipped"]["mse"],
+        }
+    return {"face": face.spec, "frames": int(ok.sum()), "rows": rows, "harm": harm}
+
+
+def model_version() -> dict:
+    """Which shipped model the numbers are of: its last commit and sha256."""
+    from faceclean.guided.fit import shipped_cleaner
+    from faceclean.synthetic.tracker import NAMES
+
+    try:
+        commit = subprocess.run(
+            ["git", "log", "-1", "--format=%h %cI", "--", MODEL],
+            capture_output=True, text=True, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        commit = "?"
+    return {"commit": commit, "cleaner": shipped_cleaner("mediapipe", NAMES)[1]}
+
+
+def finite(v):
+    """``v`` with every NaN (a measure with nothing to measure) as None, for JSON."""
+    if isinstance(v, dict):
+        return {k: finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [finite(x) for x in v]
+    return None if isinstance(v, float) and not np.isfinite(v) else v
+
+
+def table(result: dict) -> list[str]:
+    """The markdown tables of docs/CALIBRATION.md from a result (``--json``'s)."""
+    from faceclean.evaluation.family_eval import TABLE_GROUPS
+
+    def f(v, fmt: str = ".2f") -> str:
+        return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else f"{v:{fmt}}"
+
+    lines = ["| face | row | MSE x raw | " + " | ".join(TABLE_GROUPS)
+             + " | blink closure | prompts seen | fit s |",
+             "|---|---|---|" + "---|" * len(TABLE_GROUPS) + "---|---|---|"]  # fmt: skip
+    for r in result["faces"]:
+        for name in ROWS:
+            row = r["rows"][name]
+            seen = f"{row['seen']}/{row['prompts']}" if "prompts" in row else ""
+            fit = f(row.get("fit_s"), ".3f") if "fit_s" in row else ""
+            groups = " | ".join(f(row["groups"].get(g)) for g in TABLE_GROUPS)
+            lines.append(f"| {r['face']} | {name} | {f(row['mse_x_raw'], '.3f')} | {groups} | "
+                         f"{f(row['blink_closure'])} | {seen} | {fit} |")  # fmt: skip
+    lines += ["", "| face | clip | prompts seen | the command says | its --partial calibration, "
+              "test MSE x shipped |", "|---|---|---|---|---|"]  # fmt: skip
+    for r in result["faces"]:
+        for kind, h in r["harm"].items():
+            says = h["says"] or "writes the file"
+            lines.append(f"| {r['face']} | {kind} | {h['seen']}/{h['prompts']} | {says} | "
+                         f"{f(h['partial_x_shipped'], '.3f')} |")  # fmt: skip
+    return lines
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--faces", nargs="+", default=["painted:23", "dressed:29"],
+                   help="FAMILY:SEED or photo:SEED:PORTRAIT")  # fmt: skip
+    p.add_argument("--takes", type=int, default=2, help="how many shared takes to test on")
+    p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--cache", default="/tmp/faceclean-guided-cache")
+    p.add_argument("--no-gaze", action="store_true", help="render with the eyes ahead")
+    p.add_argument("--json", help="write the numbers here")
+    p.add_argument("--table", metavar="JSON", help="print the markdown tables of a result")
+    args = p.parse_args()
+    if args.table:
+        print("\n".join(table(json.loads(Path(args.table).read_text()))))
+        return
+    faces = [Face.parse(f) for f in args.faces]
     takes = sorted(glob.glob(TAKES))
     takes = [takes[int(k)] for k in np.linspace(0, len(takes) - 1, args.takes)]
-    cache, rows = Path(args.cache), []
-    for spec in args.faces:
-        family, seed = spec.split(":")
-        face = (family, int(seed))
-        tau, s = performed(RATE, script.seconds)
-        take = render(face, tau, script.weights(s), cache, "script")
-        started = time.perf_counter()
-        fit = guided(take, "mediapipe")
-        fit_s = time.perf_counter() - started
-        ys, truths, raws = [], [], []
-        for path in takes:
-            t, w = window(path, args.seconds)
-            tracked = render(face, t, w, cache, Path(path).stem)
-            cleaner, _ = shipped_cleaner("mediapipe", tracked.names)
-            ys.append(cleaner.clean(tracked).values)
-            truths.append(w[:, cols])
-            raws.append(tracked.values)
-        y, truth, raw = (np.concatenate(a) for a in (ys, truths, raws))
-        ok = np.isfinite(y).all(axis=1) & np.isfinite(raw).all(axis=1)
-        ya = fit.adjust.adapt(y, NAMES)
-        oracle = np.empty_like(y)
-        for j in range(y.shape[1]):  # per channel gain and offset on the test itself
-            x = np.c_[y[ok, j], np.ones(ok.sum())]
-            b = np.linalg.lstsq(x, truth[ok, j], rcond=None)[0]
-            oracle[:, j] = np.clip(y[:, j] * b[0] + b[1], 0, 1)
-        mse_raw = float(np.mean((raw[ok] - truth[ok]) ** 2))
-
-        def score(v: np.ndarray, ok: np.ndarray = ok, truth: np.ndarray = truth) -> float:
-            return float(np.mean((v[ok] - truth[ok]) ** 2)) / mse_raw  # noqa: B023
-
-        row = {
-            "face": spec,
-            "seen": fit.alignment.seen,
-            "prompts": len(fit.alignment.segments),
-            "fit_s": round(fit_s, 3),
-            "shipped": score(y),
-            "guided": score(ya),
-            "oracle": score(oracle),
-        }
-        rows.append(row)
-        print(
-            f"{spec:<12} prompts seen {row['seen']}/{row['prompts']}  fit {fit_s:.2f} s  "
-            f"x raw: shipped {row['shipped']:.3f}  guided {row['guided']:.3f}  "
-            f"oracle {row['oracle']:.3f}",
-            flush=True,
-        )
-    mean = {k: float(np.mean([r[k] for r in rows])) for k in ("shipped", "guided", "oracle")}
-    print("mean x raw: " + "  ".join(f"{k} {v:.3f}" for k, v in mean.items()))
+    studio = Studio(Path(args.cache), gaze=not args.no_gaze)
+    result = {"model": model_version(), "gaze": studio.gaze, "rate": RATE, "seconds": args.seconds,
+              "takes": [Path(t).stem for t in takes], "faces": []}  # fmt: skip
+    for face in faces:
+        r = evaluate(face, studio, takes, args.seconds)
+        result["faces"].append(r)
+        rows = r["rows"]
+        print(f"{face.spec:<18} " + "  ".join(
+            f"{k} {rows[k]['mse_x_raw']:.3f} (blink {rows[k]['blink_closure']:.2f})"
+            for k in ROWS) + f"  seen {rows['guided']['seen']}/{rows['guided']['prompts']}"
+            + "".join(f"  {k} {h['partial_x_shipped']:.3f}x" for k, h in r["harm"].items()),
+            flush=True)  # fmt: skip
+    print(f"model: {result['model']['commit']}\n" + "\n".join(table(finite(result))))
     if args.json:
-        Path(args.json).write_text(json.dumps({"rows": rows, "mean": mean}, indent=1) + "\n")
+        text = json.dumps(finite(result), indent=1, allow_nan=False)
+        Path(args.json).write_text(text + "\n")
 
 
 if __name__ == "__main__":
