@@ -48,7 +48,7 @@ from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_features, tracker_map
 from faceclean.neural.map_groups import SELECT, at_rest, group_of
 
-LAMBDAS = (0.003, 0.01, 0.03, 0.1)  # weight^2 per frame
+LAMBDAS = (0.003, 0.01, 0.03, 0.1, 0.3)  # weight^2 per frame
 # One Euro pre-filters (min_cutoff Hz, beta, d_cutoff Hz), reactive and calmer: on these
 # pairs the MSE barely moves with them, the jitter and the lag do. Calmer ones, (1, 3, 1)
 # and (0.5, 2, 1), halve the jitter again but break the rate clause of the contract (the
