@@ -122,19 +122,22 @@ def _throughputs(steppers: dict[str, _Stepper], S: int, sizes: Sizes) -> dict[st
     timeit's min): on a shared machine a block the scheduler did not interrupt measures
     the code, and neighbours weigh on every cleaner alike.
     """
-    plan = {}
+    plan, probes = {}, 8  # frames of the probe; the timed frames come after them
     for name, st in steppers.items():
-        probe, t = _walk(4, S, 2), _times(4, S)
+        probe, t = _walk(probes, S, 2), _times(probes, S)
         st.begin(probe[0], t[0])
-        t0 = time.perf_counter()
-        for i in range(1, 4):
+        per_step = np.inf  # s; the fastest of 4 steps after 3 that warm (a first call
+        for i in range(1, probes):  # may load a compiled kernel: too few steps a block)
+            t0 = time.perf_counter()
             st.step(probe[i], t[i])
-        per_step = max((time.perf_counter() - t0) / 3, 1e-7)
+            per_step = min(per_step, time.perf_counter() - t0) if i > 3 else per_step
+        per_step = max(per_step, 1e-7)
         plan[name] = (int(min(max(BLOCK_S / per_step, 1), 5000)), per_step)  # steps/block
     round_s = sum(n * p for n, p in plan.values())
     blocks = int(min(max(sizes.target_s * len(plan) / round_s, sizes.repeats), 200))
     data = {
-        name: (_walk(n * blocks, S, 3), _times(n * blocks, S, 4)) for name, (n, _) in plan.items()
+        name: (_walk(n * blocks, S, 3), _times(n * blocks, S, probes))
+        for name, (n, _) in plan.items()
     }
     best = dict.fromkeys(steppers, 0.0)
     for r in range(blocks):
