@@ -17,17 +17,27 @@ end map to. It was **seen** when, in its segment (padded by ``PAD`` s), the take
 channels it names rise at least ``RISE`` above rest and follow its envelope (correlation
 at least ``CORR``); the speech line, whose shapes are a guess, needs only mouth movement.
 The take **follows** the script when at least ``FOLLOW`` of the prompts were seen.
+
+A tracker does not read some channels however far the face moves them (guided/reading.py:
+MediaPipe's jawLeft/Right/Forward, cheekPuff, mouthFrown, noseSneer...). A prompt aimed
+only at such channels cannot be seen in its take, so, when it is not seen, it is **placed
+by timing**: the take between its neighbours (the nearest prompts not placed) is taken to
+run at an even pace, from the end of the one before to the start of the one after. It is
+not counted against the take: the take follows the script when ``FOLLOW`` of the prompts
+the tracker can show were seen (a still or random take still does not); it is not used
+in the fit. A face lost there is still "face lost".
 """
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from faceclean.channels import ARKIT52, GROUPS
 from faceclean.errors import FacecleanError
+from faceclean.guided import reading
 from faceclean.guided.script import Prompt, Script
 
 RATE = 10.0  # Hz, the alignment's grid
@@ -49,9 +59,15 @@ class Segment:
     t0: float  # s, take time of the prompt's start
     t1: float  # s, ... and of its end
     seen: bool
-    why: str  # "seen", "not performed", "face lost"
+    why: str  # "seen", "not performed", "face lost", "placed by timing (...)"
     rise: float  # weight units, the take's rise over rest on the prompt's channels
     corr: float  # with the prompt's envelope
+    readable: bool = True  # the tracker reads at least one of the prompt's channels
+
+    @property
+    def placed(self) -> bool:
+        """Not seen because the tracker cannot show it: placed by timing (module docstring)."""
+        return not self.readable and not self.seen and self.why != "face lost"
 
 
 @dataclass(frozen=True)
@@ -60,21 +76,32 @@ class Alignment:
     take_s: np.ndarray  # (P,) s, ... and the take times they map to (both increasing)
     segments: tuple[Segment, ...]
     cost: float  # mean C along the path
+    tracker: str = "arkit"  # whose readings (guided/reading.py)
 
     @property
     def seen(self) -> int:
         return sum(s.seen for s in self.segments)
 
     @property
+    def placed(self) -> int:
+        return sum(s.placed for s in self.segments)
+
+    @property
     def follows(self) -> bool:
-        return self.seen >= FOLLOW * len(self.segments)
+        """At least FOLLOW of the prompts the tracker can show were seen."""
+        shown = [g for g in self.segments if g.readable]
+        return sum(g.seen for g in shown) >= FOLLOW * len(shown)
 
     def shortfall(self) -> str | None:
-        """Why the take falls short of the script, in one line (None: every prompt seen)."""
-        missing = [g for g in self.segments if not g.seen]
+        """Why the take falls short of the script, in one line (None: every prompt seen or
+        placed by timing)."""
+        missing = [g for g in self.segments if not g.seen and not g.placed]
         if not self.follows:
-            return (f"the take did not follow the script ({self.seen} of {len(self.segments)} "
-                    "prompts seen)")  # fmt: skip
+            shown = [g for g in self.segments if g.readable]
+            hidden = len(self.segments) - len(shown)
+            aside = f"; {hidden} more that {reading.label(self.tracker)} does not read"
+            return (f"the take did not follow the script ({sum(g.seen for g in shown)} of "
+                    f"{len(shown)} prompts seen{aside if hidden else ''})")  # fmt: skip
         if missing:
             names = ", ".join(f"{g.prompt.id} ({g.why})" for g in missing)
             return f"{len(missing)} prompt{'s' * (len(missing) > 1)} not seen: {names}"
@@ -87,8 +114,11 @@ class Alignment:
         return np.where((t < self.take_s[0]) | (t > self.take_s[-1]), np.nan, s)
 
 
-def align(times: np.ndarray, response: np.ndarray, script: Script) -> Alignment:
-    """Align a take (times (N,) s, response (N, 52), NaN rows: no face) to ``script``."""
+def align(
+    times: np.ndarray, response: np.ndarray, script: Script, tracker: str = "arkit"
+) -> Alignment:
+    """Align a take (times (N,) s, response (N, 52), NaN rows: no face) to ``script``;
+    ``tracker``'s unread channels (guided/reading.py) decide which prompts are placed."""
     times = np.asarray(times, dtype=np.float64)
     response = np.asarray(response, dtype=np.float64)
     ok = np.isfinite(times) & np.isfinite(response).any(axis=1)
@@ -114,13 +144,44 @@ def align(times: np.ndarray, response: np.ndarray, script: Script) -> Alignment:
     wn = w[:, moved] / w[:, moved].max(axis=0)
     cost = _cost(wn, np.clip(rn, -0.5, 1.5))  # (I, J)
     path_i, path_j = _dtw(cost)
-    script_s, take_s = st[path_i], grid[path_j]
-    keep = np.r_[True, np.diff(take_s) > 0]  # one script time per take time: increasing
+    script_s, take_s = st[path_i], grid[path_j]  # script_s increasing, take_s not decreasing
+    unread = reading.unread(tracker)
     segs = []
     for p in script.prompts:
         t0, t1 = np.interp([p.start, p.end], script_s, take_s)
-        segs.append(_judge(p, float(t0), float(t1), grid, r, base, lost))
-    return Alignment(script_s[keep], take_s[keep], tuple(segs), float(cost[path_i, path_j].mean()))
+        g = _judge(p, float(t0), float(t1), grid, r, base, lost)
+        shown = not p.channels or bool(p.keys) or not set(p.channels) <= unread
+        segs.append(replace(g, readable=shown))
+    take_s, segs = _place(script_s, take_s, segs, reading.label(tracker))
+    keep = np.r_[True, np.diff(take_s) > 0]  # one script time per take time: increasing
+    cost_mean = float(cost[path_i, path_j].mean())
+    return Alignment(script_s[keep], take_s[keep], tuple(segs), cost_mean, tracker)
+
+
+def _place(
+    script_s: np.ndarray, take_s: np.ndarray, segs: list[Segment], tracker: str
+) -> tuple[np.ndarray, list[Segment]]:
+    """The path (take times of ``script_s``) and segments with each prompt the tracker
+    cannot show, and did not, placed at an even pace between its neighbours."""
+    placed = [g.placed for g in segs]
+    span = np.zeros(len(script_s), bool)  # (P,) path points to place by timing
+    for k in np.flatnonzero(placed):
+        before = [i for i in range(k) if not placed[i]]
+        after = [i for i in range(k + 1, len(segs)) if not placed[i]]
+        if before and after:  # else the alignment's own (no neighbour to time from)
+            lo, hi = segs[before[-1]].prompt.end, segs[after[0]].prompt.start
+            span |= (script_s > lo) & (script_s < hi)
+    if span.any() and not span.all():
+        take_s = take_s.copy()
+        take_s[span] = np.interp(script_s[span], script_s[~span], take_s[~span])
+    out = []
+    for g in segs:
+        if g.placed:
+            t0, t1 = np.interp([g.prompt.start, g.prompt.end], script_s, take_s)
+            why = f"placed by timing ({tracker} does not read {', '.join(g.prompt.channels)})"
+            g = replace(g, t0=float(t0), t1=float(t1), why=why)
+        out.append(g)
+    return take_s, out
 
 
 def _levels(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

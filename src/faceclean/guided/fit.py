@@ -108,7 +108,7 @@ def guided(
     if not present.any():
         raise FacecleanError("guided calibration: the take has no ARKit blendshape channels")
     y, present, label = response(anim, tracker)
-    alignment = al.align(anim.times, y, script)
+    alignment = al.align(anim.times, y, script, tracker)
     t = anim.times
     s = alignment.script_time(t)  # (N,) s, NaN outside the aligned span
     target = script.weights(np.nan_to_num(s))  # (N, 52)
@@ -121,6 +121,7 @@ def guided(
             "script": script.title,
             "seen": [g.prompt.id for g in alignment.segments if g.seen],
             "not_seen": [g.prompt.id for g in alignment.segments if not g.seen],
+            "placed": [g.prompt.id for g in alignment.segments if g.placed],  # by timing
             "follows": bool(alignment.follows),
         },
     }
