@@ -1,11 +1,13 @@
 """Where each prompt of the guided script is in a take: dynamic time warping.
 
 A person is late, slow and uneven, so the script's timetable is not the take's. The take's
-response r (N, 52) ARKit weights (the shipped cleaner's output for MediaPipe, the values
-themselves for ARKit) and the script's weights w are both resampled at ``RATE`` Hz and
-each channel the script moves is scaled to its own range (the take's: its robust rest
-``base`` = median and top = HIGH-th percentile, the range at least ``FLOOR``, so a face
-that reads a channel weakly still aligns, and a still face's noise is not blown up):
+readings r (N, 52): what the tracker itself reads, as ARKit weights (MediaPipe's raw
+scores, not the shipped cleaner's output: the cleaner can shrink a channel the tracker
+shows, or hold one up after its prompt: dressed 29's brows), and the script's weights w
+are both resampled at ``RATE`` Hz and each channel the script moves is scaled to its own
+range (the take's: its robust rest ``base`` = median and top = HIGH-th percentile, the
+range at least ``FLOOR``, so a face that reads a channel weakly still aligns, and a still
+face's noise is not blown up):
 
     C[i, j] = 1 - cos([w(i), REST (1 - max w(i))], [r(j)+, REST (1 - max r(j)+)])   script i, take j
     D[i, j] = C[i, j] + min(D[i-1, j-1], D[i-1, j-2], D[i-1, j-3], D[i-2, j-1] + C[i-1, j])
@@ -13,10 +15,15 @@ that reads a channel weakly still aligns, and a still face's noise is not blown 
 Every script frame is matched once; the take may run from half to three times the
 script's speed, varying along it. The path starts anywhere in the take (a late start)
 and ends anywhere (the take runs on). A prompt's segment is the take time its start and
-end map to. It was **seen** when, in its segment (padded by ``PAD`` s), the take's
-channels it names rise at least ``RISE`` above rest and follow its envelope (correlation
-at least ``CORR``); the speech line, whose shapes are a guess, needs only mouth movement.
-The take **follows** the script when at least ``FOLLOW`` of the prompts were seen.
+end map to. It was **seen** when, in its segment (padded by ``PAD`` s), the mean over its
+channels the tracker reads of their rise above the take's rest (the median over the first
+neutral hold's segment) reaches the prompt's bar at its 90th percentile and follows the
+prompt's envelope (correlation at least ``CORR``). The bar is calibration's test of a
+channel that moved: max(MOVE_MIN = 0.01, NOISE_K = 6 x the robust standard deviation
+(1.4826 MAD) of that same mean over the neutral hold). The speech line, whose shapes are a
+guess, needs only mouth movement: a mouth or jaw channel's standard deviation in its
+segment at least that channel's bar. The take **follows** the script when at least
+``FOLLOW`` of the prompts were seen.
 
 A tracker does not read some channels however far the face moves them (guided/reading.py:
 MediaPipe's jawLeft/Right/Forward, cheekPuff, mouthFrown, noseSneer...). A prompt aimed
@@ -35,6 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from faceclean.calibration import MOVE_MIN, NOISE_K
 from faceclean.channels import ARKIT52, GROUPS
 from faceclean.errors import FacecleanError
 from faceclean.guided import reading
@@ -45,7 +53,7 @@ REST = 1.0  # weight of the rest component in the cost's vectors
 FLOOR = 0.1  # weight units: the least range a channel is scaled by
 HIGH = 99.5  # percentile, a channel's top in the take
 PAD = 0.3  # s either side of a prompt's segment, for the seen test
-RISE = 0.03  # weight units above rest
+MIN_HOLD = 5  # grid points of the neutral hold needed to measure its rest and noise
 CORR = 0.5
 FOLLOW = 0.6  # fraction of prompts seen for the take to follow the script
 MIN_SPEED, MAX_SPEED = 1 / 3, 2.0  # the take's speed against the script's (the steps')
@@ -60,9 +68,10 @@ class Segment:
     t1: float  # s, ... and of its end
     seen: bool
     why: str  # "seen", "not performed", "face lost", "placed by timing (...)"
-    rise: float  # weight units, the take's rise over rest on the prompt's channels
+    rise: float  # weight units, the readings' rise over rest on the prompt's channels
     corr: float  # with the prompt's envelope
     readable: bool = True  # the tracker reads at least one of the prompt's channels
+    bar: float = MOVE_MIN  # weight units, the least rise that is movement (from the hold)
 
     @property
     def placed(self) -> bool:
@@ -115,13 +124,15 @@ class Alignment:
 
 
 def align(
-    times: np.ndarray, response: np.ndarray, script: Script, tracker: str = "arkit"
+    times: np.ndarray, readings: np.ndarray, script: Script, tracker: str = "arkit"
 ) -> Alignment:
-    """Align a take (times (N,) s, response (N, 52), NaN rows: no face) to ``script``;
-    ``tracker``'s unread channels (guided/reading.py) decide which prompts are placed."""
+    """Align a take (times (N,) s, ``tracker``'s own readings (N, 52) as ARKit weights, NaN
+    rows: no face) to ``script``; the tracker's unread channels (guided/reading.py) are
+    left out of the seen test where a prompt aims at others, and decide which prompts
+    are placed."""
     times = np.asarray(times, dtype=np.float64)
-    response = np.asarray(response, dtype=np.float64)
-    ok = np.isfinite(times) & np.isfinite(response).any(axis=1)
+    readings = np.asarray(readings, dtype=np.float64)
+    ok = np.isfinite(times) & np.isfinite(readings).any(axis=1)
     if ok.sum() < 2:
         raise FacecleanError("guided calibration: the take has no frames with a face")
     if np.any(np.diff(times[np.isfinite(times)]) <= 0):
@@ -133,11 +144,13 @@ def align(
             f"({script.seconds:.1f} s): record the whole script"
         )
     grid = np.arange(times[ok][0], times[ok][-1] + 1e-9, 1.0 / RATE)  # (J,) s
-    x = np.nan_to_num(response[ok])
+    x = np.nan_to_num(readings[ok])
     r = np.stack([np.interp(grid, times[ok], x[:, c]) for c in range(x.shape[1])], axis=1)
     lost = _lost(grid, times[ok])  # (J,) bool: no face within a frame's reach
     st = np.arange(int(script.seconds * RATE) + 1) / RATE  # (I,) s
     w = script.weights(st)
+    unread = reading.unread(tracker)
+    shows = np.array([n not in unread for n in ARKIT52])  # (52,) the tracker reads it
     moved = np.flatnonzero(w.max(axis=0) > 0)
     base, scale = _levels(r)
     rn = (r[:, moved] - base[moved]) / scale[moved]
@@ -145,13 +158,15 @@ def align(
     cost = _cost(wn, np.clip(rn, -0.5, 1.5))  # (I, J)
     path_i, path_j = _dtw(cost)
     script_s, take_s = st[path_i], grid[path_j]  # script_s increasing, take_s not decreasing
-    unread = reading.unread(tracker)
+    spans = [np.interp([p.start, p.end], script_s, take_s) for p in script.prompts]
+    h0, h1 = spans[0]  # the first prompt is a neutral hold (script.from_dict)
+    hold = (grid >= h0) & (grid <= h1) & ~lost
+    rest = np.median(r[hold], axis=0) if hold.sum() >= MIN_HOLD else base
     segs = []
-    for p in script.prompts:
-        t0, t1 = np.interp([p.start, p.end], script_s, take_s)
-        g = _judge(p, float(t0), float(t1), grid, r, base, lost)
-        shown = not p.channels or bool(p.keys) or not set(p.channels) <= unread
-        segs.append(replace(g, readable=shown))
+    for p, (t0, t1) in zip(script.prompts, spans, strict=True):
+        g = _judge(p, float(t0), float(t1), grid, r, rest, hold, lost, shows)
+        readable = not p.channels or bool(p.keys) or not set(p.channels) <= unread
+        segs.append(replace(g, readable=readable))
     take_s, segs = _place(script_s, take_s, segs, reading.label(tracker))
     keep = np.r_[True, np.diff(take_s) > 0]  # one script time per take time: increasing
     cost_mean = float(cost[path_i, path_j].mean())
@@ -251,8 +266,8 @@ def _dtw(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _judge(
-    p: Prompt, t0: float, t1: float, grid: np.ndarray, r: np.ndarray, base: np.ndarray,
-    lost: np.ndarray,
+    p: Prompt, t0: float, t1: float, grid: np.ndarray, r: np.ndarray, rest: np.ndarray,
+    hold: np.ndarray, lost: np.ndarray, shows: np.ndarray,
 ) -> Segment:  # fmt: skip
     """The prompt's segment, and whether the take shows it there (module docstring)."""
     inside = (grid >= t0 - PAD) & (grid <= t1 + PAD)
@@ -262,21 +277,35 @@ def _judge(
         return Segment(p, t0, t1, False, "face lost", 0.0, 0.0)
     if not p.channels:  # a neutral hold: seen unless the face is lost
         return Segment(p, t0, t1, True, "seen", 0.0, 1.0)
-    cols = [ARKIT52.index(n) for n in p.channels]
+    if p.keys:  # speech: mouth movement is enough (its shapes are a guess)
+        cols = [c for c in _MOUTH if shows[c]] or list(_MOUTH)
+        moves = np.std(r[inside][:, cols], axis=0)  # (C,)
+        bars = _bar(r[hold][:, cols], axis=0)
+        k = int(np.argmax(moves / bars))
+        seen = bool(moves[k] >= bars[k])
+        why = "seen" if seen else "not performed"
+        return Segment(p, t0, t1, seen, why, float(moves[k]), 0.0, bar=float(bars[k]))
+    aimed = [ARKIT52.index(n) for n in p.channels]
+    cols = [c for c in aimed if shows[c]] or aimed  # what the tracker reads of it, if any
     # the script's time of each grid point in the segment, linear in the take
     u = (grid[inside] - t0) / max(t1 - t0, 1e-9) * p.duration
-    env = p.weights(u)[:, cols]  # (K, C)
-    rise = r[inside][:, cols] - base[cols]  # (K, C)
-    if p.keys:  # speech: mouth movement is enough (its shapes are a guess)
-        moves = float(np.std(r[inside][:, list(_MOUTH)], axis=0).max())
-        seen = moves >= RISE
-        return Segment(p, t0, t1, seen, "seen" if seen else "not performed", moves, 0.0)
-    wsum = env.sum(axis=1)  # (K,) the envelope
-    rsum = (rise * (env.max(axis=0) > 0)).sum(axis=1) / len(cols)  # (K,) mean rise
-    top = float(np.percentile(rsum, 90))
-    corr = _corr(wsum, rsum)
-    seen = top >= RISE and corr >= CORR
-    return Segment(p, t0, t1, seen, "seen" if seen else "not performed", top, corr)
+    env = p.weights(u)[:, cols].sum(axis=1)  # (K,) the envelope
+    rise = (r[inside][:, cols] - rest[cols]).mean(axis=1)  # (K,) the channels' mean rise
+    bar = float(_bar((r[hold][:, cols] - rest[cols]).mean(axis=1)))  # ... its hold's noise
+    top = float(np.percentile(rise, 90))
+    corr = _corr(env, rise)
+    seen = top >= bar and corr >= CORR
+    return Segment(p, t0, t1, seen, "seen" if seen else "not performed", top, corr, bar=bar)
+
+
+def _bar(quiet: np.ndarray, axis: int | None = None) -> np.ndarray:
+    """The least rise that is movement: max(MOVE_MIN, NOISE_K x the robust standard
+    deviation (1.4826 MAD) of ``quiet``, the neutral hold's readings); MOVE_MIN alone
+    without a hold."""
+    if quiet.shape[0] < MIN_HOLD:
+        return np.full(quiet.shape[1:] if axis == 0 else (), MOVE_MIN)
+    mad = np.median(np.abs(quiet - np.median(quiet, axis=axis)), axis=axis)
+    return np.maximum(MOVE_MIN, NOISE_K * 1.4826 * mad)
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:

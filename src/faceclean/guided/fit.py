@@ -108,7 +108,7 @@ def guided(
     if not present.any():
         raise FacecleanError("guided calibration: the take has no ARKit blendshape channels")
     y, present, label = response(anim, tracker)
-    alignment = al.align(anim.times, y, script, tracker)
+    alignment = al.align(anim.times, x, script, tracker)  # on what the tracker itself read
     t = anim.times
     s = alignment.script_time(t)  # (N,) s, NaN outside the aligned span
     target = script.weights(np.nan_to_num(s))  # (N, 52)
