@@ -114,3 +114,22 @@ def test_a_group_whose_own_rise_is_worse_too_passes_through_as_read():
     assert "gaze" in w.config["passed"] and "gaze" not in w.config["own_rise"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["b"][GAZE].any()
+
+
+def test_a_lift_that_breaks_the_frame_rate_contract_is_refused(fitted):
+    # the lift multiplies the pre-filter's discretisation differences between rates by its
+    # gain: behind the shipped pre-filter (1 Hz, beta 10) a gain of 5 parts the same curve
+    # at 30 and 120 fps by more than the contract's rate clause allows, a gain of 1 not
+    rises, _, _ = fitted
+    assert map_rises.keeps_rate(rises)
+    n = len(rises.outputs)
+    blink = [i for i, name in enumerate(rises.outputs) if name.startswith("eyeBlink")]
+
+    def lifted(g: float):
+        a = dict(rises.arrays, lift_gain=np.zeros(n), lift_knee=np.zeros(n))
+        a.update(min_cutoff=np.full(n, 1.0), beta=np.full(n, 10.0), d_cutoff=np.full(n, 2.0))
+        a["lift_gain"][blink], a["lift_knee"][blink] = g, 0.3
+        return replace(rises, arrays=a, config=dict(rises.config, lift_top=False))
+
+    assert map_rises.keeps_rate(lifted(1.0))
+    assert not map_rises.keeps_rate(lifted(5.0))

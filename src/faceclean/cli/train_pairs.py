@@ -101,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"{knee}: leaving each of {e['cv']} sources out, MSE {e['val_mse']:.3f}x "
                   f"raw, jitter {e['jitter']:.2f}x, blink closure {e['closure']:.2f}",
                   file=sys.stderr)  # fmt: skip
+        elif e.get("event") == "lift refused":
+            print(f"blink lift from {e['knee']:g} refused: the same curve at 30 and 120 fps "
+                  "differs past the contract's rate clause", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "rises":
             worst = max(e["worst_family"].values(), default=float("nan"))
             print(f"rises, pre-filter {e['pre']}, deadband {e['deadband']:g}, detail "

@@ -93,6 +93,7 @@ def choose(
     budget: float,
     knees: Sequence[float | None] = KNEES,
     tops: Sequence[bool] = TOPS,
+    admissible: Callable[[MapWeights], bool] | None = None,
 ) -> None:
     """Sets ``w``'s blink lift: the knee and top that score best over ``folds`` (each
     fold's linear part and its gains fitted without it, scored on its held-out
@@ -100,7 +101,8 @@ def choose(
     truth's, when over) x (1 + the mean closure's distance outside CLOSURE_BAND)); the gains then
     fitted on ``performed``, every performance. ``score(w, feats, closure=True)`` gives
     (MSE, jitter, closure) and ``set_linear(w, a, c, d)`` sets the linear part
-    (tracker_map.py's); ``w``'s linear part is left as it was."""
+    (tracker_map.py's); ``w``'s linear part is left as it was. With ``admissible``, the
+    best lift the map keeps admissible with its gains set (no lift when none is)."""
     linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
     none = np.zeros(len(w.outputs))
     lo, hi = CLOSURE_BAND
@@ -126,7 +128,13 @@ def choose(
         report({"event": "lift", "knee": knee, "top": top, "val_mse": ratio, "jitter": jit,
                 "closure": close, "cv": len(folds)})  # fmt: skip
         found.append(Choice(total, knee, top, close))
-    best = min(found, key=lambda c: c.score)
     w.arrays.update(linear)
-    set_gains(w, none if best.knee is None else gains(w, performed, best.knee), best.knee or 0.0)
-    w.config.update(lift_knee=best.knee, lift_top=best.top, val_closure=best.closure)
+    for best in sorted(found, key=lambda c: c.score):
+        set_gains(
+            w, none if best.knee is None else gains(w, performed, best.knee), best.knee or 0.0
+        )
+        w.config.update(lift_knee=best.knee, lift_top=best.top, val_closure=best.closure)
+        if admissible is None or best.knee is None or admissible(w):
+            return
+        report({"event": "lift refused", "knee": best.knee, "top": best.top})
+    clear(w)

@@ -73,6 +73,7 @@ LAG_BUDGET = 25.0  # ms of lag (issue 34's target at 30 fps), past which a fit p
 # 3.2x the truth's, 0.05: 1.9x), at a lag of band / speed on slow motions (0.01: 21 ms,
 # 0.05: 60 ms on the families' pairs, docs/MODEL.md), so both are priced.
 DEADBANDS = (0.01, 0.02, 0.03, 0.05)
+RATE_TOL = 0.03  # weight: one curve at 30 and 120 fps, the contract's rate clause
 MSE_TOL = 0.01  # candidates within 1 % of the best MSE x raw are as accurate: price decides
 REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
 HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
@@ -291,4 +292,33 @@ def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, 
         size = sum(f.y.size for f in held)
         lift_folds[key] = blink_lift.Fold(fits[key], train, held, raw / max(size, 1))
     blink_lift.choose(w, performed, lift_folds, map_features.score, map_features.set_linear,
-                      report, JITTER_BUDGET, knees)  # fmt: skip
+                      report, JITTER_BUDGET, knees, admissible=keeps_rate)  # fmt: skip
+
+
+def keeps_rate(w: MapWeights, seeds: Sequence[int] = tuple(range(8))) -> bool:
+    """Whether ``w`` gives one curve at 30 and 120 fps within RATE_TOL (the cleaner
+    contract's rate clause: it works at any frame rate): smooth made-up curves (slow
+    sines in [0.2, 0.8]) cleaned at both rates, compared every 1/30 s after 0.5 s. The
+    lift multiplies the pre-filter's small discretisation differences by its gain."""
+    from faceclean.animation import Animation
+    from faceclean.learned.tracker_map import TrackerMap
+
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        phase, freq = (
+            rng.uniform(0, 2 * np.pi, (2, len(w.inputs))),
+            rng.uniform(0.3, 1.1, (2, len(w.inputs))),
+        )
+        outs = []
+        for fps in (30, 120):
+            t = np.arange(4 * fps) / fps
+            x = (
+                0.5
+                + 0.15 * np.sin(2 * np.pi * freq[0] * t[:, None] + phase[0])
+                + 0.15 * np.sin(2 * np.pi * freq[1] * t[:, None] + phase[1])
+            )
+            y = TrackerMap(weights=w, names=w.inputs).clean(Animation(t, x, w.inputs)).values
+            outs.append(y[:: fps // 30][15:-15])
+        if np.abs(outs[0] - outs[1]).max() >= RATE_TOL:
+            return False
+    return True
