@@ -69,6 +69,20 @@ if TYPE_CHECKING:
     from faceclean.animation import Animation
 
 
+def _span(src: np.ndarray) -> slice | None:
+    """Indices ``src`` as a slice where they run (a view for numpy, no copy), else None."""
+    n = len(src)
+    if n and src[0] >= 0 and np.array_equal(src, np.arange(src[0], src[0] + n)):
+        return slice(int(src[0]), int(src[0]) + n)
+    return None
+
+
+def _cols(j: np.ndarray, width: int) -> np.ndarray | slice | None:
+    """Columns j of ``width``: None for all of them in order, a slice where they run."""
+    run = _span(j)
+    return None if run == slice(0, width) else run or j
+
+
 def _detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:
     """The ``detail`` setting checked: a number in [0, 1], or ``width`` of them."""
     if value is None:
@@ -133,14 +147,18 @@ class TrackerMap(Stepper):
         g, m = a["lift_gain"][self._lo], len(w.outputs)
         lift = np.zeros((len(w.inputs), len(self._lo)))
         lift[self._li, np.arange(len(self._lo))] = g
-        # The detail d_j (x_j - u_j) as a matrix on x and on u: D (K, M), d_j at the input
-        # of output j's name (the general path reads it as ``_di``, ``_do``).
+        # The detail d_j (x_j - u_j): -d_j u_j in the matrix on u, D (K, M), d_j at the input
+        # of output j's name; + d_j x_j elementwise, outputs ``_do`` from inputs ``_di``.
         self._d = a["detail"]  # (M,) the gains as scaled
         self._do = np.flatnonzero(self._d)  # (N,) outputs with a detail
         self._di = np.array([w.inputs.index(w.outputs[j]) for j in self._do], dtype=np.intp)
         detail = np.zeros((len(w.inputs), m))
         detail[self._di, self._do] = a["detail"][self._do]
-        self._dx = np.concatenate([detail, np.zeros_like(lift)], axis=1) if len(self._do) else None
+        # (x D was a product of a diagonal: its other terms add 0, the same bits.) Where
+        # the columns run, a slice; None where they are all of them (MediaPipe's).
+        self._dd = self._d[self._do]  # (N,)
+        self._dos = _cols(self._do, m + len(self._lo))
+        self._dis = _cols(self._di, len(w.inputs))
         ab = (a["a"] + b).T - detail
         self._ab = np.ascontiguousarray(np.concatenate([ab, lift], axis=1))  # (K, M+L)
         self._nb = np.ascontiguousarray(np.concatenate([-b.T, -lift], axis=1))  # (K, M+L)
@@ -150,8 +168,14 @@ class TrackerMap(Stepper):
         self._mc2pi = 2.0 * np.pi * np.broadcast_to(self.pre.min_cutoff, (len(w.inputs),))
         self._beta2pi = 2.0 * np.pi * np.broadcast_to(self.pre.beta, (len(w.inputs),))
         self._direct = self._in.identity and self._out.identity  # columns = inputs = outputs
+        # an ARKit take's columns: the inputs and the outputs a run of columns, read and
+        # written as a view (no gather, no scatter); None: by index
+        self._xs = _span(self._in.src)
+        self._ys = _span(self._out.src)
         band = np.asarray(w.config.get("deadband", 0.0), np.float64)
         self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if band.any() else None
+        eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
+        self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
         self.reset()
 
@@ -163,7 +187,8 @@ class TrackerMap(Stepper):
         single = x.ndim == 1
         x = x.reshape(1, -1) if single else x
         s, k = len(x), len(self.weights.inputs)
-        tt = np.broadcast_to(np.asarray(t, dtype=np.float64), (s,))
+        tt = np.array(t, dtype=np.float64, ndmin=1)  # (S,) s (broadcast_to costs 4 us)
+        tt = tt if tt.shape == (s,) else np.broadcast_to(tt, (s,))
         if self._y is not None and self._y.shape == x.shape:
             out = self._usual(x, tt)
             if out is not None:
@@ -218,47 +243,71 @@ class TrackerMap(Stepper):
         """The usual frame in fewer, fused steps (the cost of one stream is the count of
         numpy calls): every stream present, finite and within MAX_ABS, every one advancing
         (MIN_DT < dt <= max_gap), a pre-filter and no hidden layer. The same numbers as the
-        general path (tests/learned/test_tracker_map.py); None: take the general path."""
+        general path (tests/learned/test_tracker_map.py); None: take the general path.
+        x (S, columns) is ``step``'s own copy: the output is written into it. Each
+        elementwise step in place is the same operation on the same operands as its
+        expression (tests/learned/test_map_step.py: the same bits)."""
         if not self.prefilter or self._hidden or not np.abs(x).max() <= MAX_ABS:
             return None  # (NaN fails the test too)
         dt = tt - self._t  # (S,) s
         lo, hi = (dt[0], dt[0]) if len(dt) == 1 else (dt.min(), dt.max())
         if not (lo > MIN_DT and hi <= self.pre.max_gap):
             return None
-        xi = x if self._in.identity else self._in_matrix(x)
+        xs = self._xs
+        xi = x[:, xs] if xs is not None else self._in_matrix(x)  # (S, K), a view where it runs
         h = np.maximum(dt, DT_MIN)[:, None] if lo != hi else max(float(lo), DT_MIN)  # s
         u, edx = self._u, self._edx
         e = xi - u  # (S, K)
         # One Euro: edx += a_d (e / h - edx), a = 1 / (1 + tau / h) = h / (h + tau)
-        edx += (h / (h + self._tau_d)) * (e / h - edx)
-        g = h * (self._mc2pi + self._beta2pi * np.abs(edx))  # 2 pi f h
-        u += (g / (1.0 + g)) * e
+        a = h + self._tau_d
+        np.divide(h, a, out=a)
+        q = e / h
+        q -= edx
+        q *= a
+        edx += q
+        g = np.abs(edx)  # g = h (2 pi mc + 2 pi beta |edx|): 2 pi f h
+        g *= self._beta2pi
+        g += self._mc2pi
+        g *= h
+        q = g + 1.0
+        np.divide(g, q, out=q)
+        q *= e
+        u += q  # u += g / (1 + g) e
         np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
         y = u @ self._ab  # (S, M+L)
         y += self._r @ self._nb
-        if self._dx is not None:  # the detail: + d (x - u), the -d u being in _ab
-            y += xi @ self._dx
+        if len(self._do):  # the detail: + d (x - u), the -d u being in _ab
+            q = (xi if self._dis is None else xi[:, self._dis]) * self._dd
+            if self._dos is None:
+                y += q
+            else:
+                y[:, self._dos] += q
         y += self._c
         if self._lift_top:  # the lift's top: l / max(1, the largest l so far)
             lift = y[:, self._m_cols :]
             np.maximum(self._top, lift, out=self._top)
             lift /= np.maximum(self._top, 1.0)
-        np.clip(y, 0.0, 1.0, out=y)
+        y.clip(0.0, 1.0, out=y)  # np.clip's ufunc, without its wrapper
         if len(self._lo):  # the lift: m_j = max(m_j, its lift column)
             m = self._m_cols
             lifted = np.maximum(y[:, self._lo], y[:, m:])
             y = y[:, :m].copy()  # contiguous: the steps below run faster on it
             y[:, self._lo] = lifted
-        if self._band is not None:  # the deadband: y = m - clip(m - y_prev, -eps, eps)
+        band = self._band
+        if band is not None:  # the deadband: y = m - clip(m - y_prev, -eps, eps)
             d = y - self._m
-            np.clip(d, -self._band, self._band, out=d)
-            y -= d
-        self._m = y
-        if self._direct:
-            out = y
+            d.clip(*self._eps, out=d)
+        out = y if self._direct else x  # (x: ``step``'s own copy, its columns written)
+        if self._direct or self._ys is None:
+            if band is not None:
+                y -= d
+            if not self._direct:
+                out[:, self._out.cols] = y[:, self._out.have]
+        elif band is not None:  # the run of output columns: written in place, a view
+            y = np.subtract(y, d, out=x[:, self._ys])
         else:
-            out = x.copy()
-            out[:, self._out.cols] = y[:, self._out.have]
+            x[:, self._ys] = y
+        self._m = y
         self._t = tt.copy()
         self._y = out
         return out
@@ -346,7 +395,7 @@ class TrackerMap(Stepper):
         the last accepted frame: (N, M) outputs; the state ends as stepping leaves it."""
         from faceclean.filters import compiled
 
-        xi = xs if self._in.identity else self._in_matrix(xs)  # (N, K)
+        xi = xs[:, self._xs] if self._xs is not None else self._in_matrix(xs)  # (N, K)
         h = np.empty(len(xs))  # (N,) s
         h[0] = dt
         h[1:] = np.diff(ts)
@@ -355,8 +404,9 @@ class TrackerMap(Stepper):
         consts = [np.array(c, np.float64) for c in (self._tau_d, self._mc2pi, self._beta2pi)]
         U, R = compiled.map_prefilter(u, edx, r, np.ascontiguousarray(xi), h, *consts)
         # y = u (A + B)' - r B' + d x + c, (N, M+L), as ``_usual``; the detail's -d u in _ab
-        pairs = [(U, self._ab), (R, self._nb)] + ([(xi, self._dx)] if self._dx is not None else [])
-        y = compiled.affine(self._c, *pairs)
+        y = compiled.affine(self._c, (U, self._ab), (R, self._nb))
+        if len(self._do):  # + d x: the one term of each output's own input
+            y[:, self._do] += xi[:, self._di] * self._dd
         m = self._m_cols
         if self._lift_top:  # l / max(1, the largest l so far)
             lift = y[:, m:]
@@ -376,10 +426,10 @@ class TrackerMap(Stepper):
                     y[n] -= np.clip(y[n] - prev, -self._band, self._band)
             else:
                 y = held[1:]
-        if self._direct:
-            outv = y
-        else:
-            outv = xs.copy()
+        outv = y if self._direct else xs.copy()
+        if self._ys is not None and not self._direct:
+            outv[:, self._ys] = y
+        elif not self._direct:
             outv[:, self._out.cols] = y[:, self._out.have]
         self._u, self._edx, self._r = u[None], edx[None], r[None]
         self._m, self._t, self._y = y[-1:].copy(), ts[-1:].copy(), outv[-1:].copy()
