@@ -106,6 +106,7 @@ def evaluate(folder: str | Path, shipped: str | Path | None = None,
         "channels": _channels(per),
         "chosen": dict(sorted(chosen.items())),
         "pairs": paired.summary_json(pairs),
+        "gaze": all(p.meta.get("job", {}).get("gaze", False) for p in pairs),  # eyes turn
     }
 
 
@@ -244,7 +245,9 @@ def markdown(result: dict[str, Any]) -> str:
         "(the head fitted to a real portrait and textured from it, docs/DATA.md), `dressed` "
         "(spectacles, a cap or fringe, a hand near the face, auto-exposure, white balance, "
         "motion blur). Every identity is new. "
-        f"Pairs: `{result['pairs']}`.",
+        + ("The eyes turn with the eyeLook weights (`pairs --eyes turn`). "
+           if result.get("gaze") else "The eyes look ahead; only the lids move with eyeLook. ")
+        + f"Pairs: `{result['pairs']}`.",
         "",
         "| held-out family | cleaner | MSE x raw | " + " | ".join(TABLE_GROUPS) +
         " | blink closure | jitter (x truth) | lag ms | neutral: worst channel off |",
