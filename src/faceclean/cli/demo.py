@@ -45,7 +45,9 @@ IPHONE = """\
     with the shipped default. That default IS the tuned One Euro filter today: the learned
     cleaner, trained on every real source, did not beat it on held-out takes (docs/MODEL.md),
     so the default and one-euro rows match. On an iPhone take faceclean adds that tuned
-    filter and the tools around it, not a better model.
+    filter and the tools around it, not a better model. A group above 1.00 is one where the
+    filter's lag costs more than the jitter it takes off: it was tuned on real takes, and
+    this made-up performer's jaw moves faster than theirs.
     files in {out}/: noisy.csv (Live Link Face), cleaned.csv, truth.csv,
     curves.png (the first {span:g} s of eyeBlinkLeft, jawOpen, mouthSmileLeft)"""
 MEDIAPIPE = """\
