@@ -24,6 +24,17 @@ REPO = Path(__file__).resolve().parents[1]  # the repository root
 IMPORTERS = REPO / "tests" / "importers"  # the real glTF importers the tests drive
 
 
+# A prelude for `python -c`: torch as if not installed (a finder that refuses it).
+NOT_INSTALLED = """
+import sys
+class _NoTorch:
+    def find_spec(self, name, path=None, target=None):
+        if name == "torch" or name.startswith("torch."):
+            raise ImportError("torch is not installed (test)")
+sys.meta_path.insert(0, _NoTorch())
+"""
+
+
 def steps(cleaner, t, x) -> np.ndarray:
     """(N, M) outputs of stepping ``cleaner`` frame by frame over (N,) times, (N, M) values."""
     return np.array([cleaner.step(x[i], t[i]) for i in range(len(t))])

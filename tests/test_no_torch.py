@@ -11,19 +11,13 @@ import sys
 import textwrap
 
 import pytest
+from helpers import NOT_INSTALLED
 
 PRELUDE = "import sys; sys.modules['torch'] = None\n"  # the issue's own check
-# "Not installed", more faithfully: a finder that refuses torch. (Under PRELUDE,
+# "Not installed", more faithfully: NOT_INSTALLED (helpers.py), a finder that refuses
+# torch. (Under PRELUDE,
 # scipy.signal itself fails to import: scipy's array-API helpers look up
 # sys.modules['torch'].Tensor; the learned runtime does not import scipy.signal.)
-NOT_INSTALLED = """
-import sys
-class _NoTorch:
-    def find_spec(self, name, path=None, target=None):
-        if name == "torch" or name.startswith("torch."):
-            raise ImportError("torch is not installed (test)")
-sys.meta_path.insert(0, _NoTorch())
-"""
 
 
 def _run(code: str, prelude: str = PRELUDE) -> str:

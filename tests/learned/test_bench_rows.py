@@ -15,18 +15,10 @@ import textwrap
 
 import numpy as np
 import pytest
+from helpers import NOT_INSTALLED
 
 from faceclean.channels import ARKIT52
 from faceclean.evaluation import bench
-
-NOT_INSTALLED = """
-import sys
-class _NoTorch:
-    def find_spec(self, name, path=None, target=None):
-        if name == "torch" or name.startswith("torch."):
-            raise ImportError("torch is not installed (test)")
-sys.meta_path.insert(0, _NoTorch())
-"""
 
 
 def _walk(n: int, s: int, m: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
