@@ -95,8 +95,8 @@ def render_and_track(face: int, seconds: float, eyes: bool = True) -> dict:
     from faceclean.synthetic.head import Head
     from faceclean.synthetic.render import Renderer
     from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import NAMES, landmarker
     from faceclean.trackers.face import head_angles
+    from faceclean.trackers.mediapipe import NAMES, landmarker
 
     setting = ("studio", "webcam", "window")[face % 3]
     family = ("painted", "dressed")[face % 2]
@@ -152,7 +152,7 @@ def iris_features(marks: np.ndarray, head: np.ndarray, side: str) -> np.ndarray:
 
 def score_features(raw: np.ndarray, head: np.ndarray, side: str) -> np.ndarray:
     """(N, 4): MediaPipe's out - in and up - down of one eye, head yaw and pitch (rad)."""
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     def col(name: str) -> np.ndarray:
         return raw[:, NAMES.index(f"eyeLook{name}{side}")]
@@ -195,7 +195,7 @@ def shipped(take: dict) -> np.ndarray:
     from faceclean import io
     from faceclean.animation import Animation
     from faceclean.cli import main
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     with tempfile.TemporaryDirectory() as tmp:
         raw, out = Path(tmp) / "raw.csv", Path(tmp) / "clean.csv"
@@ -281,7 +281,7 @@ def blinks(takes: list[dict]) -> dict:
     MAE over both eyeBlink channels: all frames, frames of a blink (truth > 0.5), and
     frames looking down (eyeLookDown > 0.3, no blink: the lids lower without a blink)."""
     from faceclean.channels import ARKIT52
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     def feats(t: dict, side: str, what: str) -> np.ndarray:
         score = t["raw"][:, NAMES.index(f"eyeBlink{side}")]

@@ -109,7 +109,7 @@ class Studio:
 
     def render(self, face: Face, times: np.ndarray, weights: np.ndarray, tag: str) -> Animation:
         """MediaPipe's scores (N, 51) of ``weights`` (N, 52) at ``times`` on ``face``."""
-        from faceclean.synthetic.tracker import NAMES
+        from faceclean.trackers.mediapipe import NAMES
 
         what = f"{face.spec} gaze={self.gaze}".encode()
         key = hashlib.sha256(what + weights.tobytes() + times.tobytes()).hexdigest()[:10]
@@ -175,7 +175,7 @@ def score(test: Test, y: np.ndarray, ok: np.ndarray) -> dict:
     """MSE x raw overall and per group, and blink closure, of output ``y`` (N, 51)."""
     from faceclean.evaluation.family_eval import TABLE_GROUPS
     from faceclean.evaluation.metrics import blink_peaks
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     ok = ok & np.isfinite(y).all(axis=1)
     out: dict = {"groups": {}}
@@ -246,7 +246,7 @@ def evaluate(face: Face, studio: Studio, takes: list[str], seconds: float) -> di
     from faceclean.datasets.performer import perform
     from faceclean.guided.script import TAIL, load
     from faceclean.synthetic import rom
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     cols = [ARKIT52.index(n) for n in NAMES]
     script = load()
@@ -299,7 +299,7 @@ def evaluate(face: Face, studio: Studio, takes: list[str], seconds: float) -> di
 def model_version() -> dict:
     """Which shipped model the numbers are of: its last commit and sha256."""
     from faceclean.guided.fit import shipped_cleaner
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     try:
         commit = subprocess.run(

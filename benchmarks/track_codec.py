@@ -78,7 +78,7 @@ def cleaned(t: np.ndarray, raw: np.ndarray) -> np.ndarray:
     from faceclean import io
     from faceclean.animation import Animation
     from faceclean.cli import main
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     with tempfile.TemporaryDirectory() as tmp:
         src, out = Path(tmp) / "raw.csv", Path(tmp) / "clean.csv"
@@ -96,8 +96,8 @@ def mae(a: np.ndarray, b: np.ndarray) -> float:
 def main() -> None:
     from faceclean.channels import ARKIT52
     from faceclean.settings import tracker_model
-    from faceclean.synthetic.tracker import NAMES, Tracker
     from faceclean.trackers.face import FaceTracker, track_video
+    from faceclean.trackers.mediapipe import NAMES, Tracker
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--faces", type=int, default=3)

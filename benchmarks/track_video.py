@@ -90,7 +90,7 @@ def mediapipe(path: Path, faces: int) -> dict:
     import mediapipe as mp
 
     from faceclean.settings import tracker_model
-    from faceclean.synthetic.tracker import landmarker
+    from faceclean.trackers.mediapipe import landmarker
     from faceclean.trackers.video import Video
 
     found = n = 0

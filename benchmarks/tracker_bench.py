@@ -22,7 +22,7 @@ def engine(frames: int = 40) -> dict:
     from faceclean.synthetic.head import Head
     from faceclean.synthetic.render import Renderer
     from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import Tracker
+    from faceclean.trackers.mediapipe import Tracker
 
     head = Head.load(mesh_file("ict_full.npz"))
     out = {}

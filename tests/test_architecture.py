@@ -41,15 +41,16 @@ MAY_IMPORT: dict[str, set[str]] = {
     "evaluation": {
         *("filters", "learned", "adjust", "resolve", "io", "cleaner", "neural", "relay"),
         "datasets",  # the takes, splits and pairs it judges on
-        "synthetic",  # the still real face is tracked by the tracker in the loop
+        "synthetic",  # the still real face is rendered (its JPEG) ...
+        "trackers",  # ... and tracked by MediaPipe
         "calibration",  # the tracker table's calibration row (a pair's own clip)
         "ui",  # the fuzz of the tuning page's messages (fuzz_surfaces.py, inside functions)
     },
-    "synthetic": {"io", "datasets"},  # takes read and pairs written; the performer
+    "synthetic": {"io", "datasets", "trackers"},  # takes, pairs; the performer; MediaPipe
     # training and evaluation data: pair folders check values as the filters bound them
     # and know the engine's pair format; the simulator wraps angles as rotation does
     "datasets": {"io", "filters", "synthetic"},
-    "trackers": {"synthetic", "relay", "io"},  # the model bundle check; the live send
+    "trackers": {"relay", "io"},  # the live send; the bounded reader
     "report": {"evaluation", "face", "io", "faceclean"},
     "ui": {
         *("resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"),

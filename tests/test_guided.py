@@ -198,7 +198,7 @@ def face(request):
     at 24 fps; the renders are kept in pytest's cache (a pure function of the weights)."""
     pytest.importorskip("mediapipe")
     from faceclean.settings import mesh_file, tracker_model
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
     from tests.helpers import first_take
 
     if mesh_file("ict_full.npz") is None or tracker_model() is None:
@@ -227,7 +227,7 @@ def _render(cache, times: np.ndarray, weights: np.ndarray, seed: int = 7) -> np.
     from faceclean.synthetic.head import Head
     from faceclean.synthetic.render import Renderer
     from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import NAMES, Tracker
+    from faceclean.trackers.mediapipe import NAMES, Tracker
 
     key = hashlib.sha256(times.tobytes() + weights.tobytes()).hexdigest()[:12]
     path = cache / f"painted{seed}_{key}.npy"

@@ -9,7 +9,7 @@ guess. A tracker keeps state from frame to frame (it follows a face) and holds a
 ``close()`` it when the stream ends. ``name`` says what made the scores, version
 included (a pair's record names it).
 
-MediaPipe's Face Landmarker implements it, once (synthetic/tracker.py ``Tracker``): the
+MediaPipe's Face Landmarker implements it, once (trackers/mediapipe.py ``Tracker``): the
 pairs engine feeds a tracker rendered frames through this interface alone (``scores``), so
 a second tracker plugs in there (synthetic/engine.py ``Worker(tracker=...)``);
 ``faceclean track`` reads a video or a camera through it (trackers/face.py

@@ -11,7 +11,7 @@ from faceclean import io
 from faceclean.animation import Animation
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.settings import MODELS
-from faceclean.synthetic.tracker import NAMES
+from faceclean.trackers.mediapipe import NAMES
 
 CLI = [sys.executable, "-m", "faceclean"]
 

@@ -12,7 +12,7 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.evaluation import tracker_eval
 from faceclean.synthetic import engine, rom
-from faceclean.synthetic.tracker import NAMES
+from faceclean.trackers.mediapipe import NAMES
 
 GAIN, OFFSET = 0.6, 0.05  # the made-up tracker: x = GAIN y + OFFSET + noise
 N = 240  # frames a pair (8 s at 30 fps)

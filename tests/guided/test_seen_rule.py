@@ -22,7 +22,7 @@ from faceclean.guided import align as al
 from faceclean.guided import fit, reading
 from faceclean.guided.fit import guided
 from faceclean.guided.script import TAIL, load
-from faceclean.synthetic.tracker import NAMES
+from faceclean.trackers.mediapipe import NAMES
 
 SCRIPT = load()
 RATE = 24.0

@@ -23,7 +23,7 @@ from faceclean.cli import main
 from faceclean.guided import reading
 from faceclean.guided.fit import guided
 from faceclean.guided.script import TAIL, load
-from faceclean.synthetic.tracker import NAMES
+from faceclean.trackers.mediapipe import NAMES
 
 SCRIPT = load()
 RATE = 24.0

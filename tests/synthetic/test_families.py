@@ -59,7 +59,7 @@ def test_scenes_of_each_family_differ_and_are_recorded():
 def test_every_family_renders_a_face_mediapipe_finds(head, portrait_file):
     from faceclean.synthetic.portrait import Fitter, load
     from faceclean.synthetic.render import Renderer
-    from faceclean.synthetic.tracker import Tracker
+    from faceclean.trackers.mediapipe import Tracker
 
     images = dict(load([str(portrait_file)]))
     fitter = Fitter(head, tracker_model())

@@ -61,7 +61,7 @@ def test_mediapipe_sees_the_irises_turn(head):
         pytest.skip("shared models/face_landmarker.task absent")
     from faceclean.synthetic.render import Renderer
     from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import landmarks
+    from faceclean.trackers.mediapipe import landmarks
 
     r = Renderer(head, Scene.draw(3, "studio"), gaze=True)
 

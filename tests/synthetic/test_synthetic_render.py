@@ -16,7 +16,7 @@ from faceclean.synthetic.head import Head  # noqa: E402
 from faceclean.synthetic.raster import rasterise  # noqa: E402
 from faceclean.synthetic.render import Renderer  # noqa: E402
 from faceclean.synthetic.scene import SETTINGS, Scene  # noqa: E402
-from faceclean.synthetic.tracker import NAMES, Tracker  # noqa: E402
+from faceclean.trackers.mediapipe import NAMES, Tracker  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import BLANK, N_FRAMES, VFR_TIMES, YAW, yaw_of
 
-from faceclean.synthetic.tracker import head_angles
 from faceclean.trackers.face import HEAD
+from faceclean.trackers.mediapipe import head_angles
 from faceclean.trackers.signature import judge
 
 
@@ -104,8 +104,8 @@ def test_the_track_tracker_is_the_one_tracker_interface(face_video, rendered):
     """FaceTracker is a tracking.Tracker (MediaPipe's one implementation, with the head's
     angles): a whole video tracked is that interface's scores, frame by frame."""
     from faceclean import tracking
-    from faceclean.synthetic.tracker import NAMES
     from faceclean.trackers.face import FaceTracker, track_video
+    from faceclean.trackers.mediapipe import NAMES
     from faceclean.trackers.video import Video
 
     with FaceTracker() as tracker:

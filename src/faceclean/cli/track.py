@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.cli.clean_take import build_cleaner, build_levels
 
     choice = options.choice(args)  # bad options fail now, before any tracking
-    from faceclean.synthetic.tracker import NAMES
+    from faceclean.trackers.mediapipe import NAMES
 
     build_cleaner(choice, NAMES)
     build_levels(args, choice, NAMES)

@@ -34,7 +34,7 @@ def still_take(model_path, seconds: float = 10.0, fps: float = 30.0, seed: int =
             "the still-face test needs scikit-image (pip install scikit-image)"
         ) from None
     from faceclean.synthetic.render import jpeg
-    from faceclean.synthetic.tracker import NAMES, Tracker
+    from faceclean.trackers.mediapipe import NAMES, Tracker
 
     image = data.astronaut().astype(np.float32)  # (512, 512, 3)
     rng = np.random.default_rng(seed)

@@ -248,7 +248,7 @@ class Worker:
         self.head = Head.load(head_path)
         self.tracker_path = tracker_path
         if tracker is None:
-            from faceclean.synthetic.tracker import Tracker as MediaPipe
+            from faceclean.trackers.mediapipe import Tracker as MediaPipe
 
             tracker = lambda: MediaPipe(tracker_path)  # noqa: E731
         self.tracker = tracker

@@ -141,7 +141,7 @@ class Fitter:
         return self._anchors
 
     def _fit(self, name: str, image: np.ndarray) -> Skin:
-        from faceclean.synthetic.tracker import landmarks
+        from faceclean.trackers.mediapipe import landmarks
 
         lm = landmarks(self.tracker_path, image)
         if lm is None:
@@ -214,7 +214,7 @@ def _anchors(head, tracker_path) -> np.ndarray:
     from faceclean.synthetic.raster import rasterise
     from faceclean.synthetic.render import Renderer
     from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import landmarks
+    from faceclean.trackers.mediapipe import landmarks
 
     scene = Scene.draw(0, "studio", head.n_identity)
     scene = _frontal(scene, head.n_identity)

@@ -1,6 +1,6 @@
 """MediaPipe on a video or a camera: ``faceclean track``'s tracker and a whole video tracked.
 
-``FaceTracker(model)`` is the one MediaPipe tracker (synthetic/tracker.py ``Tracker``, a
+``FaceTracker(model)`` is the one MediaPipe tracker (trackers/mediapipe.py ``Tracker``, a
 faceclean.tracking ``Tracker``) built for ``track``: the facial transformation matrix on,
 so ``read(rgb, t)`` gives, beside the 51 ARKit scores MediaPipe has (``NAMES``: no
 ``tongueOut``) and the landmarks, the head's (yaw, pitch, roll) in radians, Live Link's
@@ -24,7 +24,7 @@ import numpy as np
 
 from faceclean.animation import Animation
 from faceclean.errors import FacecleanError
-from faceclean.synthetic.tracker import NAMES, Tracker
+from faceclean.trackers.mediapipe import NAMES, Tracker
 
 HEAD = ("HeadYaw", "HeadPitch", "HeadRoll")  # the angles a tracked take carries, rad
 MAX_FACES = 2  # faces MediaPipe looks for: a second one is seen, so the choice is ours
@@ -81,7 +81,7 @@ class Follow:
 
 
 class FaceTracker(Tracker):
-    """MediaPipe (synthetic/tracker.py ``Tracker``), VIDEO mode, up to ``MAX_FACES`` looked
+    """MediaPipe (trackers/mediapipe.py ``Tracker``), VIDEO mode, up to ``MAX_FACES`` looked
     for and one followed (``Follow``), with the head's rotation (``Reading.pose``, (3,) rad,
     NaN when MediaPipe gives no matrix). ``on_crowd(line)`` is called once, the first time
     several faces are in view."""

@@ -88,7 +88,7 @@ def test_mediapipe_is_a_tracker_with_landmarks(head_path):
     from faceclean.synthetic.head import Head
     from faceclean.synthetic.render import Renderer
     from faceclean.synthetic.scene import Scene
-    from faceclean.synthetic.tracker import NAMES, Tracker
+    from faceclean.trackers.mediapipe import NAMES, Tracker
 
     weights = np.zeros(52)
     frame = Renderer(Head.load(head_path), Scene.draw(1, "studio")).frame(weights, np.zeros(3), 0)
