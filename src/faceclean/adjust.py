@@ -267,6 +267,11 @@ def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
     x = x[x <= MAX_ABS]  # finite, and no absurd glitch (filters/base.py rule 2)
     if not x.size:
         return
+    # The 99th percentile (linear) lies between the sorted values at floor(p) and ceil(p),
+    # p = 0.99 (n - 1): when even the one at ceil(p) is within FAR, so is it; counting
+    # those beyond FAR says so without the sort (exact, and most takes end here).
+    if math.ceil(0.99 * (x.size - 1)) < x.size - np.count_nonzero(x > FAR):
+        return
     high = float(np.percentile(x, 99))
     if high > FAR:
         guess = 0.01 if high <= 100.0 * FAR else 10.0 ** -math.ceil(math.log10(high))
