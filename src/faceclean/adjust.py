@@ -265,12 +265,9 @@ def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
     cols = [j for j, n in enumerate(names) if canonical(n) is not None]
     x = np.abs(np.asarray(values, dtype=np.float64)[..., cols])
     x = x[x <= MAX_ABS]  # finite, and no absurd glitch (filters/base.py rule 2)
-    if not x.size:
-        return
-    # The 99th percentile (linear) lies between the sorted values at floor(p) and ceil(p),
-    # p = 0.99 (n - 1): when even the one at ceil(p) is within FAR, so is it; counting
-    # those beyond FAR says so without the sort (exact, and most takes end here).
-    if math.ceil(0.99 * (x.size - 1)) < x.size - np.count_nonzero(x > FAR):
+    # The 99th percentile lies between the sorted x at floor(p) and ceil(p), p = 0.99 (n - 1):
+    # when the one at ceil(p) is within FAR (counted, no sort: exact), so is the percentile.
+    if not x.size or math.ceil(0.99 * (x.size - 1)) < x.size - np.count_nonzero(x > FAR):
         return
     high = float(np.percentile(x, 99))
     if high > FAR:
