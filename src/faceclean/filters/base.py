@@ -151,10 +151,20 @@ def check_finite(inp: np.ndarray, out: np.ndarray, name: str) -> None:
     finite and within MAX_ABS: a cleaner that erases data must not write a file."""
     lost = kept = 0
     for a in range(0, max(len(inp), 1), BLOCK):  # in blocks: no temporary as large as a take
-        with np.errstate(invalid="ignore"):
-            sane = np.abs(inp[a : a + BLOCK]) <= MAX_ABS
-        lost += int((sane & ~np.isfinite(out[a : a + BLOCK])).sum())
-        kept += int(sane.sum())
+        n_lost, n_kept = finite_counts(inp[a : a + BLOCK], out[a : a + BLOCK])
+        lost, kept = lost + n_lost, kept + n_kept
+    refuse_lost(lost, kept, name)
+
+
+def finite_counts(inp: np.ndarray, out: np.ndarray) -> tuple[int, int]:
+    """``check_finite``'s counts for one block: (cells lost, cells sane) of inp, out."""
+    with np.errstate(invalid="ignore"):
+        sane = np.abs(inp) <= MAX_ABS
+    return int(np.count_nonzero(sane & ~np.isfinite(out))), int(np.count_nonzero(sane))
+
+
+def refuse_lost(lost: int, kept: int, name: str) -> None:
+    """``check_finite``'s refusal, from its counts over a whole take."""
     if lost:
         raise FacecleanError(
             f"{name}: the output is not finite in {lost} of {kept} cells where the input "
@@ -214,21 +224,31 @@ class StreamCleaner(Stepper):
         from faceclean.filters import compiled
 
         self.reset()
-        out = np.full_like(anim.values, np.nan)
-        idx = np.flatnonzero(anim.valid)
+        valid = anim.valid
+        idx = np.flatnonzero(valid)
+        out = np.empty_like(anim.values)  # every valid row is written below
+        out[~valid] = np.nan
         t64 = anim.times[idx].astype(np.float64)  # (V,) s
         run = self._compiled() if compiled.for_take(len(idx)) else None
-        told = 0
+        told = lost = kept = 0
         for a in range(0, len(idx), BLOCK):
             rows = idx[a : a + BLOCK]
-            x = np.array(anim.values[rows], dtype=np.float64)  # ours: _advance may write in it
-            self._block(x, t64[a : a + BLOCK], out, rows, run)
+            first = int(rows[0])
+            if rows[-1] - first == len(rows) - 1:  # no missing frame inside: views
+                x, dst = anim.values[first : first + len(rows)], out[first : first + len(rows)]
+            else:
+                x, dst = anim.values[rows], np.empty((len(rows), out.shape[1]))
+            self._block(np.ascontiguousarray(x), t64[a : a + BLOCK], dst, run)
+            if dst.base is not out:
+                out[rows] = dst
+            n_lost, n_kept = finite_counts(x, dst)  # check_finite, block by block
+            lost, kept = lost + n_lost, kept + n_kept
             if progress is not None and a + len(rows) - told >= PROGRESS_EVERY:
                 progress(a + len(rows) - told)
                 told = a + len(rows)
         if progress is not None and len(idx) > told:
             progress(len(idx) - told)
-        check_finite(anim.values, out, self.name)
+        refuse_lost(lost, kept, self.name)
         return anim.with_values(out)
 
     def steps(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -242,14 +262,14 @@ class StreamCleaner(Stepper):
         run = self._compiled() if compiled.enabled() else None
         out = np.empty((len(values), values.shape[1]))
         for a in range(0, len(values), BLOCK):
-            x = np.array(values[a : a + BLOCK], dtype=np.float64)  # ours: _advance may write
+            x = np.ascontiguousarray(values[a : a + BLOCK], dtype=np.float64)
             t64 = np.asarray(times[a : a + BLOCK], dtype=np.float64)
-            self._block(x, t64, out, np.arange(a, a + len(x)), run)
+            self._block(x, t64, out[a : a + len(x)], run)
         return out
 
-    def _block(self, x: np.ndarray, t64: np.ndarray, out: np.ndarray, rows, run) -> None:
-        """``clean`` over one block: x (B, M) the valid frames at t64 (B,) s, written to
-        ``out`` at ``rows`` (B,); ``run`` the compiled run, or None."""
+    def _block(self, x: np.ndarray, t64: np.ndarray, dst: np.ndarray, run) -> None:
+        """``clean`` over one block: x (B, M) the valid frames at t64 (B,) s (read only:
+        a view of the take), written to ``dst`` (B, M); ``run`` the compiled run, or None."""
         with np.errstate(invalid="ignore"):
             ok = (np.abs(x) <= MAX_ABS).all(axis=1)
         good = ok.tolist()
@@ -260,7 +280,6 @@ class StreamCleaner(Stepper):
             breaks = np.append(np.flatnonzero(~chain), len(x))  # runs end before these
         k, n = 0, len(x)
         while k < n:
-            i = int(rows[k])
             if good[k] and self._state is not None:
                 dt = times[k] - float(self._t[0])
                 if run is not None and MIN_DT < dt <= self.max_gap:
@@ -268,18 +287,18 @@ class StreamCleaner(Stepper):
                     dts = np.empty(end - k)  # (end - k,) s
                     dts[0] = dt  # from the last accepted frame
                     dts[1:] = np.diff(t64[k:end])
-                    self._state, ys = run(self._state, x[k:end], dts)
-                    out[rows[k:end]] = ys
-                    self._t[0], self._y = times[end - 1], ys[-1:].copy()
+                    self._state = run(self._state, x[k:end], dts, dst[k:end])
+                    self._t[0], self._y = times[end - 1], dst[end - 1 : end].copy()
                     k = end
                     continue
                 if MIN_DT < dt <= self.max_gap:  # (NaN fails)
-                    self._state, y = self._advance(self._state, x[k : k + 1], np.full((1, 1), dt))
+                    xk = x[k : k + 1].copy()  # _advance's own: it may write in it
+                    self._state, y = self._advance(self._state, xk, np.full((1, 1), dt))
                     self._t[0], self._y = times[k], y
-                    out[i] = y[0]
+                    dst[k] = y[0]
                     k += 1
                     continue
-            out[i] = self.step(x[k], times[k])
+            dst[k] = self.step(x[k], times[k])
             k += 1
 
     clean._finite_checked = True  # type: ignore[attr-defined]

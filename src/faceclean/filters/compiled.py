@@ -25,8 +25,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-# A run: (state, x (N, M) frames, dt (N,) s) -> (state, y (N, M)), one stream.
-Run = Callable[[tuple[np.ndarray, ...], np.ndarray, np.ndarray], tuple]
+# A run: (state, x (N, M) frames, dt (N,) s, out (N, M)) -> state; one stream, its
+# outputs written to out (a view of the take's output: no copy of a block).
+Run = Callable[[tuple[np.ndarray, ...], np.ndarray, np.ndarray, np.ndarray], tuple]
 
 # From this many frames a clean loads numba for its whole take: numba's import and one
 # cached kernel (~0.45 s) against numpy's ~15 us a frame (docs/BENCHMARKS.md, issue 38).
@@ -45,10 +46,12 @@ def _warm_args() -> dict[str, tuple]:
         "inert": (one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy()),
         "ema": (one.copy(), x, x + 0.5, x.copy()),
         "deadband": (x, one, x.copy()),
-        "kalman": (*(one.copy() for _ in range(5)), x, one, x, x, x, one, x.copy()),
+        "kalman": (*(one.copy() for _ in range(5)), x, one, one, one, one, one, x.copy()),
         "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one,
                           x.copy(), x.copy()),
         "affine": (x, x, x.copy()),
+        "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0,
+                       x.copy()),
     }  # fmt: skip
 
 
@@ -128,11 +131,10 @@ def _run(kernel: Callable, *consts: np.ndarray) -> Run:
     """A run of ``kernel(*state rows, x, dt, *consts, out)``, one stream, on a copy of the
     state (the rows are updated in place)."""
 
-    def run(state, x, dt):
+    def run(state, x, dt, out):
         rows = [s[0].copy() for s in state]  # (M,) each
-        out = np.empty_like(x)
         kernel(*rows, x, dt, *consts, out)
-        return tuple(r[None] for r in rows), out
+        return tuple(r[None] for r in rows)
 
     return run
 
@@ -163,31 +165,27 @@ def ema(m: int, gamma, tau) -> Run | None:
     gamma = None if gamma is None else _per_channel(m, (gamma,))[0]
     tau = None if tau is None else _per_channel(m, (tau,))[0]
 
-    def run(state, x, dt):
+    def run(state, x, dt, out):
         if gamma is not None:
             alpha = np.broadcast_to(gamma, x.shape)
         else:
             with np.errstate(over="ignore"):
                 alpha = np.broadcast_to(-np.expm1(-dt[:, None] / tau), x.shape)
-        return _run(kernel)(state, x, np.ascontiguousarray(alpha))  # alpha in dt's place
+        return _run(kernel)(state, x, np.ascontiguousarray(alpha), out)  # alpha in dt's place
 
     return run
 
 
 def kalman(m: int, q, r) -> Run | None:
     """The Kalman filter's run (filters/kalman.py) for M channels' ``q`` and ``r``, or
-    None when off; the process noise of every frame computed by numpy as ``_advance`` does."""
+    None when off; dt's powers computed by numpy as ``_advance`` computes them."""
     kernel = _kernel("kalman")
     if kernel is None:
         return None
-    q = np.asarray(q, np.float64)
-    r2 = _per_channel(m, (np.asarray(r, np.float64) ** 2,))[0]
+    q, r2 = _per_channel(m, (q, np.asarray(r, np.float64) ** 2))
 
-    def run(state, x, dt):
-        h = dt[:, None]  # (N, 1) s
-        noise = [np.ascontiguousarray(np.broadcast_to(v, x.shape)) for v in
-                 (q * h**3 / 3.0, q * h**2 / 2.0, q * h)]  # fmt: skip
-        return _run(kernel, *noise, r2)(state, x, dt)  # state: p, v, a, b, c
+    def run(state, x, dt, out):
+        return _run(kernel, dt**3, dt**2, q, r2)(state, x, dt, out)  # state: p, v, a, b, c
 
     return run
 
@@ -221,16 +219,17 @@ def _ema(y, x, alpha, out):
             out[n, m] = y[m]
 
 
-def _kalman(p, v, a, b, c, x, dt, q3, q2, q1, r2, out):
-    """In place: p, v and P = [[a, b], [b, c]] (M,) the state; x (N, M); dt (N,) s; q3,
-    q2, q1 (N, M) the process noise q dt^3/3, q dt^2/2, q dt; r2 (M,); out (N, M) gets p."""
+def _kalman(p, v, a, b, c, x, dt, h3, h2, q, r2, out):
+    """In place: p, v and P = [[a, b], [b, c]] (M,) the state; x (N, M); dt, h3, h2 (N,)
+    s, s^3, s^2; q, r2 (M,); out (N, M) gets p. The process noise q dt^3/3, q dt^2/2,
+    q dt in ``_advance``'s order: (q dt^k) / k."""
     for n in range(x.shape[0]):
         h = dt[n]
         for m in range(x.shape[1]):
             pm = p[m] + h * v[m]  # predict
-            am = a[m] + h * (2.0 * b[m] + h * c[m]) + q3[n, m]
-            bm = b[m] + h * c[m] + q2[n, m]
-            cm = c[m] + q1[n, m]
+            am = a[m] + h * (2.0 * b[m] + h * c[m]) + q[m] * h3[n] / 3.0
+            bm = b[m] + h * c[m] + q[m] * h2[n] / 2.0
+            cm = c[m] + q[m] * h
             s = am + r2[m]  # update with the measured position
             k0, k1 = am / s, bm / s
             innov = x[n, m] - pm
@@ -323,6 +322,33 @@ def _affine(a, w, y):
                 y[n, j] += v * w[k, j]
 
 
+def noise_band(m, h, y0, p1, p2, s, floor, c: float, tau: float) -> np.ndarray | None:
+    """learned/band.py's band over a run of one stream's frames m (N, M), h (N,) s, after
+    the output y0 (M,); p1, p2, s (M,) its state, updated in place. (N, M), or None when
+    off."""
+    kernel = _kernel("noise_band")
+    if kernel is None:
+        return None
+    y = np.empty_like(m)
+    kernel(m, h, y0, p1, p2, s, floor, float(c), float(tau), y)
+    return y
+
+
+def _noise_band(m, h, y0, p1, p2, s, floor, c, tau, y):
+    """In place: y (N, M) the band's outputs, in learned/band.py's ``step`` order."""
+    for n in range(m.shape[0]):
+        a = h[n] / (h[n] + tau)
+        for j in range(m.shape[1]):
+            d2 = abs(m[n, j] - 2.0 * p1[j] + p2[j])
+            s[j] = s[j] + a * (d2 - s[j])
+            eps = max(floor[j], c * s[j])
+            prev = y0[j] if n == 0 else y[n - 1, j]
+            d = min(max(m[n, j] - prev, -eps), eps)
+            y[n, j] = m[n, j] - d
+            p2[j] = p1[j]
+            p1[j] = m[n, j]
+
+
 _SOURCES = {"one_euro": _one_euro, "inert": _inert, "ema": _ema, "kalman": _kalman,
             "deadband": _deadband, "map_prefilter": _map_prefilter,
-            "affine": _affine}  # fmt: skip
+            "affine": _affine, "noise_band": _noise_band}  # fmt: skip
