@@ -151,15 +151,20 @@ def check_finite(inp: np.ndarray, out: np.ndarray, name: str) -> None:
     finite and within MAX_ABS: a cleaner that erases data must not write a file."""
     lost = kept = 0
     for a in range(0, max(len(inp), 1), BLOCK):  # in blocks: no temporary as large as a take
-        n_lost, n_kept = finite_counts(inp[a : a + BLOCK], out[a : a + BLOCK])
+        n_lost, n_kept = finite_counts(sane_cells(inp[a : a + BLOCK]), out[a : a + BLOCK])
         lost, kept = lost + n_lost, kept + n_kept
     refuse_lost(lost, kept, name)
 
 
-def finite_counts(inp: np.ndarray, out: np.ndarray) -> tuple[int, int]:
-    """``check_finite``'s counts for one block: (cells lost, cells sane) of inp, out."""
+def sane_cells(x: np.ndarray) -> np.ndarray:
+    """Cells finite and within +-MAX_ABS (rule 2's good values), bool like x."""
     with np.errstate(invalid="ignore"):
-        sane = np.abs(inp) <= MAX_ABS
+        return np.abs(x) <= MAX_ABS  # (NaN compares False)
+
+
+def finite_counts(sane: np.ndarray, out: np.ndarray) -> tuple[int, int]:
+    """``check_finite``'s counts for one block: (cells lost, cells sane), from the input's
+    ``sane_cells`` and the output."""
     return int(np.count_nonzero(sane & ~np.isfinite(out))), int(np.count_nonzero(sane))
 
 
@@ -238,10 +243,11 @@ class StreamCleaner(Stepper):
                 x, dst = anim.values[first : first + len(rows)], out[first : first + len(rows)]
             else:
                 x, dst = anim.values[rows], np.empty((len(rows), out.shape[1]))
-            self._block(np.ascontiguousarray(x), t64[a : a + BLOCK], dst, run)
+            sane = sane_cells(x)  # (B, M)
+            self._block(np.ascontiguousarray(x), t64[a : a + BLOCK], dst, run, sane.all(axis=1))
             if dst.base is not out:
                 out[rows] = dst
-            n_lost, n_kept = finite_counts(x, dst)  # check_finite, block by block
+            n_lost, n_kept = finite_counts(sane, dst)  # check_finite, block by block
             lost, kept = lost + n_lost, kept + n_kept
             if progress is not None and a + len(rows) - told >= PROGRESS_EVERY:
                 progress(a + len(rows) - told)
@@ -264,16 +270,15 @@ class StreamCleaner(Stepper):
         for a in range(0, len(values), BLOCK):
             x = np.ascontiguousarray(values[a : a + BLOCK], dtype=np.float64)
             t64 = np.asarray(times[a : a + BLOCK], dtype=np.float64)
-            self._block(x, t64, out[a : a + len(x)], run)
+            self._block(x, t64, out[a : a + len(x)], run, sane_cells(x).all(axis=1))
         return out
 
-    def _block(self, x: np.ndarray, t64: np.ndarray, dst: np.ndarray, run) -> None:
+    def _block(self, x: np.ndarray, t64: np.ndarray, dst: np.ndarray, run, ok) -> None:
         """``clean`` over one block: x (B, M) the valid frames at t64 (B,) s (read only:
-        a view of the take), written to ``dst`` (B, M); ``run`` the compiled run, or None."""
-        with np.errstate(invalid="ignore"):
-            ok = (np.abs(x) <= MAX_ABS).all(axis=1)
-        good = ok.tolist()
-        times = t64.tolist()
+        a view of the take), written to ``dst`` (B, M); ``run`` the compiled run, or None;
+        ok (B,): every value of the frame sane."""
+        # frame by frame, Python's own bool and float are faster; with runs, few are read
+        good, times = (ok, t64) if run is not None else (ok.tolist(), t64.tolist())
         if run is not None:  # frame k + 1 chains on an accepted frame k: a usual frame
             d = np.diff(t64)
             chain = np.concatenate([[False], ok[1:] & (d > MIN_DT) & (d <= self.max_gap)])

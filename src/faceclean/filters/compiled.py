@@ -44,7 +44,7 @@ def _warm_args() -> dict[str, tuple]:
     return {
         "one_euro": (one.copy(), one.copy(), x, one, one, one, one, x.copy()),
         "inert": (one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy()),
-        "ema": (one.copy(), x, x + 0.5, x.copy()),
+        "ema": (one.copy(), x, x + 0.5, np.zeros(1, np.intp), x.copy()),
         "deadband": (x, one, x.copy()),
         "kalman": (*(one.copy() for _ in range(5)), x, one, one, one, one, one, x.copy()),
         "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one,
@@ -158,20 +158,23 @@ def inert(m: int, min_cutoff, beta, w_d, ea, k) -> Run | None:
 def ema(m: int, gamma, tau) -> Run | None:
     """Exponential smoothing's run (filters/ema.py): per-frame ``gamma``, or ``tau`` s
     (M channels' settings, the other None), or None when off. The gains are computed by
-    numpy, as ``_advance`` computes them, for every frame of the run at once."""
+    numpy, as ``_advance`` computes them, for every frame of the run at once, once per
+    distinct ``tau`` (a tuned preset has a few: 5 of 52 channels' expm1 per frame)."""
     kernel = _kernel("ema")
     if kernel is None:
         return None
-    gamma = None if gamma is None else _per_channel(m, (gamma,))[0]
-    tau = None if tau is None else _per_channel(m, (tau,))[0]
+    if gamma is not None:
+        gains, col = _per_channel(m, (gamma,))[0][None], np.arange(m)  # (1, M): every frame
+    else:
+        taus, col = np.unique(_per_channel(m, (tau,))[0], return_inverse=True)  # (U,), (M,)
 
     def run(state, x, dt, out):
-        if gamma is not None:
-            alpha = np.broadcast_to(gamma, x.shape)
-        else:
+        if gamma is None:
             with np.errstate(over="ignore"):
-                alpha = np.broadcast_to(-np.expm1(-dt[:, None] / tau), x.shape)
-        return _run(kernel)(state, x, np.ascontiguousarray(alpha), out)  # alpha in dt's place
+                g = -np.expm1(-dt[:, None] / taus)  # (N, U)
+        else:
+            g = gains
+        return _run(kernel, col)(state, x, g, out)  # the gains in dt's place
 
     return run
 
@@ -211,11 +214,15 @@ def _deadband(m, band, y):
             y[n, j] = m[n, j] - d
 
 
-def _ema(y, x, alpha, out):
-    """In place: y (M,) the state; x, alpha (N, M); out (N, M) gets y after each frame."""
+def _ema(y, x, gains, col, out):
+    """In place: y (M,) the state; x (N, M); gains (N, U), or (1, U) for every frame, one
+    per distinct setting, col (M,) each channel's: alpha = gains[n, col[m]]; out (N, M)
+    gets y after each frame."""
+    per_frame = 1 if gains.shape[0] > 1 else 0
     for n in range(x.shape[0]):
+        g = gains[n * per_frame]
         for m in range(x.shape[1]):
-            y[m] = y[m] + alpha[n, m] * (x[n, m] - y[m])
+            y[m] = y[m] + g[col[m]] * (x[n, m] - y[m])
             out[n, m] = y[m]
 
 
