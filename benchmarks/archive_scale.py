@@ -12,7 +12,12 @@ once; then, side by side in the same run and interleaved round by round, fresh p
   and with FACECLEAN_NUMBA=0 (the numpy path, as without numba), once each;
 - a 1-frame file, compiled default and numba off (numba is never loaded for it).
 
-Each process's time is the median over rounds; its peak RSS (VmHWM). Memory of
+Each process's time is the median over rounds; its peak RSS (VmHWM). Every process reads
+its modules' bytecode from a cache in the run's folder (PYTHONPYCACHEPREFIX), as an
+installed package does: a shell with PYTHONDONTWRITEBYTECODE=1 (this sandbox's) would
+compile faceclean's sources in every process, ~0.1 s more for a clean's ~50 modules than
+for the floor's ~15. Each run is done once before the rounds (bytecode and numba's
+caches written). Memory of
 the take's own copies: the same clean in one process under ``tracemalloc`` with numba
 imported first (numba's import is a fixed ~45 MB of Python objects and ~160 MB of RSS,
 whatever the take), over the take's own arrays (times + values). The written file is
@@ -88,9 +93,13 @@ def make_take(path: Path, minutes: float) -> int:
     return n
 
 
+PYC: dict[str, str] = {}  # the bytecode cache's environment, set by main
+
+
 def child(code: str, args: list[str], env: dict | None = None) -> list[float]:
+    base = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
-                         env={**os.environ, **(env or {})}, check=True).stdout  # fmt: skip
+                         env={**base, **PYC, **(env or {})}, check=True).stdout  # fmt: skip
     return [float(v) for v in out.split("RESULT")[-1].split()]
 
 
@@ -101,17 +110,20 @@ def main() -> None:
     ap.add_argument("--format", choices=("npz", "csv"), default="npz")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
+    PYC["PYTHONPYCACHEPREFIX"] = str(tmp / "pycache")
+    load_before = os.getloadavg()[0]
     ext = args.format
     src, out = tmp / f"take.{ext}", tmp / f"out.{ext}"
     frames = make_take(src, args.minutes)
     one = tmp / f"one.{ext}"
     make_take(one, 1 / 3600)
-    child(RUN, ["clean", str(src), "-o", str(out)])  # numba's cache written, file cached
     runs = {"bare": (["bare", str(src), str(out)], None)}
     for name, flags in CLEANERS.items():
         runs[name] = (["clean", str(src), "-o", str(out), *flags], None)
     runs["1-frame default"] = (["clean", str(one), "-o", str(tmp / f"o1.{ext}")], None)
     runs["1-frame default, numba off"] = (runs["1-frame default"][0], {"FACECLEAN_NUMBA": "0"})
+    for argv, env in runs.values():  # bytecode and numba's caches written, the file cached
+        child(RUN, argv, env)
     times: dict[str, list[float]] = {k: [] for k in runs}
     rss: dict[str, float] = {}
     for _ in range(args.rounds):
@@ -130,7 +142,8 @@ def main() -> None:
     bare = statistics.median(times["bare"])
     print(
         f"{frames} frames ({args.minutes:g} min at 60 fps), {src.stat().st_size / 1e6:.1f} MB "
-        f"{ext}; median of {args.rounds} rounds; load average {os.getloadavg()[0]:.2f}\n"
+        f"{ext}; median of {args.rounds} rounds; load average {load_before:.2f} before, "
+        f"{os.getloadavg()[0]:.2f} after\n"
     )
     print(
         "| run | time (s) | x bare | numpy path (s) | compiled speed-up | peak RSS (MB) "
@@ -148,14 +161,24 @@ def main() -> None:
 
 
 def check_lossless(src: Path, out: Path) -> bool:
+    """Each compiled cleaner's written file (the LSTM's aside: 8 s) is its clean in this
+    process, bit for bit."""
     from faceclean import io
-    from faceclean.resolve import resolve
+    from faceclean.cli import options
+    from faceclean.cli.clean import add_arguments
 
-    subprocess.run([sys.executable, "-m", "faceclean", "clean", str(src), "-o", str(out),
-                    "--method", "one-euro"], capture_output=True, check=True)  # fmt: skip
     take = io.load(src)
-    want = resolve("one-euro").build(take.names).clean(take).values
-    return bool(np.array_equal(io.load(out).values, want, equal_nan=True))
+    for name, flags in CLEANERS.items():
+        if name == "lstm":
+            continue
+        child(RUN, ["clean", str(src), "-o", str(out), *flags])
+        ap = argparse.ArgumentParser()
+        add_arguments(ap)
+        cleaner = options.choice(ap.parse_args([str(src), *flags])).build(take.names)
+        want = cleaner.clean(take).values
+        if not np.array_equal(io.load(out).values, want, equal_nan=True):
+            return False
+    return True
 
 
 if __name__ == "__main__":

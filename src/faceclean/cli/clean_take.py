@@ -193,15 +193,17 @@ def clean_with_progress(cleaner: Stepper, anim: Animation) -> Animation:
     ``StreamCleaner.clean`` reports its progress itself.
     """
     import numpy as np
-    from tqdm import tqdm
 
     from faceclean.filters.base import Stepper, StreamCleaner, check_finite
 
-    valid = np.flatnonzero(anim.valid)
     own = type(cleaner).clean
     stepped = own in (Stepper.clean, StreamCleaner.clean)
-    if cleaner.offline or not stepped or len(valid) < PROGRESS_FRAMES:
+    if cleaner.offline or not stepped or anim.n_frames < PROGRESS_FRAMES:
+        return cleaner.clean(anim)  # its own clean (the LSTM's, a map's): no bar, no tqdm
+    valid = np.flatnonzero(anim.valid)
+    if len(valid) < PROGRESS_FRAMES:
         return cleaner.clean(anim)
+    from tqdm import tqdm
     if own is StreamCleaner.clean:
         with tqdm(total=len(valid), unit="frame", file=sys.stderr, leave=False,
                   desc="cleaning") as bar:  # fmt: skip
