@@ -187,3 +187,48 @@ def test_the_tracker_maps_affine_kernel_is_the_product(on):
         rng.random((4, 3)), rng.random(3)  # fmt: skip
     np.testing.assert_allclose(compiled.affine(c, (a, w), (b, v)), a @ w + b @ v + c,
                                rtol=1e-14, atol=0)  # fmt: skip
+
+
+def test_compiles_says_which_takes_run_compiled(monkeypatch):
+    """A short take: no, and numba stays unloaded; a long one: yes for a cleaner with a
+    kernel, no for one without."""
+    from faceclean.channels import ARKIT52
+    from faceclean.filters.base import StreamCleaner
+
+    class Hold(StreamCleaner):  # no compiled run
+        names = ARKIT52
+
+        def _start(self, x):
+            return (x.copy(),)
+
+        def _advance(self, state, x, dt):
+            return state, state[0].copy()
+
+    compiled.disable()
+    f = OneEuro(names=ARKIT52)
+    assert not f.compiles(compiled.WHOLE_TAKE_FRAMES - 1) and not compiled.enabled()
+    try:
+        assert f.compiles(compiled.WHOLE_TAKE_FRAMES) and compiled.enabled()
+        assert not Hold().compiles(compiled.WHOLE_TAKE_FRAMES)
+    finally:
+        compiled.disable()
+
+
+def test_a_compiled_clean_shows_no_progress_bar(monkeypatch, capsys):
+    """clean_with_progress: a take long enough for a bar gets one stepped in numpy, none
+    where its runs go compiled (some 2 million frames a second); the same numbers."""
+    from faceclean.cli.clean_take import PROGRESS_FRAMES, clean_with_progress
+
+    take = perform(PROGRESS_FRAMES / 60.0 + 10.0, 5, fps=60.0)
+    build = lambda: OneEuro(names=take.names)  # noqa: E731
+    compiled.disable()
+    monkeypatch.setattr(compiled, "WHOLE_TAKE_FRAMES", 10**9)
+    slow = clean_with_progress(build(), take).values
+    assert "cleaning" in capsys.readouterr().err
+    monkeypatch.setattr(compiled, "WHOLE_TAKE_FRAMES", 0)
+    try:
+        fast = clean_with_progress(build(), take).values
+        assert compiled.enabled() and "cleaning" not in capsys.readouterr().err
+    finally:
+        compiled.disable()
+    np.testing.assert_array_equal(fast, slow)

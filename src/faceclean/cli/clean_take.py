@@ -190,7 +190,7 @@ def clean_with_progress(cleaner: Stepper, anim: Animation) -> Animation:
 
     A stream cleaner that keeps the base batch path is stepped here frame by frame, which
     is the same computation (reset, then step every valid frame); one with
-    ``StreamCleaner.clean`` reports its progress itself.
+    ``StreamCleaner.clean`` reports its progress itself, unless its runs go compiled.
     """
     import numpy as np
 
@@ -199,11 +199,13 @@ def clean_with_progress(cleaner: Stepper, anim: Animation) -> Animation:
     own = type(cleaner).clean
     stepped = own in (Stepper.clean, StreamCleaner.clean)
     if cleaner.offline or not stepped or anim.n_frames < PROGRESS_FRAMES:
-        return cleaner.clean(anim)  # its own clean (the LSTM's, a map's): no bar, no tqdm
+        return cleaner.clean(anim)  # short, offline, or its own (the LSTM's, a map's): no bar
     valid = np.flatnonzero(anim.valid)
-    if len(valid) < PROGRESS_FRAMES:
+    fast = own is StreamCleaner.clean and cleaner.compiles(len(valid))
+    if len(valid) < PROGRESS_FRAMES or fast:  # compiled: ~2 million frames a second, no bar
         return cleaner.clean(anim)
     from tqdm import tqdm
+
     if own is StreamCleaner.clean:
         with tqdm(total=len(valid), unit="frame", file=sys.stderr, leave=False,
                   desc="cleaning") as bar:  # fmt: skip

@@ -214,6 +214,13 @@ class StreamCleaner(Stepper):
         """A compiled run of usual frames (filters/compiled.py), or None: step them."""
         return None
 
+    def compiles(self, frames: int) -> bool:
+        """Whether ``clean`` of a take of ``frames`` valid frames sends its runs to the
+        compiled loop (filters/compiled.py ``for_take``: numba loads for a long take)."""
+        from faceclean.filters import compiled
+
+        return compiled.for_take(frames) and self._compiled() is not None
+
     def clean(self, anim: Animation, progress: Callable[[int], object] | None = None) -> Animation:
         """Reset, then step every valid frame (``Stepper.clean``). A usual frame (every
         value good, more than MIN_DT and at most max_gap after the last accepted one) goes
