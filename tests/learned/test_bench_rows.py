@@ -54,8 +54,8 @@ def test_the_map_row_is_the_cleaner_clean_tracker_mediapipe_runs(tmp_path):
 
 
 def _richer_map():
-    """The shipped map with a lift (its top kept) and a hidden layer: every branch of the
-    step the shipped file does not take."""
+    """The shipped map with a lift (its top kept), a hidden layer and the band widened by
+    the noise: every branch of the step the shipped file does not take."""
     from faceclean.learned.map_weights import MapWeights
     from faceclean.learned.tracker_map import TrackerMap
     from faceclean.settings import MODELS
@@ -76,7 +76,7 @@ def _richer_map():
         mu=rng.normal(0, 0.1, 2 * k),
         sd=rng.uniform(0.5, 2.0, 2 * k),
     )
-    config = dict(w.config, hidden=h, lift_top=True)
+    config = dict(w.config, hidden=h, lift_top=True, noise_band=16.0)
     return TrackerMap(weights=MapWeights.build(config, arrays), names=ARKIT52, detail=0.5)
 
 
@@ -93,8 +93,9 @@ def test_the_map_reference_computes_the_runtime_function(which):
     for n in range(1, len(x)):
         want = ours.step(x[n], t[n])
         np.testing.assert_allclose(ref.step(x[n], t[n] - t[n - 1]), want, rtol=0, atol=1e-12)
-    if which == "richer":  # the lift did act: some rise passed its knee
+    if which == "richer":  # the lift did act: some rise passed its knee; the band widened
         assert (ours._top > 0).any()
+        assert (ours.weights.config["noise_band"] * ours._noise.s > ours._band).any()
 
 
 def test_the_bench_runs_without_torch_and_says_so(tmp_path):

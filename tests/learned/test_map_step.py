@@ -120,8 +120,11 @@ class Previous(TrackerMap):
 
 def _weights(which: str) -> MapWeights:
     """The shipped map; with a per-output deadband and no lift; or with a lift (some
-    knees at 0, its top kept), a scalar deadband and a detail on some outputs only."""
+    knees at 0, its top kept), a scalar deadband and a detail on some outputs only. The
+    band is never widened by the noise: the frozen step predates it (learned/band.py;
+    its paths are checked against each other in tests/learned/test_tracker_map.py)."""
     w = MapWeights.load(MODELS / "mediapipe.npz")
+    w = MapWeights.build(dict(w.config, noise_band=0.0), w.arrays)
     m = len(w.outputs)
     if which == "shipped":
         return w

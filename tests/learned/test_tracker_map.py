@@ -14,7 +14,7 @@ NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
 
 
 def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None,
-            detail=None, top=False) -> MapWeights:  # fmt: skip
+            detail=None, top=False, noise=0.0) -> MapWeights:  # fmt: skip
     rng = np.random.default_rng(seed)
     k = len(NAMES)
     arrays = {
@@ -38,7 +38,7 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None
         arrays["detail"] = np.full(k, float(detail))
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
               "hidden": hidden, "prefilter": prefilter, "rest": rest,
-              "deadband": deadband, "lift_top": top}  # fmt: skip
+              "deadband": deadband, "lift_top": top, "noise_band": noise}  # fmt: skip
     return MapWeights.build(config, arrays)
 
 
@@ -143,11 +143,13 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("band, lift, detail, top", [
-    (0.0, None, None, False), (0.05, None, None, False), (0.05, (2.5, 0.2), 0.6, False),
-    (0.02, (6.0, 0.1), 0.3, True)])  # fmt: skip
+@pytest.mark.parametrize("band, lift, detail, top, noise", [
+    (0.0, None, None, False, 0.0), (0.05, None, None, False, 0.0),
+    (0.05, (2.5, 0.2), 0.6, False, 0.0), (0.02, (6.0, 0.1), 0.3, True, 0.0),
+    (0.01, None, 0.3, False, 16.0), (0.0, (2.5, 0.2), None, False, 8.0)])  # fmt: skip
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
-def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top):
+def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top,
+                                                               noise):  # fmt: skip
     """``_usual`` (every stream present and advancing) against the general path, forced, on
     streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
     three streams together and one alone."""
@@ -159,7 +161,7 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift,
     t[100:, 0] += 1.0  # ... and the one stream stepped alone
     x = rng.uniform(0, 1, (n, 3, len(names)))
     x[40, 0] = np.nan  # a lost frame
-    w = weights(hidden=0, deadband=band, lift=lift, detail=detail, top=top)
+    w = weights(hidden=0, deadband=band, lift=lift, detail=detail, top=top, noise=noise)
     for streams in (slice(None), 0):
         fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
         general._usual = lambda x, tt: None
@@ -205,6 +207,43 @@ def test_the_deadband_holds_tracker_noise_and_passes_movement():
     for bad in (-0.1, 0.5, [0.01, 0.02], "x"):
         with pytest.raises(FacecleanError, match="deadband"):
             MapWeights.build({**plain.config, "deadband": bad}, plain.arrays)
+
+
+def test_the_noise_band_widens_on_a_noisy_face_and_stays_the_floor_on_a_clean_one():
+    """learned/band.py: eps = max(floor, c s), s the running mean |second difference| of
+    the map: a noisy still face is held far stiller than by the floor alone; a smooth
+    movement gets the floor's output; the whole take compiled equals stepping; a restart
+    keeps the noise level; a bad c is refused."""
+    from faceclean.filters import compiled
+
+    rng = np.random.default_rng(4)
+    t = np.arange(600) / 30.0
+    noisy = np.tile([0.3, 0.2, 0.1], (600, 1)) + rng.normal(0, 0.02, (600, 3))
+    floor = weights(hidden=0, prefilter=False, rest=False, deadband=0.01)
+    wide = weights(hidden=0, prefilter=False, rest=False, deadband=0.01, noise=16.0)
+    m = TrackerMap(weights=floor).clean(Animation(t, noisy, NAMES)).values
+    y = TrackerMap(weights=wide).clean(Animation(t, noisy, NAMES)).values
+    assert np.abs(np.diff(y[60:], axis=0)).mean() < 0.3 * np.abs(np.diff(m[60:], axis=0)).mean()
+    smooth = 0.4 + 0.2 * np.sin(2 * np.pi * 0.5 * t[:, None] + np.arange(3))
+    m = TrackerMap(weights=floor).clean(Animation(t, smooth, NAMES)).values
+    y = TrackerMap(weights=wide).clean(Animation(t, smooth, NAMES)).values
+    np.testing.assert_allclose(y, m, rtol=0, atol=1e-12)  # c s stays under the floor
+    gap = t + (t >= 10.0) * 2.0  # a gap restarts the stream; the noise level is kept
+    anim = Animation(gap, noisy, NAMES)
+    tm = TrackerMap(weights=wide)
+    stepped = np.array([tm.step(noisy[i], gap[i]) for i in range(len(t))])
+    assert tm._noise.s.min() > 0.01
+    was = compiled.enabled()
+    compiled.enable()
+    try:
+        np.testing.assert_allclose(TrackerMap(weights=wide).clean(anim).values, stepped,
+                                   rtol=0, atol=1e-12)  # fmt: skip
+    finally:
+        if not was:
+            compiled.disable()
+    for bad in (-1.0, 101.0, True, "2"):
+        with pytest.raises(FacecleanError, match="noise_band"):
+            MapWeights.build({**floor.config, "noise_band": bad}, floor.arrays)
 
 
 def test_the_lift_closes_a_blink_and_leaves_a_face_at_rest():

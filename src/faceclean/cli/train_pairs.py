@@ -106,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
                   "differs past the contract's rate clause", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "rises":
             worst = max(e["worst_family"].values(), default=float("nan"))
-            print(f"rises, pre-filter {e['pre']}, deadband {e['deadband']:g}, detail "
+            print(f"rises, pre-filter {e['pre']}, deadband {e['deadband']:g} (noise x"
+                  f"{e['noise_band']:g}), detail "
                   f"{e['detail']:g}, shrinkage {e['lam']:g}: leaving a look and a source out, "
                   f"MSE {e['val_mse']:.3f}x raw, jitter {e['jitter']:.2f}x, lag {e['lag']:.0f} "
                   f"ms, worst group {worst:.2f}x, at rest {e['neutral_off']:.3f} off",

@@ -346,8 +346,9 @@ def _noise_band(m, h, y0, p1, p2, s, floor, c, tau, y):
     for n in range(m.shape[0]):
         a = h[n] / (h[n] + tau)
         for j in range(m.shape[1]):
-            d2 = abs(m[n, j] - 2.0 * p1[j] + p2[j])
-            s[j] = s[j] + a * (d2 - s[j])
+            d, d0 = m[n, j] - p1[j], p1[j] - p2[j]
+            v = min(abs(d), abs(d0)) if d * d0 < 0.0 else 0.0  # a reversal
+            s[j] = s[j] + a * (v - s[j])
             eps = max(floor[j], c * s[j])
             prev = y0[j] if n == 0 else y[n - 1, j]
             d = min(max(m[n, j] - prev, -eps), eps)

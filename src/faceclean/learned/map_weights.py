@@ -9,7 +9,8 @@ or M of them, weight units, 0 if absent), ...facts}; arrays
 input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_DETAIL]
 (absent: 0; nonzero needs an input of the output's name, as the lift does), the fitted
 gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
-user's ``detail`` setting; config ``lift_top`` true or false (absent: false).
+user's ``detail`` setting; config ``lift_top`` true or false (absent: false); config
+``noise_band`` c in [0, MAX_NOISE] (absent: 0), the band's widening (learned/band.py).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ MAX_WIDTH = 4096
 MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
 MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blinks
 MAX_DETAIL = 4.0  # the detail's gain: more would pass the raw input's noise amplified
+MAX_NOISE = 100.0  # the band over the noise: more would hold a face still through its moves
 
 
 @dataclass(frozen=True)
@@ -115,6 +117,9 @@ class MapWeights:
             raise FacecleanError(f"{label}: deadband must be within [0, {MAX_DEADBAND}]")
         if not isinstance(config.get("lift_top", False), bool):
             raise FacecleanError(f"{label}: lift_top must be true or false")
+        c = config.get("noise_band", 0.0)
+        if isinstance(c, bool) or not isinstance(c, (int, float)) or not 0 <= c <= MAX_NOISE:
+            raise FacecleanError(f"{label}: noise_band must be a number within [0, {MAX_NOISE}]")
         scale = config.get("detail_scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
             raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")

@@ -13,7 +13,9 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
     m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))  a lift, where g_j > 0 (blinks):
                                         l_j = g_j (u_j - r_j - k_j), T_j its largest value
                                         so far (with ``lift_top``; else T_j = 1)
-    y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output
+    y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output, with
+                                        ``noise_band`` c > 0 widened to c x the stream's
+                                        own noise where that is more (learned/band.py)
 
 ``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
 the rest feature takes each face's own resting reading off, which is where identities
@@ -22,31 +24,28 @@ ridge baseline). ``d (x - u)_own`` is the detail: output j adds d_j times what t
 pre-filter took off the input of its own name (x_j - u_j, the raw frame minus the filtered
 one). The levels come through the filter from every input; the timing comes from the
 channel's own raw input, so the output need not lag by the filter's time constant, and the
-noise of the 50 other inputs stays filtered (docs/MODEL.md). The deadband (``deadband`` in
-the config, 0 if absent) lets the output stand while the map's value stays within eps of
-it: a still face's tracker noise, which the map gathers from all its inputs, moves
-nothing, while a movement passes with a lag of eps / speed (1 ms at a blink's 10 /s) and a
-bias of at most eps. The lift restores what a least-squares map cannot: a peak. The
-tracker under-reads a closing eyelid, and a map fitted to every frame pulls each peak
-toward the mean; where the same channel's own rise above rest passes a knee k, its output
-is at least that rise times a gain g (output j reads the input of its own name). At rest
-the rise u - r is below k, so the lift is 0. With ``lift_top`` the lift's top follows the
-stream: once a face's own rise has lifted past 1 (an eye that reads higher than the
-training faces'), every lift is scaled so that the largest so far reaches 1, not more; the
-gain only ever falls. The optional hidden layer (``hidden`` > 0)
-adds what is not linear; on the pairs we have it overfits (docs/MODEL.md), so the shipped
-map is linear. Why this cannot invent motion: m is a function of (u, r, x - u) only; on a
-still face u converges to x, so the detail goes to 0, r is constant, and m converges and y
-with it; a missing frame holds u and so y.
+noise of the 50 other inputs stays filtered (docs/MODEL.md). The deadband (``deadband``,
+0 if absent) lets the output stand while the map's value stays within eps of it: a still
+face's noise, which the map gathers from all its inputs, moves nothing, while a movement
+passes with a lag of eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps.
+The lift restores what a least-squares map cannot: a peak. The tracker under-reads a
+closing eyelid, and a map fitted to every frame pulls each peak toward the mean; where the
+same channel's own rise above rest passes a knee k, its output is at least that rise times
+a gain g (output j reads the input of its own name). At rest the rise u - r is below k, so
+the lift is 0. With ``lift_top`` the lift's top follows the stream: once a face's own rise
+has lifted past 1 (an eye that reads higher than the training faces'), every lift is scaled
+so that the largest so far reaches 1, not more; the gain only ever falls. The optional
+hidden layer (``hidden`` > 0) adds what is not linear; on the pairs we have it overfits
+(docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
+function of (u, r, x - u) only; on a still face u converges to x, so the detail goes to 0,
+r is constant, and m converges and y with it; a missing frame holds u and so y.
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
 the filter (the rest level is kept: the same face came back). Input columns the model
 does not know pass through (under the same rules); model inputs the frame lacks are fed 0
 (a tracker that never reads them); model outputs the frame has no column for (tongueOut
-for MediaPipe) are not written.
-
-The weights and their checkpoint: map_weights.py.
+for MediaPipe) are not written. The weights and their checkpoint: map_weights.py.
 """
 
 from __future__ import annotations
@@ -62,6 +61,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import BLOCK, MAX_ABS, MIN_DT, Stepper, check_finite, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
+from faceclean.learned import band as noise
 from faceclean.learned.map_weights import MAX_DETAIL as MAX_DETAIL  # neural/map_groups.py's
 from faceclean.learned.map_weights import MapWeights
 
@@ -173,7 +173,9 @@ class TrackerMap(Stepper):
         self._xs = _span(self._in.src)
         self._ys = _span(self._out.src)
         band = np.asarray(w.config.get("deadband", 0.0), np.float64)
-        self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if band.any() else None
+        self._noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py's c
+        on = band.any() or self._noise_c > 0
+        self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if on else None
         eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
         self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
@@ -201,6 +203,7 @@ class TrackerMap(Stepper):
             self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
             self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
             self._top = np.full((s, len(self._lo)), -np.inf)  # (S, L) largest lift so far
+            self._noise = noise.Noise(s, len(self.weights.outputs))  # the band's noise
         bad = ~(np.abs(x) <= MAX_ABS)  # rule 2 for every column, passthrough ones too
         missing = bad.all(axis=1) | ~np.isfinite(tt)  # rule 1
         if bad.any():
@@ -227,7 +230,13 @@ class TrackerMap(Stepper):
         if bad.any() and len(self._do):  # a held value has no detail
             xi = np.where(self._in_matrix(bad.astype(np.float64)) > 0, u, xi)
         y = self._map(u, moved, xi)
-        if self._band is not None:  # the deadband; a (re)start takes the map's value
+        if self._noise_c > 0:  # the band widened by the noise (learned/band.py)
+            go = advance & ~start
+            h = np.maximum(np.where(go, dt, 1.0), DT_MIN)[:, None]  # s
+            y_band = noise.step(y, self._m, self._noise, h, self._band, self._noise_c, go)
+            noise.start(y, self._noise, start)
+            y = y_band
+        elif self._band is not None:  # the deadband; a (re)start takes the map's value
             d = np.clip(y - self._m, -self._band, self._band)
             y = y - np.where(start[:, None] | np.isnan(d), 0.0, d)
         self._m = y if moved.all() else np.where(moved[:, None], y, self._m)
@@ -294,6 +303,9 @@ class TrackerMap(Stepper):
             y = y[:, :m].copy()  # contiguous: the steps below run faster on it
             y[:, self._lo] = lifted
         band = self._band
+        if self._noise_c > 0:  # the band widened by the noise (learned/band.py)
+            y = noise.step(y, self._m, self._noise, h, band, self._noise_c)
+            band = None
         if band is not None:  # the deadband: y = m - clip(m - y_prev, -eps, eps)
             d = y - self._m
             d.clip(*self._eps, out=d)
@@ -418,7 +430,9 @@ class TrackerMap(Stepper):
             lifted = np.maximum(y[:, self._lo], y[:, m:])
             y = y[:, :m].copy()
             y[:, self._lo] = lifted
-        if self._band is not None:  # the deadband, from the last output on
+        if self._noise_c > 0:  # the band widened by the noise (learned/band.py)
+            y = noise.run(y, h, self._m[0], self._noise, self._band, self._noise_c)
+        elif self._band is not None:  # the deadband, from the last output on
             held = compiled.deadband(np.concatenate([self._m, y]), self._band)
             if held is None:
                 for n in range(len(y)):

@@ -114,7 +114,7 @@ def score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tup
 
     sq, n, jit, lags, peaks = 0.0, 0, [], [], []
     for t, u, r, y, e in feats:
-        pred = predict(w, u, r, e)
+        pred = predict(w, u, r, e, t)
         sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
         if len(t) > 3:
             jit.append(jitter_ratio(t, pred, y))
@@ -127,9 +127,10 @@ def score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tup
     return out + ((mean(np.concatenate(peaks)) if peaks else float("nan"),) if closure else ())
 
 
-def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None
-             ) -> np.ndarray:  # fmt: skip
-    """The runtime's output for one pair's features (F, K), deadband included."""
+def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None,
+            t: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """The runtime's output for one pair's features (F, K), deadband included (the band
+    widened by the noise needs the frames' times t (F,) s)."""
     a = w.arrays
     lin = u @ a["a"].T + a["c"]
     rest = (u - r) if w.config["rest"] else np.zeros_like(u)
@@ -150,6 +151,13 @@ def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = 
             rise = rise / np.maximum(np.maximum.accumulate(rise, axis=0), 1.0)
         m[:, lo] = np.maximum(m[:, lo], np.clip(rise, 0.0, 1.0))
     band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), m.shape[1:])
+    c = float(w.config.get("noise_band", 0.0))
+    if c > 0:
+        if t is None:
+            raise ValueError("a band widened by the noise needs the frames' times")
+        from faceclean.learned import band as noise
+
+        return noise.whole(m, t, np.ascontiguousarray(band), c)
     if not band.any() or len(m) < 2:
         return m
     from faceclean.filters import compiled

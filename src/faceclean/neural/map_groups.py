@@ -150,7 +150,7 @@ def choose(w, folds: dict[str, tuple], predict: Callable, set_linear: Callable,
             gram, xty, held = folds[key]
             set_linear(w, *solve(gram, xty, names, every))
             for feat in held:
-                pred = predict(w, feat.u, feat.r, feat.e)
+                pred = predict(w, feat.u, feat.r, feat.e, feat.t)
                 np.add.at(sse[ci, f], gi, ((pred - feat.y) ** 2).sum(0))
                 quiet = (feat.u - feat.r) < QUIET  # no evidence on the channel's own input
                 up += np.where(quiet, pred - feat.u, 0.0).sum(0)

@@ -17,6 +17,7 @@ import torch
 
 from faceclean.channel_map import ChannelMap
 from faceclean.filters.one_euro import DT_MIN
+from faceclean.learned.band import TAU as BAND_TAU
 
 
 class MapReference:
@@ -58,6 +59,7 @@ class MapReference:
         self.topped = bool(w.config.get("lift_top", False)) and len(lo) > 0
         band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), (self.M,))
         self.band = t64(band)
+        self.noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py
         self.state: tuple | None = None
 
     @property
@@ -97,6 +99,7 @@ class MapReference:
         top = torch.full((len(xt), len(self.lo)), -np.inf, dtype=torch.float64)
         m, top = self._map(u, u.clone(), u, top)
         self.state = (u, torch.zeros_like(u), u.clone(), m, top)
+        self.noise = (m.clone(), m.clone(), torch.zeros_like(m))  # m_{n-1}, m_{n-2}, s
 
     @torch.no_grad()
     def step(self, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -114,7 +117,15 @@ class MapReference:
             u = xi
         r = torch.minimum(r, u)
         m, top = self._map(u, r, xi, top)
-        m = m - (m - prev).clamp(-self.band, self.band)  # the deadband
+        band = self.band
+        if self.noise_c > 0:  # widened by the noise: c s, s the mean reversal
+            p1, p2, s = self.noise
+            d, d0 = m - p1, p1 - p2
+            v = torch.where(d * d0 < 0, torch.minimum(d.abs(), d0.abs()), torch.zeros_like(d))
+            s = s + h / (h + BAND_TAU) * (v - s)
+            self.noise = (m.clone(), p1, s)
+            band = torch.maximum(band, self.noise_c * s)
+        m = m - (m - prev).clamp(-band, band)  # the deadband
         self.state = (u, edx, r, m, top)
         y = xt.clone()
         y[:, self.out_cols] = m[:, self.out_have]

@@ -1,0 +1,112 @@
+"""The tracker map's output band, widened by the stream's own noise.
+
+A map that sums 51 inputs' rises gathers their noise, and how much noise MediaPipe gives
+depends on the face: on the appearance families' pairs raw MediaPipe jitters 4.6x the
+truth on painted faces and 16x on photo-textured ones (docs/RESULTS.md). A fixed deadband
+(learned/tracker_map.py) wide enough for a noisy face lags a clean one. Here the band
+follows the stream. Per output j, frame n, m the map's value, y the output, h the frame's
+dt (s):
+
+    v_n   = min(|d_n|, |d_{n-1}|) where d_n d_{n-1} < 0, else 0,   d_n = m_n - m_{n-1}
+    s_n   = s_{n-1} + a_n (v_n - s_{n-1}),  a_n = h_n / (h_n + TAU)
+    eps_n = max(floor_j, c s_n)
+    y_n   = m_n - clip(m_n - y_{n-1}, -eps_n, eps_n)
+
+v is a reversal: the map went one way and came back. Noise reverses about every other
+frame; a movement does not, and where it turns (a peak) its steps are near 0. So s, the
+running mean of v (weight units), grows with the noise and barely with the motion: on a
+face the tracker reads cleanly the band is the floor (the model's ``deadband``), on a
+noisy one it widens, during speech as at rest. (The second difference |m_n - 2 m_{n-1} +
+m_{n-2}| measures speech's accelerations as noise: at the same jitter it lagged 6-8 ms
+more, docs/MODEL.md.) ``c`` is the model's ``noise_band`` (0 or absent: the fixed band).
+A (re)start takes the map's value (y = m) and m_{n-1} = m_{n-2} = m; s is kept through a
+restart (the same face came back) and is 0 after ``reset``. A smooth curve reverses only
+where it turns, with steps near 0, at any frame rate: the contract's rate clause holds as
+for the fixed band.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceclean.filters.one_euro import DT_MIN
+
+TAU = 1.0  # s: the noise estimate's time constant
+
+
+class Noise:
+    """The band's state for S streams and M outputs: m_{n-1}, m_{n-2}, s (S, M) each."""
+
+    def __init__(self, s: int, m: int) -> None:
+        self.p1 = np.full((s, m), np.nan)
+        self.p2 = np.full((s, m), np.nan)
+        self.s = np.zeros((s, m))
+
+
+def step(m: np.ndarray, y: np.ndarray, st: Noise, h: np.ndarray | float, floor: np.ndarray,
+         c: float, rows: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """The output (S, M) for the map's value m (S, M) after the last output y (S, M), h s
+    (S, 1) or a number; updates ``st``. ``rows`` (S,) bool: the streams that advance (the
+    others keep their state; their output is m, which the caller discards)."""
+    v = reversal(m - st.p1, st.p1 - st.p2)
+    a = h / (h + TAU)
+    s = st.s + a * (v - st.s)
+    eps = np.maximum(floor, c * s)
+    out = m - np.clip(m - y, -eps, eps)
+    if rows is None:
+        st.s, st.p2, st.p1 = s, st.p1, m.copy()
+        return out
+    keep = rows[:, None]
+    st.s = np.where(keep, s, st.s)
+    st.p2 = np.where(keep, st.p1, st.p2)
+    st.p1 = np.where(keep, m, st.p1)
+    return np.where(keep, out, m)
+
+
+def reversal(d: np.ndarray, d0: np.ndarray) -> np.ndarray:
+    """v: min(|d|, |d0|) where the steps d, d0 turn (d d0 < 0), else 0 (NaN: 0)."""
+    return np.where(d * d0 < 0.0, np.minimum(np.abs(d), np.abs(d0)), 0.0)
+
+
+def start(m: np.ndarray, st: Noise, rows: np.ndarray) -> None:
+    """A (re)start of the streams ``rows`` (S,) bool: m_{n-1} = m_{n-2} = m (S, M)."""
+    keep = rows[:, None]
+    st.p1 = np.where(keep, m, st.p1)
+    st.p2 = np.where(keep, m, st.p2)
+
+
+def run(m: np.ndarray, h: np.ndarray, y0: np.ndarray, st: Noise, floor: np.ndarray,
+        c: float) -> np.ndarray:  # fmt: skip
+    """``step`` over a run of frames of one stream: m (N, M) the map's values, h (N,) s,
+    y0 (M,) the output before the run; (N, M) outputs, ``st`` (one stream) as stepping
+    leaves it. Compiled (filters/compiled.py) where numba is on, else frame by frame."""
+    from faceclean.filters import compiled
+
+    s, p1, p2 = st.s[0].copy(), st.p1[0].copy(), st.p2[0].copy()
+    m = np.ascontiguousarray(m, np.float64)
+    y = compiled.noise_band(m, h, y0, p1, p2, s, floor, c, TAU)
+    if y is None:
+        y = np.empty_like(m)
+        prev = y0
+        for n in range(len(m)):
+            v = reversal(m[n] - p1, p1 - p2)
+            s = s + h[n] / (h[n] + TAU) * (v - s)
+            eps = np.maximum(floor, c * s)
+            y[n] = prev = m[n] - np.clip(m[n] - prev, -eps, eps)
+            p2, p1 = p1, m[n].copy()
+    st.s, st.p1, st.p2 = s[None], p1[None], p2[None]
+    return y
+
+
+def whole(m: np.ndarray, t: np.ndarray, floor: np.ndarray, c: float) -> np.ndarray:
+    """The band over one stream's frames m (N, M) at t (N,) s from a reset (the fits'
+    view: map_features.predict): y_0 = m_0, then ``run``."""
+    if len(m) < 2:
+        return m.copy()
+    st = Noise(1, m.shape[1])
+    start(m[:1], st, np.ones(1, bool))
+    y = np.empty_like(m)
+    y[0] = m[0]
+    h = np.maximum(np.diff(t), DT_MIN)  # s, as the runtime's usual frame takes it
+    y[1:] = run(m[1:], h, m[0], st, floor, c)
+    return y
