@@ -21,8 +21,9 @@ FPS = 30.0
 PRE = [(2.0, 50.0, 4.0)]  # one pre-filter: the test is about the map, not the filter
 
 
-def tracker(look: int):
-    """A look's tracker: (N, 51) truth -> (N, 51) readings, its own gaze mix and rest."""
+def tracker(look: int, noise: float = 0.01):
+    """A look's tracker: (N, 51) truth -> (N, 51) readings, its own gaze mix and rest, and
+    ``noise`` (weight units, one sd) on every reading."""
     rng = np.random.default_rng(look)
     mix = np.eye(len(GAZE)) * rng.uniform(0.4, 0.8) + rng.uniform(0, 0.35, (len(GAZE),) * 2)
     rest = rng.uniform(0.0, 0.12, len(NAMES))
@@ -31,14 +32,14 @@ def tracker(look: int):
         x = 0.8 * y + rest
         x[:, GAZE] = y[:, GAZE] @ mix.T + rest[GAZE]
         x[:, ZERO_READ] = 0.0
-        noise = np.random.default_rng([look, seed]).normal(0, 0.01, x.shape)
-        return np.clip(x + noise, 0.0, 1.0)
+        jitter = np.random.default_rng([look, seed]).normal(0, noise, x.shape)
+        return np.clip(x + jitter, 0.0, 1.0)
 
     return read
 
 
-def pairs(look: int, sources: int = 4, per: int = 2) -> list[paired.Pair]:
-    read = tracker(look)
+def pairs(look: int, sources: int = 4, per: int = 2, noise: float = 0.01) -> list[paired.Pair]:
+    read = tracker(look, noise)
     out = []
     for s in range(sources):
         for k in range(per):

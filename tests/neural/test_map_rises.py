@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from looks import GAZE, NAMES, PRE, cleaned, gaze_ratio, neutral_off, pairs
+from looks import FPS, GAZE, NAMES, PRE, cleaned, gaze_ratio, neutral_off, pairs, tracker
 
 from faceclean.animation import Animation
 from faceclean.learned.tracker_map import TrackerMap
@@ -69,7 +69,7 @@ def test_the_runtime_gives_what_the_fit_scored(fitted):
     feats = fit.features(rises, test[:2])
     for f, p in zip(feats, test[:2], strict=True):
         out = TrackerMap(weights=rises, names=NAMES).clean(p.tracked).values
-        np.testing.assert_allclose(out, fit.predict(rises, f.u, f.r, f.e), atol=1e-9)
+        np.testing.assert_allclose(out, fit.predict(rises, f.u, f.r, f.e, f.t), atol=1e-9)
 
 
 def test_groups_told_to_read_their_own_rise_do_whatever_the_folds_say():
@@ -133,3 +133,29 @@ def test_a_lift_that_breaks_the_frame_rate_contract_is_refused(fitted):
 
     assert map_rises.keeps_rate(lifted(1.0))
     assert not map_rises.keeps_rate(lifted(5.0))
+
+
+def test_the_band_widened_by_the_noise_calms_a_noisy_look_and_leaves_a_clean_one(fitted):
+    """The fitted map with its band widened by the noise (learned/band.py, c = 16, the
+    shipped choice) on a new look, a face moving smoothly (slow sines), read by a tracker
+    that jitters (0.04 sd): far less jitter than the fixed band gives, for a little MSE;
+    read cleanly (0.002 sd), the band stays near its floor: the output within 0.02 of the
+    fixed band's."""
+    from faceclean.evaluation.metrics import jitter_ratio
+
+    rises, _, _ = fitted
+    plain = replace(rises, config=dict(rises.config, noise_band=0.0, deadband=0.01))
+    wide = replace(plain, config=dict(plain.config, noise_band=16.0))
+    t = np.arange(int(12 * FPS)) / FPS
+    rng = np.random.default_rng(7)
+    f, ph = rng.uniform(0.1, 0.6, len(NAMES)), rng.uniform(0, 2 * np.pi, len(NAMES))
+    y = 0.3 + 0.25 * np.sin(2 * np.pi * f * t[:, None] + ph)  # (N, 51) the truth
+    outs = {}
+    for sd in (0.04, 0.002):
+        x = tracker(3, sd)(y, 5)
+        for name, w in (("wide", wide), ("plain", plain)):
+            out = TrackerMap(weights=w, names=NAMES).clean(Animation(t, x, NAMES)).values
+            outs[sd, name] = out, float(((out - y) ** 2).mean()), jitter_ratio(t, out, y)
+    assert outs[0.04, "wide"][2] < 0.5 * outs[0.04, "plain"][2]
+    assert outs[0.04, "wide"][1] <= 1.15 * outs[0.04, "plain"][1]  # a band's bias: < eps
+    assert np.abs(outs[0.002, "wide"][0] - outs[0.002, "plain"][0]).max() <= 0.02

@@ -50,7 +50,7 @@ def _warm_args() -> dict[str, tuple]:
         "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one,
                           x.copy(), x.copy()),
         "affine": (x, x, x.copy()),
-        "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0,
+        "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0, 0.1,
                        x.copy()),
     }  # fmt: skip
 
@@ -329,7 +329,8 @@ def _affine(a, w, y):
                 y[n, j] += v * w[k, j]
 
 
-def noise_band(m, h, y0, p1, p2, s, floor, c: float, tau: float) -> np.ndarray | None:
+def noise_band(m, h, y0, p1, p2, s, floor, c: float, tau: float, cap: float
+               ) -> np.ndarray | None:  # fmt: skip
     """learned/band.py's band over a run of one stream's frames m (N, M), h (N,) s, after
     the output y0 (M,); p1, p2, s (M,) its state, updated in place. (N, M), or None when
     off."""
@@ -337,11 +338,11 @@ def noise_band(m, h, y0, p1, p2, s, floor, c: float, tau: float) -> np.ndarray |
     if kernel is None:
         return None
     y = np.empty_like(m)
-    kernel(m, h, y0, p1, p2, s, floor, float(c), float(tau), y)
+    kernel(m, h, y0, p1, p2, s, floor, float(c), float(tau), float(cap), y)
     return y
 
 
-def _noise_band(m, h, y0, p1, p2, s, floor, c, tau, y):
+def _noise_band(m, h, y0, p1, p2, s, floor, c, tau, cap, y):
     """In place: y (N, M) the band's outputs, in learned/band.py's ``step`` order."""
     for n in range(m.shape[0]):
         a = h[n] / (h[n] + tau)
@@ -349,7 +350,7 @@ def _noise_band(m, h, y0, p1, p2, s, floor, c, tau, y):
             d, d0 = m[n, j] - p1[j], p1[j] - p2[j]
             v = min(abs(d), abs(d0)) if d * d0 < 0.0 else 0.0  # a reversal
             s[j] = s[j] + a * (v - s[j])
-            eps = max(floor[j], c * s[j])
+            eps = min(cap, max(floor[j], c * s[j]))
             prev = y0[j] if n == 0 else y[n - 1, j]
             d = min(max(m[n, j] - prev, -eps), eps)
             y[n, j] = m[n, j] - d

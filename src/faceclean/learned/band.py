@@ -9,7 +9,7 @@ dt (s):
 
     v_n   = min(|d_n|, |d_{n-1}|) where d_n d_{n-1} < 0, else 0,   d_n = m_n - m_{n-1}
     s_n   = s_{n-1} + a_n (v_n - s_{n-1}),  a_n = h_n / (h_n + TAU)
-    eps_n = max(floor_j, c s_n)
+    eps_n = min(CAP, max(floor_j, c s_n))
     y_n   = m_n - clip(m_n - y_{n-1}, -eps_n, eps_n)
 
 v is a reversal: the map went one way and came back. Noise reverses about every other
@@ -22,7 +22,9 @@ more, docs/MODEL.md.) ``c`` is the model's ``noise_band`` (0 or absent: the fixe
 A (re)start takes the map's value (y = m) and m_{n-1} = m_{n-2} = m; s is kept through a
 restart (the same face came back) and is 0 after ``reset``. A smooth curve reverses only
 where it turns, with steps near 0, at any frame rate: the contract's rate clause holds as
-for the fixed band.
+for the fixed band. CAP bounds the band where the tracker jumps and jumps back (a
+glitch's reversal is large) or jitters past what a band should hold: a wider band would
+hold real movement (map_weights.MAX_DEADBAND).
 """
 
 from __future__ import annotations
@@ -30,8 +32,10 @@ from __future__ import annotations
 import numpy as np
 
 from faceclean.filters.one_euro import DT_MIN
+from faceclean.learned.map_weights import MAX_DEADBAND
 
 TAU = 1.0  # s: the noise estimate's time constant
+CAP = MAX_DEADBAND  # weight units: the widest band
 
 
 class Noise:
@@ -51,7 +55,7 @@ def step(m: np.ndarray, y: np.ndarray, st: Noise, h: np.ndarray | float, floor: 
     v = reversal(m - st.p1, st.p1 - st.p2)
     a = h / (h + TAU)
     s = st.s + a * (v - st.s)
-    eps = np.maximum(floor, c * s)
+    eps = np.minimum(CAP, np.maximum(floor, c * s))
     out = m - np.clip(m - y, -eps, eps)
     if rows is None:
         st.s, st.p2, st.p1 = s, st.p1, m.copy()
@@ -84,14 +88,14 @@ def run(m: np.ndarray, h: np.ndarray, y0: np.ndarray, st: Noise, floor: np.ndarr
 
     s, p1, p2 = st.s[0].copy(), st.p1[0].copy(), st.p2[0].copy()
     m = np.ascontiguousarray(m, np.float64)
-    y = compiled.noise_band(m, h, y0, p1, p2, s, floor, c, TAU)
+    y = compiled.noise_band(m, h, y0, p1, p2, s, floor, c, TAU, CAP)
     if y is None:
         y = np.empty_like(m)
         prev = y0
         for n in range(len(m)):
             v = reversal(m[n] - p1, p1 - p2)
             s = s + h[n] / (h[n] + TAU) * (v - s)
-            eps = np.maximum(floor, c * s)
+            eps = np.minimum(CAP, np.maximum(floor, c * s))
             y[n] = prev = m[n] - np.clip(m[n] - prev, -eps, eps)
             p2, p1 = p1, m[n].copy()
     st.s, st.p1, st.p2 = s[None], p1[None], p2[None]

@@ -17,6 +17,7 @@ import torch
 
 from faceclean.channel_map import ChannelMap
 from faceclean.filters.one_euro import DT_MIN
+from faceclean.learned.band import CAP as BAND_CAP
 from faceclean.learned.band import TAU as BAND_TAU
 
 
@@ -124,7 +125,7 @@ class MapReference:
             v = torch.where(d * d0 < 0, torch.minimum(d.abs(), d0.abs()), torch.zeros_like(d))
             s = s + h / (h + BAND_TAU) * (v - s)
             self.noise = (m.clone(), p1, s)
-            band = torch.maximum(band, self.noise_c * s)
+            band = torch.maximum(band, self.noise_c * s).clamp(max=BAND_CAP)
         m = m - (m - prev).clamp(-band, band)  # the deadband
         self.state = (u, edx, r, m, top)
         y = xt.clone()
