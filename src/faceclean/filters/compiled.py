@@ -199,14 +199,18 @@ def deadband(m: np.ndarray, band: np.ndarray) -> np.ndarray | None:
     kernel = _kernel("deadband")
     if kernel is None:
         return None
-    y = np.array(m, dtype=np.float64, order="C")
-    kernel(np.ascontiguousarray(m, dtype=np.float64), np.ascontiguousarray(band, np.float64), y)
+    m = np.ascontiguousarray(m, dtype=np.float64)
+    y = np.empty_like(m)
+    if len(m):  # (the kernel writes the first frame)
+        kernel(m, np.ascontiguousarray(band, np.float64), y)
     return y
 
 
 def _deadband(m, band, y):
-    """In place: y (N, M) starts as m; each frame after the first takes what is left of
-    m after its change from the last output, clipped to +-band (M,), is taken off."""
+    """Into y (N, M): the first frame of m, then each frame what is left of m after its
+    change from the last output, clipped to +-band (M,), is taken off."""
+    for j in range(m.shape[1]):
+        y[0, j] = m[0, j]
     for n in range(1, m.shape[0]):
         for j in range(m.shape[1]):
             d = m[n, j] - y[n - 1, j]
