@@ -13,14 +13,12 @@ identity is clamped to [0, 1] after its mapping (``eyeBlink*.gain=1.2`` reads 1.
 full closure, not 1.09). A calibrated overshoot is asked for explicitly: ``clamp=0,1.2``
 (that range), or ``clamp=none`` (no clamp at all; written ``"clamp": false`` in the file).
 
-The identity (scale 1, gain 1, offset 0, curve 1, no rule, on) leaves a channel
-bit-for-bit unchanged: the arithmetic is skipped for it, not merely neutral.
-
-Rules are (pattern, key, value) with key in ``MAP_KEYS``. A pattern is a channel name in
-any spelling ``faceclean.channels`` accepts (``eyeBlinkLeft``, ``EyeBlink_L``), a glob on
-the canonical name (``eyeBlink*``, ``mouth*Left``), or a channel group (``eyes``,
-``mouth``, ...: ``channels.GROUPS``); matching is case-insensitive. Later rules win, so
-``a.merged(b)`` is a with b's rules on top.
+The identity (scale 1, gain 1, offset 0, curve 1, no rule, on) leaves a channel bit-for-bit
+unchanged: the arithmetic is skipped for it, not merely neutral. Rules are (pattern, key, value)
+with key in ``MAP_KEYS``. A pattern is a channel name in any spelling ``faceclean.channels``
+accepts (``eyeBlinkLeft``, ``EyeBlink_L``), a glob on the canonical name (``eyeBlink*``,
+``mouth*Left``), or a channel group (``eyes``, ``mouth``, ...: ``channels.GROUPS``); matching is
+case-insensitive. Later rules win, so ``a.merged(b)`` is a with b's rules on top.
 
 The file format (what ``faceclean calibrate`` writes and ``--calibration`` reads)::
 
@@ -31,9 +29,9 @@ The file format (what ``faceclean calibrate`` writes and ``--calibration`` reads
      "calibration": {...facts, optional, shown by describe()},
      "adaptation": {...}}   # optional: a per-face correction AFTER the cleaner
 
-"channels" maps a pattern to its keys, in order (later entries win). "adaptation" (written
-by ``calibrate --guided --tracker mediapipe``) is ``faceclean.adaptation``'s section: not a
-level, it corrects the cleaner's output; ``Adjusted`` and ``Adjust.adapt`` apply it.
+"channels" maps a pattern to its keys, in order (later entries win). "adaptation" (by
+``calibrate --guided --tracker mediapipe``, ``faceclean.adaptation``'s) corrects the
+cleaner's output, not a level; ``Adjusted`` and ``Adjust.adapt`` apply it.
 """
 
 from __future__ import annotations
@@ -263,13 +261,15 @@ def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
     FAR (a take in percent reads 7.5, not 0.075). A rare glitch does not count; the
     caller skips this when the user gave ``--scale``."""
     cols = [j for j, n in enumerate(names) if canonical(n) is not None]
-    x = np.abs(np.asarray(values, dtype=np.float64)[..., cols])
-    x = x[x <= MAX_ABS]  # finite, and no absurd glitch (filters/base.py rule 2)
-    # The 99th percentile lies between the sorted x at floor(p) and ceil(p), p = 0.99 (n - 1):
-    # when the one at ceil(p) is within FAR (counted, no sort: exact), so is the percentile.
-    if not x.size or math.ceil(0.99 * (x.size - 1)) < x.size - np.count_nonzero(x > FAR):
+    x = np.abs(np.asarray(values, dtype=np.float64))
+    x = x if len(cols) == x.shape[-1] else x[..., cols]  # (every column ARKit's: no copy)
+    # n values count: finite, no absurd glitch (filters/base.py rule 2). The 99th percentile
+    # lies between the sorted values at floor(p) and ceil(p), p = 0.99 (n - 1): when the one
+    # at ceil(p) is within FAR (counted, no sort: exact), so is the percentile.
+    n = np.count_nonzero(x <= MAX_ABS)
+    if not n or math.ceil(0.99 * (n - 1)) < n - np.count_nonzero((x > FAR) & (x <= MAX_ABS)):
         return
-    high = float(np.percentile(x, 99))
+    high = float(np.percentile(x[x <= MAX_ABS], 99))
     if high > FAR:
         guess = 0.01 if high <= 100.0 * FAR else 10.0 ** -math.ceil(math.log10(high))
         raise FacecleanError(

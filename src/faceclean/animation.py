@@ -54,11 +54,12 @@ class Animation:
     @property
     def valid(self) -> np.ndarray:
         """(N,) bool: frames that carry values (not tracking loss)."""
-        return (
-            ~np.all(np.isnan(self.values), axis=1)
-            if self.n_channels
-            else np.ones(self.n_frames, bool)
-        )
+        if not self.n_channels:
+            return np.ones(self.n_frames, bool)
+        ok = ~np.isnan(self.values[:, 0])  # the first value read: the frame is valid
+        lost = np.flatnonzero(~ok)  # the rest: valid where any value is read
+        ok[lost] = ~np.all(np.isnan(self.values[lost]), axis=1)
+        return ok
 
     @property
     def duration(self) -> float:
