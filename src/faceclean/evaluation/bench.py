@@ -174,6 +174,9 @@ def _state_bytes(cleaner: Any, S: int) -> int:
         return int(cleaner.state_bytes + kept)
     if getattr(cleaner, "_state", None) is None:  # a step of its own (the tracker map):
         held = [a for a in vars(cleaner).values() if isinstance(a, np.ndarray)]  # every
+        for part in vars(cleaner).values():  # and its parts' (the band's noise state)
+            if hasattr(part, "__dict__") and not callable(part):
+                held += [a for a in vars(part).values() if isinstance(a, np.ndarray)]
         return int(sum(a.nbytes for a in held if a.ndim and len(a) == S) // S)  # row/stream
     return int(sum(a.nbytes for a in cleaner._state) // S + kept)
 

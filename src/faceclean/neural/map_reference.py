@@ -66,8 +66,9 @@ class MapReference:
     @property
     def state_bytes(self) -> int:
         """Per stream: u, its slope, the rest level (K each), the map's output (M), the
-        lift's top (L), float64."""
-        return 8 * (3 * self.K + self.M + len(self.lo))
+        lift's top (L), with a noise band its last map value, step and noise (M each),
+        float64."""
+        return 8 * (3 * self.K + self.M + len(self.lo) + (3 * self.M if self.noise_c else 0))
 
     def _inputs(self, x: torch.Tensor) -> torch.Tensor:
         """(S, C) frame -> (S, K) model inputs (0 where the frame lacks one)."""
