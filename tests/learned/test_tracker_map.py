@@ -215,6 +215,7 @@ def test_the_noise_band_widens_on_a_noisy_face_and_stays_the_floor_on_a_clean_on
     movement gets the floor's output; the whole take compiled equals stepping; a restart
     keeps the noise level; a bad c is refused."""
     from faceclean.filters import compiled
+    from faceclean.learned import band
 
     rng = np.random.default_rng(4)
     t = np.arange(600) / 30.0
@@ -238,9 +239,14 @@ def test_the_noise_band_widens_on_a_noisy_face_and_stays_the_floor_on_a_clean_on
     try:
         np.testing.assert_allclose(TrackerMap(weights=wide).clean(anim).values, stepped,
                                    rtol=0, atol=1e-12)  # fmt: skip
+        fast = band.whole(noisy, t, np.full(3, 0.01), 16.0)  # the fits' view, compiled
+        compiled.disable()  # ... and without numba: the usual frame's step in turn
+        np.testing.assert_allclose(band.whole(noisy, t, np.full(3, 0.01), 16.0), fast,
+                                   rtol=0, atol=1e-12)  # fmt: skip
     finally:
-        if not was:
-            compiled.disable()
+        compiled.disable()
+        if was:
+            compiled.enable()
     for bad in (-1.0, 101.0, True, "2"):
         with pytest.raises(FacecleanError, match="noise_band"):
             MapWeights.build({**floor.config, "noise_band": bad}, floor.arrays)

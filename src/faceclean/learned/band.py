@@ -112,16 +112,12 @@ def run(m: np.ndarray, h: np.ndarray, y0: np.ndarray, st: Noise, floor: np.ndarr
     s, p1, p2 = st.s[0].copy(), st.p1[0].copy(), st.p2[0].copy()
     m = np.ascontiguousarray(m, np.float64)
     y = compiled.noise_band(m, h, y0, p1, p2, s, floor, c, TAU, CAP)
-    if y is None:
-        y = np.empty_like(m)
-        prev = y0
-        for n in range(len(m)):
-            v = reversal(m[n] - p1, p1 - p2)
-            s = s + h[n] / (h[n] + TAU) * (v - s)
-            eps = np.minimum(CAP, np.maximum(floor, c * s))
-            y[n] = prev = m[n] - np.clip(m[n] - prev, -eps, eps)
-            p2, p1 = p1, m[n].copy()
-    st.s, st.p1, st.p2 = s[None], p1[None], p2[None]
+    if y is not None:
+        st.s, st.p1, st.p2 = s[None], p1[None], p2[None]
+        return y
+    y, prev = np.empty_like(m), y0[None]  # without numba: the usual frame's step, in turn
+    for n in range(len(m)):
+        prev = y[n : n + 1] = _every(m[n : n + 1], prev, st, h[n], floor, c)
     return y
 
 
