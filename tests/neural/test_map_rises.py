@@ -19,7 +19,7 @@ from faceclean.neural import tracker_map as fit
 @pytest.fixture(scope="module")
 def fitted():
     train = pairs(1) + pairs(2)
-    rises = map_rises.fit(train, prefilters=PRE, own_rise=())
+    rises = map_rises.fit(train, prefilters=PRE, own_rise=(), noise_bands=(0.0, 16.0))
     every = fit.fit(train, [], prefilters=PRE, knees=(None,))
     return rises, every, pairs(3)
 
