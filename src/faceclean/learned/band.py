@@ -54,23 +54,22 @@ def step(m: np.ndarray, y: np.ndarray, st: Noise, h: np.ndarray | float, floor: 
     others keep their state; their output is m, which the caller discards)."""
     if rows is None:
         return _every(m, y, st, h, floor, c)
-    v = reversal(m - st.p1, st.p1 - st.p2)
-    a = h / (h + TAU)
-    s = st.s + a * (v - st.s)
-    eps = np.minimum(CAP, np.maximum(floor, c * s))
-    out = m - np.clip(m - y, -eps, eps)
+    new = Noise(0, 0)  # the usual frame's step on a copy, kept for ``rows`` only
+    new.s, new.p1, new.p2 = st.s.copy(), st.p1, st.p2
+    with np.errstate(invalid="ignore"):  # streams not started yet: NaN, not kept
+        out = _every(m, y, new, h, floor, c)
     keep = rows[:, None]
-    st.s = np.where(keep, s, st.s)
-    st.p2 = np.where(keep, st.p1, st.p2)
-    st.p1 = np.where(keep, m, st.p1)
+    st.s = np.where(keep, new.s, st.s)
+    st.p2 = np.where(keep, new.p2, st.p2)
+    st.p1 = np.where(keep, new.p1, st.p1)
     return np.where(keep, out, m)
 
 
 def _every(m: np.ndarray, y: np.ndarray, st: Noise, h: np.ndarray | float, floor: np.ndarray,
            c: float) -> np.ndarray:  # fmt: skip
-    """``step`` for every stream advancing (the usual frame), in place where it can be:
-    the same operations on the same operands, so the same bits, with fewer arrays made
-    (1.2 -> 0.5 us a stream at 1,024 streams). The streams have started: nothing is NaN."""
+    """``step`` for every stream advancing (the usual frame; the one place of the module
+    equation in numpy), in place where it can be: 1.2 -> 0.5 us a stream at 1,024
+    streams against a new array a pass."""
     d = m - st.p1
     d0 = st.p1 - st.p2
     turn = d * d0 < 0.0
@@ -88,11 +87,6 @@ def _every(m: np.ndarray, y: np.ndarray, st: Noise, h: np.ndarray | float, floor
     np.subtract(m, out, out=out)
     st.p2, st.p1 = st.p1, m.copy()
     return out
-
-
-def reversal(d: np.ndarray, d0: np.ndarray) -> np.ndarray:
-    """v: min(|d|, |d0|) where the steps d, d0 turn (d d0 < 0), else 0 (NaN: 0)."""
-    return np.where(d * d0 < 0.0, np.minimum(np.abs(d), np.abs(d0)), 0.0)
 
 
 def start(m: np.ndarray, st: Noise, rows: np.ndarray) -> None:
