@@ -49,6 +49,26 @@ def test_mediapipe_like_scores_pass_and_each_sign_is_found():
     assert judge(np.full((10, len(NAMES)), np.nan), NAMES) is None  # no face at all
 
 
+def test_a_long_take_is_judged_on_rows_spread_over_it_and_an_infinite_reading_is_no_level():
+    """Past SAMPLE rows sign 2 reads levels on rows spread over the take (an hour's sort
+    cost 0.3 s); a channel that moves only late in the take is read there too."""
+    from faceclean.trackers.signature import SAMPLE
+
+    x = mediapipe_like(3 * SAMPLE + 7, seed=3)
+    assert judge(x, NAMES) is None
+    assert "quantised" in judge(np.round(x, 2), NAMES)
+    late = np.round(x, 2)
+    late[: 2 * SAMPLE] = late[0]  # still for two thirds, then moving in steps of 0.01
+    assert "quantised" in judge(late, NAMES)
+    x[5, 3], x[9, NAMES.index("jawForward")] = np.inf, -np.inf  # not levels, not frames lost
+    assert judge(x, NAMES) is None
+    x[10:20] = np.nan
+    x[11, 0] = 0.2  # a row with one value is a face frame
+    q = np.round(x, 2)
+    assert judge(q[: MIN_FRAMES + 8], NAMES) is None  # 59 frames with a face: too few
+    assert "quantised" in judge(q[: MIN_FRAMES + 9], NAMES)  # 60, row 11 among them
+
+
 def test_real_mediapipe_takes_pass():
     """The rule's data: every finished (tracked, truth) pair in the families cache."""
     root = os.path.expanduser("~/.cache/faceclean/families")

@@ -40,18 +40,20 @@ _jit: Callable | None = None  # numba's njit with our options, once numba is loa
 
 def _warm_args() -> dict[str, tuple]:
     """Per kernel: arguments of a one-frame call that compiles (or loads) it."""
-    one, x = np.ones(1), np.zeros((1, 1))
+    one, x, i = np.ones(1), np.zeros((1, 1)), np.zeros(1, np.intp)
     return {
         "one_euro": (one.copy(), one.copy(), x, one, one, one, one, x.copy()),
         "inert": (one.copy(), one.copy(), x, one, one, one, one, one, one, x.copy()),
         "ema": (one.copy(), x, x + 0.5, np.zeros(1, np.intp), x.copy()),
         "deadband": (x, one, x.copy()),
         "kalman": (*(one.copy() for _ in range(5)), x, one, one, one, one, one, x.copy()),
-        "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one,
+        "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one, 0,
                           x.copy(), x.copy()),
         "affine": (x, x, x.copy()),
         "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0, 0.1,
                        x.copy()),
+        "map_run": (x.copy(), x, x, one, one, one, i, one, i, 2, one, 0.0, 1.0, 0.1, one,
+                    one.copy(), one.copy(), one.copy()),
     }  # fmt: skip
 
 
@@ -68,6 +70,7 @@ def enable(warm: bool = True) -> bool:
             return False
         # error_model="numpy": a division by zero gives inf as numpy's does, never an exception
         _jit = njit(boundscheck=False, nogil=True, cache=True, error_model="numpy")
+        globals().update({name: _jit(f) for name, f in _HELPERS.items()})
     if warm:
         return all(_kernel(name) is not None for name in _SOURCES)
     return True
@@ -85,10 +88,16 @@ def enabled() -> bool:
     return _jit is not None
 
 
+def have(*names: str) -> bool:
+    """Whether every kernel ``names`` is on (compiled, or loaded from numba's cache)."""
+    return all(_kernel(name) is not None for name in names)
+
+
 def disable() -> None:
     global _jit
     _jit = None
     _kernels.clear()
+    globals().update(_HELPERS)
 
 
 def status(frames: int | None = None) -> str:
@@ -282,32 +291,40 @@ def _inert(y, edx, x, dt, mc, beta, w_d, ea, k, out):
             out[n, m] = y[m]
 
 
-def map_prefilter(u, edx, r, xi: np.ndarray, h: np.ndarray, tau_d, mc2pi, beta2pi):
+def map_prefilter(u, edx, r, xi: np.ndarray, h: np.ndarray, tau_d, mc2pi, beta2pi,
+                  rises: bool = False, out: tuple | None = None):  # fmt: skip
     """A tracker map's pre-filter over a run of usual frames (learned/tracker_map.py
     ``_usual``, one stream): state u, edx, r (K,) updated in place; xi (N, K) the inputs,
-    h (N,) s the steps; tau_d, mc2pi, beta2pi (K,). Returns (U, R) (N, K): the filtered
-    inputs and their running minimum after each frame; None when off."""
+    h (N,) s the steps; tau_d, mc2pi, beta2pi (K,). Returns (U, R) (N, K), into ``out``
+    where given: the filtered inputs and their running minimum after each frame
+    (``rises``: u - r instead); None when off."""
     kernel = _kernel("map_prefilter")
     if kernel is None:
         return None
-    U, R = np.empty_like(xi), np.empty_like(xi)
-    kernel(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, U, R)
+    U, R = out if out is not None else (np.empty_like(xi), np.empty_like(xi))
+    kernel(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, int(rises), U, R)
     return U, R
 
 
-def _map_prefilter(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, U, R):
-    """In place: ``_usual``'s One Euro in its arithmetic order, a = h / (h + tau) and
-    2 pi f h / (1 + 2 pi f h), then the rest level r = min(r, u)."""
+def _map_prefilter(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, rises, U, R):
+    """In place: ``_prefilter_frame`` frame after frame, U and R (N, K) getting u and r
+    (rises: u - r)."""
     for n in range(xi.shape[0]):
-        hn = h[n]
+        _prefilter_frame(u, edx, r, xi[n], h[n], tau_d, mc2pi, beta2pi)
         for j in range(xi.shape[1]):
-            e = xi[n, j] - u[j]
-            edx[j] = edx[j] + (hn / (hn + tau_d[j])) * (e / hn - edx[j])
-            g = hn * (mc2pi[j] + beta2pi[j] * abs(edx[j]))
-            u[j] = u[j] + (g / (1.0 + g)) * e
-            r[j] = min(r[j], u[j])
             U[n, j] = u[j]
-            R[n, j] = r[j]
+            R[n, j] = u[j] - r[j] if rises else r[j]
+
+
+def _prefilter_frame(u, edx, r, x, h, tau_d, mc2pi, beta2pi):
+    """One frame x (K,) h s later, in place: ``_usual``'s One Euro in its arithmetic
+    order, a = h / (h + tau) and 2 pi f h / (1 + 2 pi f h), then the rest r = min(r, u)."""
+    for j in range(x.shape[0]):
+        e = x[j] - u[j]
+        edx[j] = edx[j] + (h / (h + tau_d[j])) * (e / h - edx[j])
+        g = h * (mc2pi[j] + beta2pi[j] * abs(edx[j]))
+        u[j] = u[j] + (g / (1.0 + g)) * e
+        r[j] = min(r[j], u[j])
 
 
 def affine(c: np.ndarray, *pairs: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
@@ -347,21 +364,59 @@ def noise_band(m, h, y0, p1, p2, s, floor, c: float, tau: float, cap: float
 
 
 def _noise_band(m, h, y0, p1, p2, s, floor, c, tau, cap, y):
-    """In place: y (N, M) the band's outputs, in learned/band.py's ``step`` order."""
+    """In place: y (N, M) the band's outputs, ``_band_frame`` frame after frame."""
     for n in range(m.shape[0]):
-        a = h[n] / (h[n] + tau)
-        for j in range(m.shape[1]):
-            d, d0 = m[n, j] - p1[j], p1[j] - p2[j]
-            v = min(abs(d), abs(d0)) if d * d0 < 0.0 else 0.0  # a reversal
-            s[j] = s[j] + a * (v - s[j])
-            eps = min(cap, max(floor[j], c * s[j]))
-            prev = y0[j] if n == 0 else y[n - 1, j]
-            d = min(max(m[n, j] - prev, -eps), eps)
-            y[n, j] = m[n, j] - d
-            p2[j] = p1[j]
-            p1[j] = m[n, j]
+        prev = y0 if n == 0 else y[n - 1]
+        _band_frame(m[n], prev, p1, p2, s, floor, c, h[n] / (h[n] + tau), cap, y[n])
+
+
+def _band_frame(m, prev, p1, p2, s, floor, c, a, cap, y):
+    """One frame of learned/band.py's band in its ``step`` order, in place: the map's
+    values m (M,) after the output prev, a = h / (h + tau); y (M,) may be m itself."""
+    for j in range(m.shape[0]):
+        mj = m[j]
+        d, d0 = mj - p1[j], p1[j] - p2[j]
+        v = min(abs(d), abs(d0)) * (d * d0 < 0.0)  # a reversal (no branch: noise turns
+        s[j] = s[j] + a * (v - s[j])  # about every other frame, and a branch mispredicts)
+        eps = min(cap, max(floor[j], c * s[j]))
+        y[j] = mj - min(max(mj - prev[j], -eps), eps)
+        p2[j] = p1[j]
+        p1[j] = mj
+
+
+def map_run(p, u, xi, h, c, own, band, y0, bstate) -> np.ndarray | None:
+    """The end of a tracker map's run of usual frames (learned/map_take.py), in place
+    into p (N, M), the map's products (u - r) B' per frame: + c_j + a_j u[ai_j] + d_j
+    x[di_j] (c (M,), ``own`` (a, ai, d, di) (M,)), clipped to [0, 1], then the band from y0 (M,)
+    on: ``band`` (mode, floor (M,), c, tau s, cap), mode 0 none, 1 the deadband, 2
+    widened by the noise, its state ``bstate`` (p1, p2, s) (M,) updated in place. u, xi
+    (N, K) the filtered and the raw inputs, h (N,) s. p, or None when off."""
+    kernel = _kernel("map_run")
+    if kernel is None:
+        return None
+    mode, floor, nc, tau, cap = band
+    kernel(p, u, xi, h, c, *own, int(mode), floor, float(nc), float(tau), float(cap), y0,
+           *bstate)  # fmt: skip
+    return p
+
+
+def _map_run(p, u, xi, h, c, a, ai, d, di, mode, floor, nc, tau, cap, y0, p1, p2, s):
+    """In place: p (N, M) the outputs, frame after frame."""
+    for n in range(p.shape[0]):
+        m, un, x = p[n], u[n], xi[n]
+        for j in range(m.shape[0]):
+            m[j] = min(max(m[j] + c[j] + a[j] * un[ai[j]] + d[j] * x[di[j]], 0.0), 1.0)
+        prev = y0 if n == 0 else p[n - 1]
+        if mode == 2:
+            _band_frame(m, prev, p1, p2, s, floor, nc, h[n] / (h[n] + tau), cap, m)
+        elif mode == 1:
+            for j in range(m.shape[0]):
+                m[j] = m[j] - min(max(m[j] - prev[j], -floor[j]), floor[j])
 
 
 _SOURCES = {"one_euro": _one_euro, "inert": _inert, "ema": _ema, "kalman": _kalman,
             "deadband": _deadband, "map_prefilter": _map_prefilter,
-            "affine": _affine, "noise_band": _noise_band}  # fmt: skip
+            "affine": _affine, "noise_band": _noise_band, "map_run": _map_run}  # fmt: skip
+# Per-frame helpers the kernels call: compiled first, in their place (numba resolves a
+# kernel's globals as it compiles it).
+_HELPERS = {"_prefilter_frame": _prefilter_frame, "_band_frame": _band_frame}

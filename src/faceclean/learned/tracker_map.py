@@ -59,7 +59,7 @@ import numpy as np
 
 from faceclean.channel_map import ChannelMap
 from faceclean.errors import FacecleanError
-from faceclean.filters.base import BLOCK, MAX_ABS, MIN_DT, Stepper, check_finite, frame_rules
+from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import band as noise
 from faceclean.learned.map_weights import MAX_DETAIL as MAX_DETAIL  # neural/map_groups.py's
@@ -359,92 +359,11 @@ class TrackerMap(Stepper):
     # -- whole takes (issue 38) ---------------------------------------------------------------
 
     def clean(self, anim: Animation) -> Animation:
-        """Reset, then step every valid frame (``Stepper.clean``); where a long take turns
-        the compiled loops on (filters/compiled.py ``for_take``), a run of usual frames
-        (``_usual``'s) goes through at once: the pre-filter compiled in ``_usual``'s
-        arithmetic order, the map's products compiled too (summed in their own order, not
-        BLAS's: equal to stepping within 1e-12, tests/test_contract.py)."""
-        from faceclean.filters import compiled
+        """Reset, then step every valid frame; runs of usual frames compiled where a long
+        take turns the compiled loops on (learned/map_take.py)."""
+        from faceclean.learned import map_take
 
-        idx = np.flatnonzero(anim.valid)
-        if (
-            not self.prefilter
-            or self._hidden
-            or anim.n_channels != len(self.names)
-            or not compiled.for_take(len(idx))
-        ):
-            return Stepper.clean(self, anim)
-        self.reset()
-        out = np.full_like(anim.values, np.nan)
-        t64 = anim.times[idx].astype(np.float64)  # (V,) s
-        for a in range(0, len(idx), BLOCK):
-            rows, t = idx[a : a + BLOCK], t64[a : a + BLOCK]
-            x = np.array(anim.values[rows], dtype=np.float64)  # (B, M)
-            with np.errstate(invalid="ignore"):
-                ok = (np.abs(x) <= MAX_ABS).all(axis=1)
-            d = np.diff(t)
-            chain = np.concatenate([[False], ok[1:] & (d > MIN_DT) & (d <= self.pre.max_gap)])
-            breaks = np.append(np.flatnonzero(~chain), len(x))  # runs end before these
-            k = 0
-            while k < len(x):
-                if ok[k] and self._y is not None and self._y.shape == (1, x.shape[1]):
-                    dt = t[k] - float(self._t[0])
-                    if MIN_DT < dt <= self.pre.max_gap:  # _usual's frame (NaN fails)
-                        end = int(breaks[np.searchsorted(breaks, k, side="right")])
-                        out[rows[k:end]] = self._run(x[k:end], t[k:end], dt)
-                        k = end
-                        continue
-                out[rows[k]] = self.step(x[k], t[k])
-                k += 1
-        check_finite(anim.values, out, self.name)
-        return anim.with_values(out)
+        return map_take.clean(self, anim)
 
     clean._finite_checked = True  # type: ignore[attr-defined]
     clean.reset_then_step = True  # type: ignore[attr-defined] # filters/base.py ``stepwise``
-
-    def _run(self, xs: np.ndarray, ts: np.ndarray, dt: float) -> np.ndarray:
-        """``_usual`` over frames xs (N, M) at ts (N,) s, one stream, the first dt s after
-        the last accepted frame: (N, M) outputs; the state ends as stepping leaves it."""
-        from faceclean.filters import compiled
-
-        xi = xs[:, self._xs] if self._xs is not None else self._in_matrix(xs)  # (N, K)
-        h = np.empty(len(xs))  # (N,) s
-        h[0] = dt
-        h[1:] = np.diff(ts)
-        np.maximum(h, DT_MIN, out=h)
-        u, edx, r = self._u[0].copy(), self._edx[0].copy(), self._r[0].copy()  # (K,)
-        consts = [np.array(c, np.float64) for c in (self._tau_d, self._mc2pi, self._beta2pi)]
-        U, R = compiled.map_prefilter(u, edx, r, np.ascontiguousarray(xi), h, *consts)
-        # y = u (A + B)' - r B' + d x + c, (N, M+L), as ``_usual``; the detail's -d u in _ab
-        y = compiled.affine(self._c, (U, self._ab), (R, self._nb))
-        if len(self._do):  # + d x: the one term of each output's own input
-            y[:, self._do] += xi[:, self._di] * self._dd
-        m = self._m_cols
-        if self._lift_top:  # l / max(1, the largest l so far)
-            lift = y[:, m:]
-            top = np.maximum.accumulate(np.concatenate([self._top, lift]), axis=0)[1:]
-            lift /= np.maximum(top, 1.0)
-            self._top = top[-1:].copy()
-        np.clip(y, 0.0, 1.0, out=y)
-        if len(self._lo):  # the lift: m_j = max(m_j, its lift column)
-            lifted = np.maximum(y[:, self._lo], y[:, m:])
-            y = y[:, :m].copy()
-            y[:, self._lo] = lifted
-        if self._noise_c > 0:  # the band widened by the noise (learned/band.py)
-            y = noise.run(y, h, self._m[0], self._noise, self._band, self._noise_c)
-        elif self._band is not None:  # the deadband, from the last output on
-            held = compiled.deadband(np.concatenate([self._m, y]), self._band)
-            if held is None:
-                for n in range(len(y)):
-                    prev = self._m[0] if n == 0 else y[n - 1]
-                    y[n] -= np.clip(y[n] - prev, -self._band, self._band)
-            else:
-                y = held[1:]
-        outv = y if self._direct else xs.copy()
-        if self._ys is not None and not self._direct:
-            outv[:, self._ys] = y
-        elif not self._direct:
-            outv[:, self._out.cols] = y[:, self._out.have]
-        self._u, self._edx, self._r = u[None], edx[None], r[None]
-        self._m, self._t, self._y = y[-1:].copy(), ts[-1:].copy(), outv[-1:].copy()
-        return outv

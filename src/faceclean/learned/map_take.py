@@ -1,0 +1,195 @@
+"""The tracker map over a whole take: runs of usual frames compiled (issue 38).
+
+``TrackerMap.clean`` is reset-then-step (``Stepper.clean``) until a take is long enough to
+turn the compiled loops on (filters/compiled.py ``for_take``). Then a run of usual frames
+(learned/tracker_map.py ``_usual``'s: every value within MAX_ABS, each frame more than
+MIN_DT and at most max_gap after the last) goes through at once, the state ending as
+stepping leaves it. Equal to stepping within 1e-12 (the contract's ``whole_take`` clause,
+tests/test_contract.py): the same arithmetic, its sums in another order.
+
+Where the map is the shipped kind (no hidden layer, no lift, A u only on each output's own
+input) one compiled pass does each frame whole, the pre-filter, the rises' product, the
+detail, the clip and the band, with no (N, K) array between them (``compiled.map_run``):
+
+    m = clip(c + (u - r) B' + a u[own] + d x[own], 0, 1)     a = A_jj - d_j
+
+Otherwise the pre-filter and the products are compiled apart and the rest done in numpy.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from faceclean.filters import compiled
+from faceclean.filters.base import BLOCK, MAX_ABS, MIN_DT, Stepper, check_finite
+from faceclean.filters.one_euro import DT_MIN
+from faceclean.learned import band as noise
+
+# Rows per product: OpenBLAS runs a product of fewer than 65,536 x 4 multiply-adds in the
+# calling thread (96 x 51 x 51 = 249,696): its threads, on a busy machine, made the
+# hour's products 5x slower (docs/BENCHMARKS.md).
+ROWS = 96
+
+if TYPE_CHECKING:
+    from faceclean.animation import Animation
+    from faceclean.learned.tracker_map import TrackerMap
+
+
+def clean(tm: TrackerMap, anim: Animation, run_of=None) -> Animation:
+    """Reset, then step every valid frame of ``anim``, runs of usual frames at once (by
+    ``run``, or ``run_of(xs, ts, dt)``)."""
+    go = run_of or (lambda *a: run(tm, *a))
+    idx = np.flatnonzero(anim.valid)
+    if (
+        not tm.prefilter
+        or tm._hidden
+        or anim.n_channels != len(tm.names)
+        or not compiled.for_take(len(idx))
+    ):
+        return Stepper.clean(tm, anim)
+    tm.reset()
+    out = np.empty_like(anim.values)  # (N, M); every row written below, or NaN
+    gone = np.ones(len(out), bool)
+    gone[idx] = False
+    out[gone] = np.nan
+    t64 = anim.times[idx].astype(np.float64)  # (V,) s
+    for a in range(0, len(idx), BLOCK):
+        rows, t = idx[a : a + BLOCK], t64[a : a + BLOCK]
+        whole = rows[-1] - rows[0] == len(rows) - 1  # no missing row: views, no gather
+        span = slice(rows[0], rows[-1] + 1)
+        x = anim.values[span] if whole else anim.values[rows]  # (B, M), read only
+        x = np.asarray(x, np.float64)
+        with np.errstate(invalid="ignore"):
+            ok = np.abs(x).max(axis=1) <= MAX_ABS  # (NaN fails)
+        d = np.diff(t)
+        chain = np.concatenate([[False], ok[1:] & (d > MIN_DT) & (d <= tm.pre.max_gap)])
+        breaks = np.append(np.flatnonzero(~chain), len(x))  # runs end before these
+        k = 0
+        while k < len(x):
+            if ok[k] and tm._y is not None and tm._y.shape == (1, x.shape[1]):
+                dt = t[k] - float(tm._t[0])
+                if MIN_DT < dt <= tm.pre.max_gap:  # _usual's frame (NaN fails)
+                    end = int(breaks[np.searchsorted(breaks, k, side="right")])
+                    if whole and run_of is None:  # written in place
+                        run(tm, x[k:end], t[k:end], dt, out[span][k:end])
+                    else:
+                        out[rows[k:end]] = go(x[k:end], t[k:end], dt)
+                    k = end
+                    continue
+            out[rows[k]] = tm.step(x[k], t[k])
+            k += 1
+    check_finite(anim.values, out, tm.name)
+    return anim.with_values(out)
+
+
+def run(tm: TrackerMap, xs: np.ndarray, ts: np.ndarray, dt: float,
+        dest: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """``_usual`` over frames xs (N, M) at ts (N,) s, one stream, the first dt s after the
+    last accepted frame: (N, M) outputs, into ``dest`` where given; the state ends as
+    stepping leaves it."""
+    xi = xs[:, tm._xs] if tm._xs is not None else tm._in_matrix(xs)  # (N, K)
+    xi = np.ascontiguousarray(xi)
+    h = np.empty(len(xs))  # (N,) s
+    h[0] = dt
+    h[1:] = np.diff(ts)
+    np.maximum(h, DT_MIN, out=h)
+    u, edx, r = tm._u[0].copy(), tm._edx[0].copy(), tm._r[0].copy()  # (K,)
+    consts = [np.array(c, np.float64) for c in (tm._tau_d, tm._mc2pi, tm._beta2pi)]
+    y = _one_pass(tm, (u, edx, r), xi, h, consts)
+    if y is None:
+        y = _apart(tm, (u, edx, r), xi, h, consts)
+    outv = np.empty_like(xs) if dest is None else dest
+    if tm._direct:
+        outv[:] = y
+    elif tm._ys is not None:  # a run of output columns: the others pass through
+        outv[:, : tm._ys.start] = xs[:, : tm._ys.start]
+        outv[:, tm._ys] = y
+        outv[:, tm._ys.stop :] = xs[:, tm._ys.stop :]
+    else:
+        outv[:] = xs
+        outv[:, tm._out.cols] = y[:, tm._out.have]
+    tm._u, tm._edx, tm._r = u[None], edx[None], r[None]
+    tm._m, tm._t, tm._y = y[-1:].copy(), ts[-1:].copy(), outv[-1:].copy()
+    return outv
+
+
+def _shipped_kind(tm: TrackerMap) -> tuple | None:
+    """(W (K, M), c (M,)) and (a, ai, d, di) (M,) for ``compiled.map_run``, or None where
+    the map is not the shipped kind (a lift, or A beyond each output's own input)."""
+    if len(tm._lo):
+        return None
+    w = tm.weights
+    m = len(w.outputs)
+    own = (tm._ab + tm._nb)[:, :m]  # (K, M): A' - D, what multiplies u itself
+    ai = np.array([w.inputs.index(o) if o in w.inputs else 0 for o in w.outputs], np.intp)
+    a = own[ai, np.arange(m)].copy()  # (M,)
+    rest = own.copy()
+    rest[ai, np.arange(m)] = 0.0
+    if rest.any():
+        return None
+    d = np.zeros(m)
+    d[tm._do] = tm._dd
+    di = ai.copy()
+    di[tm._do] = tm._di
+    return (np.ascontiguousarray(-tm._nb[:, :m]), tm._c[:m].copy()), (a, ai, d, di)
+
+
+def _one_pass(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
+    """The shipped kind: the pre-filter compiled, the rises' product by BLAS, the rest
+    (the own terms, the clip, the band) one compiled pass: (N, M), or None (another kind,
+    or off). Its (N, K) arrays are kept from run to run (no fresh pages per block)."""
+    if not hasattr(tm, "_kind"):
+        tm._kind = _shipped_kind(tm)
+    if tm._kind is None or not compiled.have("map_prefilter", "map_run"):
+        return None
+    (w, c), own = tm._kind
+    n, k, m = len(xi), xi.shape[1], len(c)
+    if getattr(tm, "_room", None) is None or len(tm._room[0]) < n:
+        tm._room = [np.empty((max(n, BLOCK), j)) for j in (k, k, m)]
+    U, Z, p = (b[:n] for b in tm._room)  # u, u - r (N, K); the outputs (N, M)
+    compiled.map_prefilter(*pre, xi, h, *consts, rises=True, out=(U, Z))
+    for a in range(0, n, ROWS):  # (u - r) B', in one thread (ROWS)
+        np.matmul(Z[a : a + ROWS], w, out=p[a : a + ROWS])
+    band = (0, np.zeros(m), 0.0, noise.TAU, noise.CAP)
+    if tm._noise_c > 0:
+        band = (2, tm._band, tm._noise_c, noise.TAU, noise.CAP)
+    elif tm._band is not None:
+        band = (1, tm._band, 0.0, noise.TAU, noise.CAP)
+    st = tm._noise
+    state = st.p1[0].copy(), st.p2[0].copy(), st.s[0].copy()  # (M,)
+    compiled.map_run(p, U, xi, h, c, own, band, tm._m[0], state)
+    st.p1, st.p2, st.s = (v[None] for v in state)
+    return p
+
+
+def _apart(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
+    """The pre-filter and the products compiled apart, the rest in numpy: (N, M)."""
+    U, R = compiled.map_prefilter(*pre, xi, h, *consts)
+    # y = u (A + B)' - r B' + d x + c, (N, M+L), as ``_usual``; the detail's -d u in _ab
+    y = compiled.affine(tm._c, (U, tm._ab), (R, tm._nb))
+    if len(tm._do):  # + d x: the one term of each output's own input
+        y[:, tm._do] += xi[:, tm._di] * tm._dd
+    m = tm._m_cols
+    if tm._lift_top:  # l / max(1, the largest l so far)
+        lift = y[:, m:]
+        top = np.maximum.accumulate(np.concatenate([tm._top, lift]), axis=0)[1:]
+        lift /= np.maximum(top, 1.0)
+        tm._top = top[-1:].copy()
+    np.clip(y, 0.0, 1.0, out=y)
+    if len(tm._lo):  # the lift: m_j = max(m_j, its lift column)
+        lifted = np.maximum(y[:, tm._lo], y[:, m:])
+        y = y[:, :m].copy()
+        y[:, tm._lo] = lifted
+    if tm._noise_c > 0:  # the band widened by the noise (learned/band.py)
+        y = noise.run(y, h, tm._m[0], tm._noise, tm._band, tm._noise_c)
+    elif tm._band is not None:  # the deadband, from the last output on
+        held = compiled.deadband(np.concatenate([tm._m, y]), tm._band)
+        if held is None:
+            for n in range(len(y)):
+                prev = tm._m[0] if n == 0 else y[n - 1]
+                y[n] -= np.clip(y[n] - prev, -tm._band, tm._band)
+        else:
+            y = held[1:]
+    return y
