@@ -4,8 +4,10 @@
     .venv/bin/python benchmarks/archive_scale.py --minutes 10 --rounds 1
     .venv/bin/python benchmarks/archive_scale.py --format csv --rounds 1   # plain CSV
 
-One synthetic take (52 ARKit channels, jittered 60 fps, a tracking-loss gap) is written
-once; then, side by side in the same run and interleaved round by round, fresh processes:
+One synthetic take (52 ARKit channels, jittered 60 fps, a tracking-loss gap, the channels
+raw MediaPipe keeps near 0 kept there, so that ``--tracker mediapipe`` pays its whole
+signature check, trackers/signature.py) is written once; then, side by side in the same
+run and interleaved round by round, fresh processes:
 
 - ``bare``: ``io.load`` then ``io.save`` of the same arrays, uncompressed (the floor);
 - ``faceclean clean IN -o OUT`` for each cleaner, compiled (numba, the whole-take path)
@@ -80,6 +82,7 @@ print("RESULT", tracemalloc.get_traced_memory()[1] / own)
 def make_take(path: Path, minutes: float) -> int:
     from faceclean import Animation, save
     from faceclean.channels import ARKIT52
+    from faceclean.trackers.signature import SILENT
 
     n = int(minutes * 3600) + 1
     rng = np.random.default_rng(0)
@@ -88,6 +91,8 @@ def make_take(path: Path, minutes: float) -> int:
     phase, f = rng.uniform(0, 2 * np.pi, 52), rng.uniform(0.2, 1.0, 52)  # Hz
     x = 0.4 + 0.3 * np.sin(2 * np.pi * f * t[:, None] + phase) + rng.normal(0, 0.02, (n, 52))
     x = np.clip(x, 0.0, 1.0)
+    for name in SILENT:  # as raw MediaPipe: so --tracker mediapipe's check reads it whole
+        x[:, ARKIT52.index(name)] = rng.uniform(0.0, 0.006, n)
     x[1000:1010] = np.nan  # a tracking loss
     save(Animation(t, x, ARKIT52), path)
     return n

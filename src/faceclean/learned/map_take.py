@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from faceclean.filters import compiled
-from faceclean.filters.base import BLOCK, MAX_ABS, MIN_DT, Stepper, check_finite
+from faceclean.filters import base, compiled
+from faceclean.filters.base import BLOCK, MIN_DT, Stepper
 from faceclean.filters.one_euro import DT_MIN
 from faceclean.learned import band as noise
 
@@ -55,14 +55,15 @@ def clean(tm: TrackerMap, anim: Animation, run_of=None) -> Animation:
     gone[idx] = False
     out[gone] = np.nan
     t64 = anim.times[idx].astype(np.float64)  # (V,) s
+    lost = kept = 0
     for a in range(0, len(idx), BLOCK):
         rows, t = idx[a : a + BLOCK], t64[a : a + BLOCK]
         whole = rows[-1] - rows[0] == len(rows) - 1  # no missing row: views, no gather
         span = slice(rows[0], rows[-1] + 1)
         x = anim.values[span] if whole else anim.values[rows]  # (B, M), read only
         x = np.asarray(x, np.float64)
-        with np.errstate(invalid="ignore"):
-            ok = np.abs(x).max(axis=1) <= MAX_ABS  # (NaN fails)
+        sane = base.sane_cells(x)  # (B, M) bool
+        ok = sane.all(axis=1)
         d = np.diff(t)
         chain = np.concatenate([[False], ok[1:] & (d > MIN_DT) & (d <= tm.pre.max_gap)])
         breaks = np.append(np.flatnonzero(~chain), len(x))  # runs end before these
@@ -80,7 +81,9 @@ def clean(tm: TrackerMap, anim: Animation, run_of=None) -> Animation:
                     continue
             out[rows[k]] = tm.step(x[k], t[k])
             k += 1
-    check_finite(anim.values, out, tm.name)
+        n_lost, n_sane = base.finite_counts(sane, out[span] if whole else out[rows])  # in cache
+        lost, kept = lost + n_lost, kept + n_sane
+    base.refuse_lost(lost, kept, tm.name)  # (filters/base.py ``check_finite``, block by block)
     return anim.with_values(out)
 
 
