@@ -31,6 +31,7 @@ from faceclean.learned import band as noise
 # calling thread (96 x 51 x 51 = 249,696): its threads, on a busy machine, made the
 # hour's products 5x slower (docs/BENCHMARKS.md).
 ROWS = 96
+CHUNK = 1024  # frames a pass: its (C, K) arrays stay in cache, and small beside the take
 
 if TYPE_CHECKING:
     from faceclean.animation import Animation
@@ -142,19 +143,15 @@ def _shipped_kind(tm: TrackerMap) -> tuple | None:
 def _one_pass(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
     """The shipped kind: the pre-filter compiled, the rises' product by BLAS, the rest
     (the own terms, the clip, the band) one compiled pass: (N, M), or None (another kind,
-    or off). Its (N, K) arrays are kept from run to run (no fresh pages per block)."""
+    or off). Its arrays are kept from run to run (no fresh pages per block)."""
     if not hasattr(tm, "_kind"):
         tm._kind = _shipped_kind(tm)
     if tm._kind is None or not compiled.have("map_prefilter", "map_run"):
         return None
     (w, c), own = tm._kind
     n, k, m = len(xi), xi.shape[1], len(c)
-    if getattr(tm, "_room", None) is None or len(tm._room[0]) < n:
-        tm._room = [np.empty((max(n, BLOCK), j)) for j in (k, k, m)]
-    U, Z, p = (b[:n] for b in tm._room)  # u, u - r (N, K); the outputs (N, M)
-    compiled.map_prefilter(*pre, xi, h, *consts, rises=True, out=(U, Z))
-    for a in range(0, n, ROWS):  # (u - r) B', in one thread (ROWS)
-        np.matmul(Z[a : a + ROWS], w, out=p[a : a + ROWS])
+    if getattr(tm, "_room", None) is None or len(tm._room[2]) < n:
+        tm._room = [np.empty((CHUNK, k)), np.empty((CHUNK, k)), np.empty((max(n, BLOCK), m))]
     band = (0, np.zeros(m), 0.0, noise.TAU, noise.CAP)
     if tm._noise_c > 0:
         band = (2, tm._band, tm._noise_c, noise.TAU, noise.CAP)
@@ -162,7 +159,15 @@ def _one_pass(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts:
         band = (1, tm._band, 0.0, noise.TAU, noise.CAP)
     st = tm._noise
     state = st.p1[0].copy(), st.p2[0].copy(), st.s[0].copy()  # (M,)
-    compiled.map_run(p, U, xi, h, c, own, band, tm._m[0], state)
+    p, y0 = tm._room[2][:n], tm._m[0]  # the outputs (N, M); the one before
+    for a in range(0, n, CHUNK):  # the state carries from chunk to chunk, in place
+        x, dt, q = xi[a : a + CHUNK], h[a : a + CHUNK], p[a : a + CHUNK]
+        U, Z = (b[: len(x)] for b in tm._room[:2])  # u, u - r (C, K)
+        compiled.map_prefilter(*pre, x, dt, *consts, rises=True, out=(U, Z))
+        for b in range(0, len(x), ROWS):  # (u - r) B', in one thread (ROWS)
+            np.matmul(Z[b : b + ROWS], w, out=q[b : b + ROWS])
+        compiled.map_run(q, U, x, dt, c, own, band, y0, state)
+        y0 = q[-1]
     st.p1, st.p2, st.s = (v[None] for v in state)
     return p
 
