@@ -160,3 +160,34 @@ def test_the_band_widened_by_the_noise_calms_a_noisy_look_and_leaves_a_clean_one
     assert outs[0.04, "wide"][2] < 0.5 * outs[0.04, "plain"][2]
     assert outs[0.04, "wide"][1] <= 1.15 * outs[0.04, "plain"][1]  # a band's bias: < eps
     assert np.abs(outs[0.002, "wide"][0] - outs[0.002, "plain"][0]).max() <= 0.02
+
+
+def test_an_output_read_from_a_made_up_habit_reads_its_own_rise_on_real_performances():
+    # The made-up performers shift the jaw whenever the lips go left; the tracker cannot see
+    # jawLeft (reads 0) but sees mouthLeft. The real performers shift their lips alone. A
+    # map fitted on both reads jawLeft from mouthLeft: on a real face a jaw that never
+    # moved moves. Judged on the folds' real performances, jawLeft reads its own rise.
+    jaw, lips = NAMES.index("jawLeft"), NAMES.index("mouthLeft")
+
+    def performer(p, made_up: bool):
+        y = p.truth.values.copy()
+        x = p.tracked.values.copy()
+        y[:, jaw] = y[:, lips] if made_up else 0.0
+        x[:, jaw] = 0.0  # the tracker never reads it
+        group = ("independent", "synthetic")[int(p.name[-1])] if made_up else p.group
+        return replace(p, tracked=Animation(p.tracked.times, x, NAMES),
+                       truth=Animation(p.truth.times, y, NAMES), group=group)  # fmt: skip
+
+    train = [performer(p, p.group in ("src2", "src3")) for look in (1, 2)
+             for p in pairs(look) if p.group != "neutral"]  # fmt: skip
+    kw = dict(prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,), noise_bands=(0.0,))
+    w = map_rises.fit(train, **kw)
+    assert "jawLeft" in w.config["alone"] and "mouthLeft" not in w.config["alone"]
+    own = np.zeros(len(NAMES))
+    own[jaw] = 1.0
+    assert np.array_equal(w.arrays["b"][jaw], own) and not w.arrays["a"][jaw].any()
+    real = [p for p in train if p.group in ("src0", "src1")][:2]
+    assert max(np.abs(out[:, jaw]).mean() for out, _ in cleaned(w, real)) < 0.01
+    habit = map_rises.fit(train, harm_real=None, **kw)  # the rule off: the habit comes back
+    assert habit.config["alone"] == []
+    assert max(np.abs(out[:, jaw]).mean() for out, _ in cleaned(habit, real)) > 0.03

@@ -102,6 +102,7 @@ def evaluate(folder: str | Path, shipped: str | Path | None = None,
            for f, rows in sorted(per.items())}  # fmt: skip
     return {
         "families": {f: {r: _scores(v) for r, v in rows.items()} for f, rows in per.items()},
+        "kinds": _kinds(per),
         "neutral": {f: {r: _neutral(v) for r, v in rows.items()} for f, rows in per.items()},
         "channels": _channels(per),
         "chosen": dict(sorted(chosen.items())),
@@ -143,6 +144,21 @@ def fold(folder: str, fam: str, group: str, shipped, pairs=None) -> tuple:
                  for p, (_, o) in zip(test, outs, strict=True))  # fmt: skip
         parts.append(f"{name} {sq / max(raw, 1e-12):.2f}x")
     return out, structure, f"{len(train)} training pairs, {len(test)} test: " + ", ".join(parts)
+
+
+def _kinds(per: dict) -> dict[str, dict[str, dict[str, float]]]:
+    """Every held-out family pooled, by kind of performance: "real" (the shared takes'
+    sources) and "made-up" (the synthetic and independent performers): kind -> row ->
+    ``_scores``."""
+    from faceclean.neural.map_groups import MADE_UP
+
+    out: dict[str, dict[str, list]] = {}
+    for rows in per.values():
+        for name, outs in rows.items():
+            for o, p in outs:
+                kind = "made-up" if p.group in MADE_UP else "real"
+                out.setdefault(kind, {}).setdefault(name, []).append((o, p))
+    return {k: {r: _scores(v) for r, v in rows.items()} for k, rows in sorted(out.items())}
 
 
 def _scores(outs: Sequence[tuple]) -> dict[str, float]:
@@ -267,6 +283,21 @@ def markdown(result: dict[str, Any]) -> str:
                 f"{s['blink_closure']:.2f} | {s['jitter_ratio']:.2f} | {s['lag_ms']:.0f} | "
                 f"{neutral} |"
             )
+    kinds = result.get("kinds")
+    if kinds:
+        lines += ["", "Every held-out family pooled, by kind of performance: *real* (the shared "
+                  "takes' performers) and *made-up* (the synthetic and independent performers, "
+                  "who move every channel as often as any other):", "",
+                  "| performances | cleaner | MSE x raw | " + " | ".join(TABLE_GROUPS) + " |",
+                  "|---|---|---|" + "---|" * len(TABLE_GROUPS)]  # fmt: skip
+        for kind, rows in kinds.items():
+            raw = rows["raw"]
+            for name, s in rows.items():
+                groups = " | ".join(
+                    f"{s[f'mse_{g}'] / raw[f'mse_{g}']:.2f}" if raw[f"mse_{g}"] > 0 else "-"
+                    for g in TABLE_GROUPS
+                )
+                lines.append(f"| {kind} | {name} | {s['mse'] / raw['mse']:.2f} | {groups} |")
     lines += ["", *NOTES]
     chans = result["channels"]
     rows = [r for r in chans if r != "raw"]

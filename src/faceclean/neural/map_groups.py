@@ -113,6 +113,13 @@ def candidates() -> list[tuple[str, float]]:
 
 
 NEUTRAL = "neutral"  # the neutral holds' source (synthetic/engine.py)
+MADE_UP = ("synthetic", "independent")  # the made-up performers' sources (synthetic/engine.py)
+
+
+def real(key: str) -> bool:
+    """Whether a fold scores real performances (a shared take's source), not made-up
+    performers' nor neutral holds."""
+    return key.rpartition("/")[2] not in (*MADE_UP, NEUTRAL)
 
 
 def at_rest(key: str) -> bool:

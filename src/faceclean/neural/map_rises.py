@@ -31,7 +31,13 @@ takes the channels that move together are evidence (docs/MODEL.md: noseSneer, wh
 MediaPipe barely reads, from the brows and the upper lip). An output group
 (map_groups.SELECT) the map makes worse than raw in any family of the folds passes
 through instead: levelled (y_j = u_j - r_j) where that is no worse than raw, else as read
-(y_j = u_j).
+(y_j = u_j). So does an output the map makes clearly worse than raw (HARM_REAL) on the
+folds' *real* performances (the shared takes, not the made-up performers): the made-up
+performers move every channel as often as any other, so a channel MediaPipe cannot see
+(jawLeft) is read from one it can (mouthLeft moves with the jaw); real faces shift the
+lips far more often than the jaw, and there that reading is a habit of the made-up
+performers (on the families' folds, the jaw group 1.48x raw on real performances, 0.76x
+on made-up ones; docs/MODEL.md, sixth round).
 
 The choice of ``lam`` is made on folds that leave a look and a source out at once (with
 one family, a source), the held-out pairs never seen by the fit they score.
@@ -48,6 +54,7 @@ from faceclean.datasets.paired import Pair, performances
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_features, tracker_map
 from faceclean.neural.map_groups import SELECT, at_rest, group_of
+from faceclean.neural.map_groups import real as is_real
 
 LAMBDAS = (0.003, 0.01, 0.03, 0.1, 0.3)  # weight^2 per frame
 # One Euro pre-filters (min_cutoff Hz, beta, d_cutoff Hz), reactive and calmer: on these
@@ -85,6 +92,11 @@ RATE_TOL = 0.03  # weight: one curve at 30 and 120 fps, the contract's rate clau
 MSE_TOL = 0.01  # candidates within 1 % of the best MSE x raw are as accurate: price decides
 REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
 HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
+# An output's MSE over raw on the folds' real performances past this: it reads its own rise.
+# A channel's ratio is noisy where raw's error is small (jawLeft: raw's squared error 7,
+# summed over the real folds); 1.5 is harm beyond doubt (1.0 levelled 20 outputs, 1.5 seven
+# to nine, on the families' folds; docs/MODEL.md).
+HARM_REAL = 1.5
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
 Report = Callable[[dict[str, Any]], None]
 
@@ -98,6 +110,8 @@ class Scored(NamedTuple):
     per_group: dict[str, dict[str, float]]  # group -> family -> MSE x raw
     own: dict[str, dict[str, float]]  # the same for every output its own rise (gain 1)
     off: float  # the worst channel's mean |y - truth| on the neutral holds after SETTLE_S
+    real: np.ndarray | None = None  # (3, M) squared error of the map, its own rise, raw per
+    # output, summed over the folds' real performances (None: no real performance)
 
     @property
     def price(self) -> float:
@@ -112,13 +126,15 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         deadbands: Sequence[float] = DEADBANDS, own_rise: Sequence[str] = OWN_RISE,
         knees: Sequence[float | None] = blink_lift.KNEES, report: Report | None = None,
         details: Sequence[float] = DETAILS,
-        noise_bands: Sequence[float] = NOISE_BANDS) -> MapWeights:  # fmt: skip
+        noise_bands: Sequence[float] = NOISE_BANDS,
+        harm_real: float | None = HARM_REAL) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband and its
     widening by the noise, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
     docstring), accuracy first, then jitter and lag (``_choose``); then fitted on every
     pair. A group worse than raw in any family passes through levelled (its own rise)
-    where that is no worse than raw in every family, else as read. The groups in
+    where that is no worse than raw in every family, else as read; an output worse than
+    ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
     ``own_rise`` read their own rise, whatever the folds say."""
     report = report or (lambda _e: None)
     names = map_features.channels(pairs)
@@ -148,9 +164,11 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     levelled = [g for g in harmful if g in cv.own and max(cv.own[g].values()) <= HARM]
     passed = [g for g in harmful if g not in levelled and g not in own_rise]
     own = sorted({*own_rise, *levelled})
+    alone = _harmful_outputs(cv, names, passed, own, harm_real)
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
-    set_rises(w, solve(moments, lam), passed, own, detail)
+    set_rises(w, solve(moments, lam), passed, own, detail, alone)
     w.config.update(fitted="rises", noise_band=c, lam=lam, passed=passed, own_rise=own,
+                    alone=[*alone[0], *alone[1]],
                     val_mse=cv.mse, val_jitter=cv.jitter, val_lag=cv.lag, neutral_off=cv.off,
                     frames=int(sum(m[4] for m in moments)))  # fmt: skip
     _choose_lift(w, pairs, feats, moments, folds, lam, passed, own, knees, report)
@@ -165,6 +183,19 @@ def _choose(found: Sequence[tuple]) -> tuple:
         return found[0]
     near = [c for c in found if c[0].mse <= best * (1.0 + MSE_TOL)]
     return min(near, key=lambda c: c[0].price)
+
+
+def _harmful_outputs(cv: Scored, names, passed, own, harm: float | None
+                     ) -> tuple[list[str], list[str]]:  # fmt: skip
+    """(own rise, as read): the outputs, outside groups already passing, the map makes
+    worse than ``harm`` x raw on the folds' real performances; each reads its own rise
+    where that is no worse than raw there, else as read. None: no output."""
+    if cv.real is None or harm is None:
+        return [], []
+    s, o, r = cv.real
+    bad = [j for j, n in enumerate(names)
+           if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]]  # fmt: skip
+    return [names[j] for j in bad if o[j] <= r[j]], [names[j] for j in bad if o[j] > r[j]]
 
 
 def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarray:
@@ -188,18 +219,21 @@ def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarra
 
 
 def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = (),
-              own_rise: Sequence[str] = (), detail: float | None = None) -> None:  # fmt: skip
+              own_rise: Sequence[str] = (), detail: float | None = None,
+              alone: tuple[Sequence[str], Sequence[str]] = ((), ())) -> None:  # fmt: skip
     """Sets ``w``'s linear part to y = W (u - r) (b = W, a = 0, c = 0); the outputs of the
-    ``passed`` groups to y = u, those of ``own_rise`` to their own rise (gain 1). The
-    detail gain of an output is its own rise's gain (``--set detail=1``: the raw frame's
-    own timing at the map's scale), run at ``detail`` (the config's scale, kept when None)."""
+    ``passed`` groups to y = u, those of ``own_rise`` to their own rise (gain 1); so too
+    the outputs named in ``alone`` (own rise, as read). The detail gain of an output is
+    its own rise's gain (``--set detail=1``: the raw frame's own timing at the map's
+    scale), run at ``detail`` (the config's scale, kept when None)."""
     k = len(w.inputs)
     a, b, d = np.zeros((k, k)), coef.copy(), np.zeros(k)
     for j, name in enumerate(w.outputs):
         g = group_of(name)
-        if g in passed or g in own_rise:
+        as_read = g in passed or name in alone[1]
+        if as_read or g in own_rise or name in alone[0]:
             b[j] = 0.0
-            (a if g in passed else b)[j, j] = 1.0
+            (a if as_read else b)[j, j] = 1.0
         d[j] = np.clip(a[j, j] + b[j, j], 0.0, MAX_DETAIL)
     w.arrays.update(a=a, b=b, c=np.zeros(k), detail=d)
     if detail is not None:
@@ -247,6 +281,7 @@ def _cross_validate(w, feats, folds, fits) -> Scored:
     gi = np.array([list(SELECT).index(group_of(n)) for n in names])
     ratios, sse, jitter, lags = [], {}, [], []
     dev, frames = np.zeros(len(names)), 0
+    real = np.zeros((3, len(names)))  # map, own rise, raw: per output, real performances
     for key, linear in fits.items():
         map_features.set_linear(w, *linear)
         fam = key.rpartition("/")[0] or "all"
@@ -260,9 +295,11 @@ def _cross_validate(w, feats, folds, fits) -> Scored:
                 frames += int(keep.sum())
                 continue
             own = np.clip(f.u - f.r, 0.0, 1.0)  # every output its own rise
-            np.add.at(s, gi, ((pred - f.y) ** 2).sum(0))
-            np.add.at(o, gi, ((own - f.y) ** 2).sum(0))
-            np.add.at(r, gi, ((f.u + f.e - f.y) ** 2).sum(0))
+            errors = [((v - f.y) ** 2).sum(0) for v in (pred, own, f.u + f.e)]  # (M,) each
+            for acc, e in zip((s, o, r), errors, strict=True):
+                np.add.at(acc, gi, e)
+            if is_real(key):
+                real += errors
             if len(f.t) > 3:
                 jitter.append(jitter_ratio(f.t, pred, f.y))
                 lags.append(lag_ms(f.t, pred, f.y))
@@ -276,7 +313,9 @@ def _cross_validate(w, feats, folds, fits) -> Scored:
     own = {g: {f: v[1] / max(v[2], 1e-12) for f, v in fam.items()} for g, fam in sse.items()}
     off = float((dev / frames).max()) if frames else float("nan")
     mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
-    return Scored(mean(ratios), mean(jitter), mean(lags), per_group, own, off)
+    return Scored(
+        mean(ratios), mean(jitter), mean(lags), per_group, own, off, real if real[2].any() else None
+    )
 
 
 def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report) -> None:
