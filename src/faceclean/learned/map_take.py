@@ -33,12 +33,15 @@ from faceclean.learned import band as noise
 ROWS = 96
 CHUNK = 1024  # frames a pass: its (C, K) arrays stay in cache, and small beside the take
 
+# The tracker map being cleaned (learned/tracker_map.py's TrackerMap, which calls in here:
+# its state and constants are read and written as its own step leaves them).
+Map = Stepper
+
 if TYPE_CHECKING:
     from faceclean.animation import Animation
-    from faceclean.learned.tracker_map import TrackerMap
 
 
-def clean(tm: TrackerMap, anim: Animation, run_of=None) -> Animation:
+def clean(tm: Map, anim: Animation, run_of=None) -> Animation:
     """Reset, then step every valid frame of ``anim``, runs of usual frames at once (by
     ``run``, or ``run_of(xs, ts, dt)``)."""
     go = run_of or (lambda *a: run(tm, *a))
@@ -88,7 +91,7 @@ def clean(tm: TrackerMap, anim: Animation, run_of=None) -> Animation:
     return anim.with_values(out)
 
 
-def run(tm: TrackerMap, xs: np.ndarray, ts: np.ndarray, dt: float,
+def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
         dest: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """``_usual`` over frames xs (N, M) at ts (N,) s, one stream, the first dt s after the
     last accepted frame: (N, M) outputs, into ``dest`` where given; the state ends as
@@ -119,7 +122,7 @@ def run(tm: TrackerMap, xs: np.ndarray, ts: np.ndarray, dt: float,
     return outv
 
 
-def _shipped_kind(tm: TrackerMap) -> tuple | None:
+def _shipped_kind(tm: Map) -> tuple | None:
     """(W (K, M), c (M,)) and (a, ai, d, di) (M,) for ``compiled.map_run``, or None where
     the map is not the shipped kind (a lift, or A beyond each output's own input)."""
     if len(tm._lo):
@@ -140,7 +143,7 @@ def _shipped_kind(tm: TrackerMap) -> tuple | None:
     return (np.ascontiguousarray(-tm._nb[:, :m]), tm._c[:m].copy()), (a, ai, d, di)
 
 
-def _one_pass(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
+def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
     """The shipped kind: the pre-filter compiled, the rises' product by BLAS, the rest
     (the own terms, the clip, the band) one compiled pass: (N, M), or None (another kind,
     or off). Its arrays are kept from run to run (no fresh pages per block)."""
@@ -172,7 +175,7 @@ def _one_pass(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts:
     return p
 
 
-def _apart(tm: TrackerMap, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
+def _apart(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
     """The pre-filter and the products compiled apart, the rest in numpy: (N, M)."""
     U, R = compiled.map_prefilter(*pre, xi, h, *consts)
     # y = u (A + B)' - r B' + d x + c, (N, M+L), as ``_usual``; the detail's -d u in _ab
