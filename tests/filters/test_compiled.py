@@ -189,6 +189,40 @@ def test_the_tracker_maps_affine_kernel_is_the_product(on):
                                rtol=1e-14, atol=0)  # fmt: skip
 
 
+def test_the_map_pass_bands_as_the_band_kernel_and_survives_off_and_on_again(on):
+    """``map_run``'s band is ``noise_band``'s (one per-frame helper, compiled in its
+    place); turned off, the helpers are plain Python again, and on again the kernels
+    compile against the new ones."""
+    from faceclean.learned import band
+
+    rng = np.random.default_rng(2)
+    n, m = 300, 4
+    p = np.clip(np.cumsum(rng.normal(0, 0.02, (n, m)), axis=0) + 0.5, -0.2, 1.2)
+    u, x, h = rng.random((n, m)), rng.random((n, m)), rng.uniform(0.01, 0.03, n)
+    c, zero, idx = rng.normal(0, 0.05, m), np.zeros(m), np.arange(m)
+    floor = np.full(m, 0.01)
+
+    def both():
+        y0, st1 = np.full(m, 0.5), [np.full(m, 0.5), np.full(m, 0.5), np.zeros(m)]
+        st2 = [v.copy() for v in st1]
+        got = compiled.map_run(p.copy(), u, x, h, c, (zero, idx, zero, idx),
+                               (2, floor, 16.0, band.TAU, band.CAP), y0, st1)  # fmt: skip
+        m_ = np.clip(p + c, 0.0, 1.0)
+        want = compiled.noise_band(m_, h, y0, *st2, floor, 16.0, band.TAU, band.CAP)
+        return got, want, st1, st2
+
+    got, want, st1, st2 = both()
+    np.testing.assert_array_equal(got, want)  # the same helper, the same bits
+    for a, b in zip(st1, st2, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(got, np.clip(p + c, 0, 1))  # the band held something
+    compiled.disable()
+    assert not hasattr(compiled._band_frame, "py_func")  # plain Python while off
+    assert compiled.enable()
+    assert hasattr(compiled._band_frame, "py_func")
+    np.testing.assert_array_equal(both()[0], got)
+
+
 def test_compiles_says_which_takes_run_compiled(monkeypatch):
     """A short take: no, and numba stays unloaded; a long one: yes for a cleaner with a
     kernel, no for one without."""
