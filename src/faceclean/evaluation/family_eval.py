@@ -133,7 +133,8 @@ def fold(folder: str, fam: str, group: str, shipped, pairs=None) -> tuple:
     rows["map, every input"] = lambda n, w=w: TrackerMap(weights=w, names=n)
     rises = map_rises.fit(train)
     rows["map, rises (ours)"] = lambda n, w=rises: TrackerMap(weights=w, names=n)
-    structure = {"lam": rises.config["lam"], "passed": rises.config["passed"]}
+    structure = {"lam": rises.config["lam"], "passed": rises.config["passed"],
+                 "alone": rises.config.get("alone", [])}  # fmt: skip
     out = {name: [(p.name, o) for p, o in zip(test, outputs(b, test), strict=True)]
            for name, b in rows.items()}  # fmt: skip
     raw = sum(float(np.nansum((o.values - p.truth.arkit(o.names)[0]) ** 2))
