@@ -32,8 +32,9 @@ MediaPipe barely reads, from the brows and the upper lip). An output group
 (map_groups.SELECT) the map makes worse than raw in any family of the folds passes
 through instead: levelled (y_j = u_j - r_j) where that is no worse than raw, else as read
 (y_j = u_j). So does an output the map makes clearly worse than raw (HARM_REAL) on the
-folds' *real* performances (the shared takes, not the made-up performers): the made-up
-performers move every channel as often as any other, so a channel MediaPipe cannot see
+folds' *real* performances (the shared takes, not the made-up performers), levelled
+always (as read keeps a look's resting reading): the made-up performers move every
+channel as often as any other, so a channel MediaPipe cannot see
 (jawLeft) is read from one it can (mouthLeft moves with the jaw); real faces shift the
 lips far more often than the jaw, and there that reading is a habit of the made-up
 performers (on the families' folds, the jaw group 1.48x raw on real performances, 0.76x
@@ -188,14 +189,15 @@ def _choose(found: Sequence[tuple]) -> tuple:
 def _harmful_outputs(cv: Scored, names, passed, own, harm: float | None
                      ) -> tuple[list[str], list[str]]:  # fmt: skip
     """(own rise, as read): the outputs, outside groups already passing, the map makes
-    worse than ``harm`` x raw on the folds' real performances; each reads its own rise
-    where that is no worse than raw there, else as read. None: no output."""
+    worse than ``harm`` x raw on the folds' real performances; each reads its own rise,
+    never as read, even where its own rise is worse than raw there: as read carries the
+    tracker's resting reading of a look (a photographed face at rest reads mouthPressLeft
+    0.25 high; docs/MODEL.md, seventh round). None: no output."""
     if cv.real is None or harm is None:
         return [], []
-    s, o, r = cv.real
-    bad = [j for j, n in enumerate(names)
-           if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]]  # fmt: skip
-    return [names[j] for j in bad if o[j] <= r[j]], [names[j] for j in bad if o[j] > r[j]]
+    s, _o, r = cv.real
+    return [n for j, n in enumerate(names)
+            if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]], []  # fmt: skip
 
 
 def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarray:
