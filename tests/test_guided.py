@@ -24,6 +24,7 @@ from faceclean.guided.script import load
 
 SCRIPT = load()
 RATE = 24.0
+RENDERED = 12.0  # fps of the rendered face: a webcam's low end, half the render and track time
 COL = {n: i for i, n in enumerate(ARKIT52)}
 
 
@@ -195,7 +196,7 @@ def test_bad_takes_are_one_line_per_prompt_and_write_nothing(tmp_path, capsys, c
 @pytest.fixture(scope="module")
 def face(request):
     """(script take, other clip and its truth) of one painted face, rendered and tracked
-    at 24 fps; the renders are kept in pytest's cache (a pure function of the weights)."""
+    at 12 fps; the renders are kept in pytest's cache (a pure function of the weights)."""
     pytest.importorskip("mediapipe")
     from faceclean.settings import mesh_file, tracker_model
     from faceclean.trackers.mediapipe import NAMES
@@ -207,11 +208,11 @@ def face(request):
 
     src = io.load(first_take("alexdjulin"))
     values, _ = src.arkit()
-    t_other = np.arange(int(10 * RATE)) / RATE  # 10 s of an iPhone take, from its 5th s
+    t_other = np.arange(int(10 * RENDERED)) / RENDERED  # 10 s of an iPhone take, from 5 s
     w_other = np.stack([np.interp(t_other + src.times[0] + 5, src.times,
                                   np.nan_to_num(values[:, j])) for j in range(52)], 1)  # fmt: skip
     w_other = np.clip(w_other, 0, 1)
-    tau, s = performed()
+    tau, s = performed(rate=RENDERED)
     cache = request.config.cache.mkdir("guided_render")
     script = _render(cache, tau, SCRIPT.weights(s))
     other = _render(cache, t_other, w_other)
