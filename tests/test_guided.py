@@ -1,7 +1,7 @@
 """Guided calibration: the script, its alignment, the fit, the file and the command.
 
 The fast tests perform the script as ARKit weights with a person's timing (late, slow,
-uneven). The slow ones render it on a face and track it with MediaPipe (24 fps), and
+uneven). The slow ones render it on a face and track it with MediaPipe (12 fps), and
 score the calibration on another clip of the same face.
 """
 

@@ -2976,6 +2976,7 @@ def _flood(r: Relay, packets) -> int:
     return r.rss() - before
 
 
+@pytest.mark.slow
 def test_livelink_relay_memory_is_bounded_under_new_subjects():
     r = relay_for("livelink", "livelink", "--method", "ema")
     t0 = round(r.t * 60) + 100
@@ -2986,6 +2987,7 @@ def test_livelink_relay_memory_is_bounded_under_new_subjects():
     r.assert_cleans()
 
 
+@pytest.mark.slow
 def test_vmc_relay_memory_is_bounded_under_new_names():
     r = relay_for("vmc", "vmc", "--method", "ema")
     t0 = r.t + 1.0
@@ -3000,6 +3002,7 @@ def test_vmc_relay_memory_is_bounded_under_new_names():
     r.assert_cleans()
 
 
+@pytest.mark.slow
 def test_ifacialmocap_relay_memory_is_bounded_under_new_names():
     r = relay_for("ifacialmocap", "vmc", "--method", "ema")
     packets = (b"%06d" % k + _long(56_000) + b"-50|jawOpen-50" for k in range(1000))

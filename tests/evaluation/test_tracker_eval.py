@@ -61,6 +61,7 @@ def result(folder):
     return tracker_eval.evaluate(folder, held_out="window", work=folder / ".work")
 
 
+@pytest.mark.slow
 def test_every_fold_scores_every_row_and_level_rows_beat_the_filters(result):
     assert sorted(result["folds"]) == ["a", "b", engine.SYNTH_GROUP]
     overall = result["overall"]

@@ -24,6 +24,7 @@ def fitted():
     return by_group, every, test
 
 
+@pytest.mark.slow
 def test_the_map_by_group_keeps_gaze_no_worse_than_raw_on_a_new_look(fitted):
     by_group, every, test = fitted
     assert gaze_ratio(by_group, test) <= 1.0

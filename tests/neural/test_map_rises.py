@@ -33,6 +33,7 @@ def mse_ratio(w, test) -> float:
     return num / den
 
 
+@pytest.mark.slow
 def test_a_new_look_comes_out_better_than_raw_with_gaze_no_worse(fitted):
     rises, _, test = fitted
     assert mse_ratio(rises, test) < 0.8

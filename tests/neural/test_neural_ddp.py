@@ -53,6 +53,7 @@ SCRIPT = textwrap.dedent(
 
 @pytest.mark.skipif(takes_dir() is None, reason="shared data arkit_takes/ absent")
 @pytest.mark.skipif(not TORCHRUN.exists(), reason="torchrun not installed beside python")
+@pytest.mark.slow
 def test_two_process_training_keeps_ranks_identical(tmp_path):
     script = tmp_path / "ddp_run.py"
     script.write_text(SCRIPT)
@@ -108,6 +109,7 @@ def _until(condition, deadline: float) -> bool:
 @pytest.mark.skipif(takes_dir() is None, reason="shared data arkit_takes/ absent")
 @pytest.mark.skipif(not TORCHRUN.exists(), reason="torchrun not installed beside python")
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+@pytest.mark.slow
 def test_ranks_die_when_torchrun_is_killed(tmp_path):
     """SIGKILL to torchrun's agent mid-training: both ranks stop (faceclean.workers
     die_with_parent in distributed.setup), polled up to a deadline, not left training."""

@@ -129,6 +129,7 @@ def _digest(job) -> str:
     return hashlib.sha1(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:8]
 
 
+@pytest.mark.slow
 def test_pairs_skips_a_bad_portrait_and_makes_the_rest(portrait_file, tmp_path):
     bad = tmp_path / "blank.png"
     Image.fromarray(np.full((200, 200, 3), 128, np.uint8)).save(bad)

@@ -33,6 +33,7 @@ def run(*args, **kw):
     return subprocess.run([*CLI, *map(str, args)], capture_output=True, text=True, **kw)
 
 
+@pytest.mark.slow
 def test_pairs_are_written_whole_and_a_rerun_skips_them(tmp_path):
     out = tmp_path / "pairs"
     r = run("--synthetic", 2, *FAST, "-o", out, "--jobs", 2)
@@ -91,6 +92,7 @@ def test_bad_files_and_options_are_one_line(tmp_path, extra, message):
     assert len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_without_redoing_finished_pairs(tmp_path):
     out = tmp_path / "out"
     args = [*CLI, "--synthetic", 3, *FAST, "-o", out]

@@ -38,6 +38,7 @@ def camera_video(rendered, tmp_path_factory) -> str:
     return videos.write_video(tmp_path_factory.mktemp("camera") / "camera.mp4", frames, 30)
 
 
+@pytest.mark.slow
 def test_track_ui_shows_the_camera_beside_the_faces_and_swaps_the_cleaner(camera_video):
     from playwright.sync_api import sync_playwright
 

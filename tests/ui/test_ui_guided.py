@@ -54,6 +54,7 @@ def squint(receiver: Receiver, first: int, n: int) -> np.ndarray:
     return np.array([v[SQUINT] for _, v in receiver.frames[first : first + n]])
 
 
+@pytest.mark.slow
 def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, take, tmp_path):
     port, receiver = free_port(), Receiver()
     relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}",

@@ -445,6 +445,7 @@ def _roughness(frames) -> float:
     return float(np.nanmean(np.abs(np.diff(y, axis=0))))
 
 
+@pytest.mark.slow
 def test_moving_a_smoothing_slider_changes_what_the_receiver_gets(live):
     tab, receiver, take_frames, *_ = live
     # 600 received frames (10 s) of the light stream first, counted since the relay's
