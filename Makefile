@@ -30,9 +30,12 @@ lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
 
-# one pytest worker per core (pytest-xdist): most cases run the CLI in a child process
+# one pytest worker per core (pytest-xdist): most cases run the CLI in a child process.
+# One BLAS/OpenMP thread each: the workers already fill the cores, and a pool thread that
+# spins waiting for a core the other worker holds slows both.
+TEST_THREADS := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 test: $(STAMP) $(NODE_STAMP) lint
-	$(BIN)/python -m pytest -n auto
+	$(TEST_THREADS) $(BIN)/python -m pytest -n auto
 
 bench: $(STAMP)
 	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md

@@ -16,14 +16,6 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Modules that hold a test marked slow run first, each module whole (its fixtures
-    built once): the longest work is handed out while every worker is still busy, not
-    left to one worker at the end (longest first, as a scheduler packs)."""
-    slow = {item.module for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: item.module not in slow)  # stable: the order within kept
-
-
 @pytest.fixture(scope="session")
 def takes_root():
     """../shared/data/arkit_takes, or skip: the tests that read real takes say so."""
