@@ -55,6 +55,7 @@ def squint(receiver: Receiver, first: int, n: int) -> np.ndarray:
 
 
 @pytest.mark.slow
+@pytest.mark.realtime
 def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, take, tmp_path):
     port, receiver = free_port(), Receiver()
     relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}",
