@@ -169,7 +169,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
     set_rises(w, solve(moments, lam), passed, own, detail, alone)
     w.config.update(fitted="rises", noise_band=c, lam=lam, passed=passed, own_rise=own,
-                    alone=[*alone[0], *alone[1]],
+                    alone=alone,
                     val_mse=cv.mse, val_jitter=cv.jitter, val_lag=cv.lag, neutral_off=cv.off,
                     frames=int(sum(m[4] for m in moments)))  # fmt: skip
     _choose_lift(w, pairs, feats, moments, folds, lam, passed, own, knees, report)
@@ -186,18 +186,17 @@ def _choose(found: Sequence[tuple]) -> tuple:
     return min(near, key=lambda c: c[0].price)
 
 
-def _harmful_outputs(cv: Scored, names, passed, own, harm: float | None
-                     ) -> tuple[list[str], list[str]]:  # fmt: skip
-    """(own rise, as read): the outputs, outside groups already passing, the map makes
-    worse than ``harm`` x raw on the folds' real performances; each reads its own rise,
-    never as read, even where its own rise is worse than raw there: as read carries the
-    tracker's resting reading of a look (a photographed face at rest reads mouthPressLeft
-    0.25 high; docs/MODEL.md, seventh round). None: no output."""
+def _harmful_outputs(cv: Scored, names, passed, own, harm: float | None) -> list[str]:
+    """The outputs, outside groups already passing, the map makes worse than ``harm`` x
+    raw on the folds' real performances; each reads its own rise, never as read, even
+    where its own rise is worse than raw there: as read carries the tracker's resting
+    reading of a look (a photographed face at rest reads mouthPressLeft 0.25 high;
+    docs/MODEL.md, seventh round). None: no output."""
     if cv.real is None or harm is None:
-        return [], []
+        return []
     s, _o, r = cv.real
     return [n for j, n in enumerate(names)
-            if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]], []  # fmt: skip
+            if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]]  # fmt: skip
 
 
 def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarray:
@@ -222,18 +221,18 @@ def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarra
 
 def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = (),
               own_rise: Sequence[str] = (), detail: float | None = None,
-              alone: tuple[Sequence[str], Sequence[str]] = ((), ())) -> None:  # fmt: skip
+              alone: Sequence[str] = ()) -> None:  # fmt: skip
     """Sets ``w``'s linear part to y = W (u - r) (b = W, a = 0, c = 0); the outputs of the
     ``passed`` groups to y = u, those of ``own_rise`` to their own rise (gain 1); so too
-    the outputs named in ``alone`` (own rise, as read). The detail gain of an output is
+    the outputs named in ``alone`` (own rise). The detail gain of an output is
     its own rise's gain (``--set detail=1``: the raw frame's own timing at the map's
     scale), run at ``detail`` (the config's scale, kept when None)."""
     k = len(w.inputs)
     a, b, d = np.zeros((k, k)), coef.copy(), np.zeros(k)
     for j, name in enumerate(w.outputs):
         g = group_of(name)
-        as_read = g in passed or name in alone[1]
-        if as_read or g in own_rise or name in alone[0]:
+        as_read = g in passed
+        if as_read or g in own_rise or name in alone:
             b[j] = 0.0
             (a if as_read else b)[j, j] = 1.0
         d[j] = np.clip(a[j, j] + b[j, j], 0.0, MAX_DETAIL)
