@@ -30,8 +30,8 @@ output through the origin, 0.23 by covariance, where the truth averages 0.5); on
 takes the channels that move together are evidence (docs/MODEL.md: noseSneer, which
 MediaPipe barely reads, from the brows and the upper lip). An output group
 (map_groups.SELECT) the map makes worse than raw in any family of the folds passes
-through instead: levelled (y_j = u_j - r_j) where that is no worse than raw, else as read
-(y_j = u_j). So does an output the map makes clearly worse than raw (HARM_REAL) on the
+through instead, levelled (y_j = u_j - r_j), never as read (y_j = u_j keeps the look's
+resting reading). So does an output the map makes clearly worse than raw (HARM_REAL) on the
 folds' *real* performances (the shared takes, not the made-up performers), levelled
 always (as read keeps a look's resting reading): the made-up performers move every
 channel as often as any other, so a channel MediaPipe cannot see
@@ -133,8 +133,8 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     widening by the noise, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
     docstring), accuracy first, then jitter and lag (``_choose``); then fitted on every
-    pair. A group worse than raw in any family passes through levelled (its own rise)
-    where that is no worse than raw in every family, else as read; an output worse than
+    pair. A group worse than raw in any family passes through levelled (its own rise),
+    never as read; an output worse than
     ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
     ``own_rise`` read their own rise, whatever the folds say."""
     report = report or (lambda _e: None)
@@ -161,10 +161,11 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
                 found.append((cv, pre, (band, c), detail, lam))
     cv, pre, (band, c), detail, lam = _choose(found)
     feats, moments = data[pre]
+    # a group worse than raw in any family passes through levelled, always: as read would
+    # keep a look's resting reading (a photographed face's lids read eyeSquint 0.5 at rest)
     harmful = sorted(g for g, fam in cv.per_group.items() if max(fam.values()) > HARM)
-    levelled = [g for g in harmful if g in cv.own and max(cv.own[g].values()) <= HARM]
-    passed = [g for g in harmful if g not in levelled and g not in own_rise]
-    own = sorted({*own_rise, *levelled})
+    passed: list[str] = []
+    own = sorted({*own_rise, *harmful})
     alone = _harmful_outputs(cv, names, passed, own, harm_real)
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
     set_rises(w, solve(moments, lam), passed, own, detail, alone)
