@@ -93,7 +93,8 @@ class Previous(TrackerMap):
         np.maximum(h, DT_MIN, out=h)
         u, edx, r = self._u[0].copy(), self._edx[0].copy(), self._r[0].copy()
         consts = [np.array(c, np.float64) for c in (self._tau_d, self._mc2pi, self._beta2pi)]
-        U, R = compiled.map_prefilter(u, edx, r, np.ascontiguousarray(xi), h, *consts)
+        v = r.copy()  # the smoothed rest's state, unused (rest_tau 0)
+        U, R = compiled.map_prefilter(u, edx, r, v, np.ascontiguousarray(xi), h, *consts)
         pairs = [(U, self._ab), (R, self._nb)] + ([(xi, self._dx)] if self._dx is not None else [])
         y = compiled.affine(self._c, *pairs)
         m = self._m_cols
@@ -128,10 +129,11 @@ class Previous(TrackerMap):
 def _weights(which: str) -> MapWeights:
     """The shipped map; with a per-output deadband and no lift; or with a lift (some
     knees at 0, its top kept), a scalar deadband and a detail on some outputs only. The
-    band is never widened by the noise: the frozen step predates it (learned/band.py;
-    its paths are checked against each other in tests/learned/test_tracker_map.py)."""
+    band is never widened by the noise and the rest is the plain minimum: the frozen step
+    predates both (learned/band.py, the rest's ``rest_tau`` and ``rest_warm``; their paths
+    are checked against each other in tests/learned/test_tracker_map.py)."""
     w = MapWeights.load(MODELS / "mediapipe.npz")
-    w = MapWeights.build(dict(w.config, noise_band=0.0), w.arrays)
+    w = MapWeights.build(dict(w.config, noise_band=0.0, rest_tau=0.0, rest_warm=0.0), w.arrays)
     m = len(w.outputs)
     if which == "shipped":
         return w

@@ -14,7 +14,7 @@ NAMES = ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")
 
 
 def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None,
-            detail=None, top=False, noise=0.0) -> MapWeights:  # fmt: skip
+            detail=None, top=False, noise=0.0, rest_s=(0.0, 0.0)) -> MapWeights:  # fmt: skip
     rng = np.random.default_rng(seed)
     k = len(NAMES)
     arrays = {
@@ -38,7 +38,8 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None
         arrays["detail"] = np.full(k, float(detail))
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
               "hidden": hidden, "prefilter": prefilter, "rest": rest,
-              "deadband": deadband, "lift_top": top, "noise_band": noise}  # fmt: skip
+              "deadband": deadband, "lift_top": top, "noise_band": noise,
+              "rest_tau": rest_s[0], "rest_warm": rest_s[1]}  # fmt: skip
     return MapWeights.build(config, arrays)
 
 
@@ -143,13 +144,14 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("band, lift, detail, top, noise", [
-    (0.0, None, None, False, 0.0), (0.05, None, None, False, 0.0),
-    (0.05, (2.5, 0.2), 0.6, False, 0.0), (0.02, (6.0, 0.1), 0.3, True, 0.0),
-    (0.01, None, 0.3, False, 16.0), (0.0, (2.5, 0.2), None, False, 8.0)])  # fmt: skip
+@pytest.mark.parametrize("band, lift, detail, top, noise, rest_s", [
+    (0.0, None, None, False, 0.0, (0, 0)), (0.05, None, None, False, 0.0, (0, 0)),
+    (0.05, (2.5, 0.2), 0.6, False, 0.0, (0, 0)), (0.02, (6.0, 0.1), 0.3, True, 0.0, (0, 0)),
+    (0.01, None, 0.3, False, 16.0, (0.15, 0.2)), (0.0, (2.5, 0.2), None, False, 8.0, (0, 0.3)),
+    (0.0, None, None, False, 0.0, (0.3, 0))])  # fmt: skip
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
 def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top,
-                                                               noise):  # fmt: skip
+                                                               noise, rest_s):  # fmt: skip
     """``_usual`` (every stream present and advancing) against the general path, forced, on
     streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
     three streams together and one alone."""
@@ -161,7 +163,8 @@ def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift,
     t[100:, 0] += 1.0  # ... and the one stream stepped alone
     x = rng.uniform(0, 1, (n, 3, len(names)))
     x[40, 0] = np.nan  # a lost frame
-    w = weights(hidden=0, deadband=band, lift=lift, detail=detail, top=top, noise=noise)
+    w = weights(hidden=0, deadband=band, lift=lift, detail=detail, top=top, noise=noise,
+                rest_s=rest_s)  # fmt: skip
     for streams in (slice(None), 0):
         fast, general = TrackerMap(weights=w, names=names), TrackerMap(weights=w, names=names)
         general._usual = lambda x, tt: None
@@ -379,3 +382,36 @@ def test_the_lifts_top_follows_the_streams_largest_lift():
     np.testing.assert_array_equal(topped.clean(a).values, y)  # reset: the top forgotten
     with pytest.raises(FacecleanError, match="lift_top must be true or false"):
         MapWeights.build({**topped.weights.config, "lift_top": "yes"}, topped.weights.arrays)
+
+
+def test_a_smoothed_rest_keeps_a_noisy_still_face_at_rest():
+    # a face that does not move, read at 0.3 with noise 0.04 and a first reading of 0.05
+    # (MediaPipe's first frame of a face is often low): the running minimum of u finds the
+    # first frame and the noise's dips, so the face rises; smoothed over 0.15 s and from
+    # 0.2 s on, its rest is the face's own, and a movement still comes through whole
+    rng = np.random.default_rng(3)
+    t = np.arange(300) / 30.0
+    x = np.clip(0.3 + rng.normal(0, 0.04, (300, 3)), 0, 1)
+    x[0] = 0.05
+    x[200:230] += 0.4  # then a movement, 1 s
+    anim = Animation(t, np.clip(x, 0, 1), NAMES)
+
+    def own_rise(rest_s):
+        w = weights(hidden=0, rest_s=rest_s)
+        w.arrays["a"], w.arrays["b"], w.arrays["c"] = np.zeros((3, 3)), np.eye(3), np.zeros(3)
+        return TrackerMap(weights=w).clean(anim).values
+
+    plain, smoothed = own_rise((0.0, 0.0)), own_rise((0.15, 0.2))
+    still = slice(15, 200)  # 0.5 s on, before the movement
+    assert plain[still].mean() > 0.2  # the first frame's 0.05 is its rest
+    assert smoothed[still].mean() < 0.06 < plain[still].mean() / 3
+    assert smoothed[:6].max() == 0.0  # the warm-up: no rise before 0.2 s
+    assert smoothed[205:230].mean() > 0.3  # the movement (0.4) comes through
+
+
+@pytest.mark.parametrize("key, value", [("rest_tau", -0.1), ("rest_warm", 11.0),
+                                        ("rest_tau", True), ("rest_warm", "0.2")])  # fmt: skip
+def test_a_rest_out_of_range_is_refused(key, value):
+    w = weights(hidden=0)
+    with pytest.raises(FacecleanError, match=key):
+        MapWeights.build(dict(w.config, **{key: value}), w.arrays)

@@ -20,6 +20,7 @@ in numpy as before, slower (``status()`` says which, for ``info`` and ``bench``)
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 
@@ -47,8 +48,8 @@ def _warm_args() -> dict[str, tuple]:
         "ema": (one.copy(), x, x + 0.5, np.zeros(1, np.intp), x.copy()),
         "deadband": (x, one, x.copy()),
         "kalman": (*(one.copy() for _ in range(5)), x, one, one, one, one, one, x.copy()),
-        "map_prefilter": (one.copy(), one.copy(), one.copy(), x, one, one, one, one, 0,
-                          x.copy(), x.copy()),
+        "map_prefilter": (one.copy(), one.copy(), one.copy(), one.copy(), x, one, one, one,
+                          one, 0.0, 0, x.copy(), x.copy()),
         "affine": (x, x, x.copy()),
         "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0, 0.1,
                        x.copy()),
@@ -291,40 +292,45 @@ def _inert(y, edx, x, dt, mc, beta, w_d, ea, k, out):
             out[n, m] = y[m]
 
 
-def map_prefilter(u, edx, r, xi: np.ndarray, h: np.ndarray, tau_d, mc2pi, beta2pi,
-                  rises: bool = False, out: tuple | None = None):  # fmt: skip
+def map_prefilter(u, edx, r, v, xi: np.ndarray, h: np.ndarray, tau_d, mc2pi, beta2pi,
+                  tau_r: float = 0.0, rises: bool = False, out: tuple | None = None):  # fmt: skip
     """A tracker map's pre-filter over a run of usual frames (learned/tracker_map.py
-    ``_usual``, one stream): state u, edx, r (K,) updated in place; xi (N, K) the inputs,
-    h (N,) s the steps; tau_d, mc2pi, beta2pi (K,). Returns (U, R) (N, K), into ``out``
-    where given: the filtered inputs and their running minimum after each frame
-    (``rises``: u - r instead); None when off."""
+    ``_usual``, one stream): state u, edx, r, v (K,) updated in place; xi (N, K) the
+    inputs, h (N,) s the steps; tau_d, mc2pi, beta2pi (K,); tau_r s the rest's smoothing
+    (0: none, v unused). Returns (U, R) (N, K), into ``out`` where given: the filtered
+    inputs and their rest after each frame (``rises``: u - r instead); None when off."""
     kernel = _kernel("map_prefilter")
     if kernel is None:
         return None
     U, R = out if out is not None else (np.empty_like(xi), np.empty_like(xi))
-    kernel(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, int(rises), U, R)
+    kernel(u, edx, r, v, xi, h, tau_d, mc2pi, beta2pi, float(tau_r), int(rises), U, R)
     return U, R
 
 
-def _map_prefilter(u, edx, r, xi, h, tau_d, mc2pi, beta2pi, rises, U, R):
+def _map_prefilter(u, edx, r, v, xi, h, tau_d, mc2pi, beta2pi, tau_r, rises, U, R):
     """In place: ``_prefilter_frame`` frame after frame, U and R (N, K) getting u and r
     (rises: u - r)."""
     for n in range(xi.shape[0]):
-        _prefilter_frame(u, edx, r, xi[n], h[n], tau_d, mc2pi, beta2pi)
+        _prefilter_frame(u, edx, r, v, xi[n], h[n], tau_d, mc2pi, beta2pi, tau_r)
         for j in range(xi.shape[1]):
             U[n, j] = u[j]
             R[n, j] = u[j] - r[j] if rises else r[j]
 
 
-def _prefilter_frame(u, edx, r, x, h, tau_d, mc2pi, beta2pi):
+def _prefilter_frame(u, edx, r, v, x, h, tau_d, mc2pi, beta2pi, tau_r):
     """One frame x (K,) h s later, in place: ``_usual``'s One Euro in its arithmetic
-    order, a = h / (h + tau) and 2 pi f h / (1 + 2 pi f h), then the rest r = min(r, u)."""
+    order, a = h / (h + tau) and 2 pi f h / (1 + 2 pi f h), then the rest r = min(r, u),
+    or with tau_r > 0 v += (1 - exp(-h / tau_r)) (u - v) and r = min(r, v)."""
     for j in range(x.shape[0]):
         e = x[j] - u[j]
         edx[j] = edx[j] + (h / (h + tau_d[j])) * (e / h - edx[j])
         g = h * (mc2pi[j] + beta2pi[j] * abs(edx[j]))
         u[j] = u[j] + (g / (1.0 + g)) * e
-        r[j] = min(r[j], u[j])
+        if tau_r > 0.0:
+            v[j] = v[j] + (u[j] - v[j]) * -math.expm1(-h / tau_r)
+            r[j] = min(r[j], v[j])
+        else:
+            r[j] = min(r[j], u[j])
 
 
 def affine(c: np.ndarray, *pairs: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:

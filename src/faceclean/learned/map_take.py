@@ -75,7 +75,8 @@ def clean(tm: Map, anim: Animation, run_of=None) -> Animation:
         while k < len(x):
             if ok[k] and tm._y is not None and tm._y.shape == (1, x.shape[1]):
                 dt = t[k] - float(tm._t[0])
-                if MIN_DT < dt <= tm.pre.max_gap:  # _usual's frame (NaN fails)
+                warm = tm._rest_warm > 0 and not t[k] - tm._t0[0] > tm._rest_warm
+                if MIN_DT < dt <= tm.pre.max_gap and not warm:  # _usual's (NaN fails)
                     end = int(breaks[np.searchsorted(breaks, k, side="right")])
                     if whole and run_of is None:  # written in place
                         run(tm, x[k:end], t[k:end], dt, out[span][k:end])
@@ -102,11 +103,12 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
     h[0] = dt
     h[1:] = np.diff(ts)
     np.maximum(h, DT_MIN, out=h)
-    u, edx, r = tm._u[0].copy(), tm._edx[0].copy(), tm._r[0].copy()  # (K,)
+    u, edx, r, v = (a[0].copy() for a in (tm._u, tm._edx, tm._r, tm._v))  # (K,)
     consts = [np.array(c, np.float64) for c in (tm._tau_d, tm._mc2pi, tm._beta2pi)]
-    y = _one_pass(tm, (u, edx, r), xi, h, consts)
+    consts.append(tm._rest_tau)
+    y = _one_pass(tm, (u, edx, r, v), xi, h, consts)
     if y is None:
-        y = _apart(tm, (u, edx, r), xi, h, consts)
+        y = _apart(tm, (u, edx, r, v), xi, h, consts)
     outv = np.empty_like(xs) if dest is None else dest
     if tm._direct:
         outv[:] = y
@@ -117,7 +119,7 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
     else:
         outv[:] = xs
         outv[:, tm._out.cols] = y[:, tm._out.have]
-    tm._u, tm._edx, tm._r = u[None], edx[None], r[None]
+    tm._u, tm._edx, tm._r, tm._v = u[None], edx[None], r[None], v[None]
     tm._m, tm._t, tm._y = y[-1:].copy(), ts[-1:].copy(), outv[-1:].copy()
     return outv
 

@@ -10,7 +10,9 @@ input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_D
 (absent: 0; nonzero needs an input of the output's name, as the lift does), the fitted
 gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
 user's ``detail`` setting; config ``lift_top`` true or false (absent: false); config
-``noise_band`` c in [0, MAX_NOISE] (absent: 0), the band's widening (learned/band.py).
+``noise_band`` c in [0, MAX_NOISE] (absent: 0), the band's widening (learned/band.py);
+config ``rest_tau`` and ``rest_warm`` in [0, MAX_REST] s (absent: 0), the rest's smoothing
+and warm-up (learned/tracker_map.py).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
 MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blinks
 MAX_DETAIL = 4.0  # the detail's gain: more would pass the raw input's noise amplified
 MAX_NOISE = 100.0  # the band over the noise: more would hold a face still through its moves
+MAX_REST = 10.0  # s: a rest smoothed or held off longer would miss a face's own rest
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,11 @@ class MapWeights:
         c = config.get("noise_band", 0.0)
         if isinstance(c, bool) or not isinstance(c, (int, float)) or not 0 <= c <= MAX_NOISE:
             raise FacecleanError(f"{label}: noise_band must be a number within [0, {MAX_NOISE}]")
+        for key in ("rest_tau", "rest_warm"):
+            v = config.get(key, 0.0)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= MAX_REST:
+                raise FacecleanError(f"{label}: {key} must be a number of seconds within "
+                                     f"[0, {MAX_REST:g}]")  # fmt: skip
         scale = config.get("detail_scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
             raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")

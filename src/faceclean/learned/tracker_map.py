@@ -7,7 +7,12 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
 
     u  = OneEuro(x)                     tuned pre-filter (min_cutoff, beta, d_cutoff), so
                                         the map sees the tracker's signal, not its noise
-    r  = min(r, u)                      the stream's resting level so far (since reset)
+    r  = min(r, v)                      the stream's resting level so far (since reset):
+                                        v = u, or with ``rest_tau`` u smoothed over that
+                                        many s (v += (1 - exp(-h / tau)) (u - v)); with
+                                        ``rest_warm``, r = v = u for that many s after
+                                        the stream's first frame (every rise 0), then
+                                        min(r, v)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
     m  = clip(A u + B (u - r) + c + d (x - u)_own + W2 tanh(W1 z + b1) + b2, 0, 1)  (M,)
     m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))  a lift, where g_j > 0 (blinks):
@@ -39,6 +44,11 @@ hidden layer (``hidden`` > 0) adds what is not linear; on the pairs we have it o
 (docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
 function of (u, r, x - u) only; on a still face u converges to x, so the detail goes to 0,
 r is constant, and m converges and y with it; a missing frame holds u and so y.
+Why the rest may be smoothed: the running minimum of a noisy reading finds its noise's
+lowest dips, so a still face's rise is that noise's depth and grows with time (MediaPipe
+on a photographed face at rest: 0.1-0.14 off); the minimum of a smoothed reading finds
+the face's rest, and the first frames (MediaPipe's first reading of a face is often low)
+set nothing (docs/MODEL.md, eighth round).
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
@@ -178,6 +188,8 @@ class TrackerMap(Stepper):
         self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if on else None
         eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
         self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
+        self._rest_tau = float(w.config.get("rest_tau", 0.0))  # s: the rest's smoothing
+        self._rest_warm = float(w.config.get("rest_warm", 0.0))  # s: no rest before it
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
         self.reset()
 
@@ -201,6 +213,8 @@ class TrackerMap(Stepper):
             self._u = np.full((s, k), np.nan)  # (S, K) pre-filtered input
             self._edx = np.zeros((s, k))  # (S, K) One Euro's slope, weight/s
             self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
+            self._v = np.full((s, k), np.nan)  # (S, K) u smoothed for the rest (rest_tau)
+            self._t0 = np.full(s, np.nan)  # (S,) s, the stream's first frame (rest_warm)
             self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
             self._top = np.full((s, len(self._lo)), -np.inf)  # (S, L) largest lift so far
             self._noise = noise.Noise(s, len(self.weights.outputs))  # the band's noise
@@ -227,6 +241,7 @@ class TrackerMap(Stepper):
             u = np.where(start[:, None], xi, u)
             self._edx = np.where(start[:, None], 0.0, self._edx)
         self._u = u
+        self._rest(u, dt, start, advance, tt)
         if bad.any() and len(self._do):  # a held value has no detail
             xi = np.where(self._in_matrix(bad.astype(np.float64)) > 0, u, xi)
         y = self._map(u, moved, xi)
@@ -262,6 +277,8 @@ class TrackerMap(Stepper):
         lo, hi = (dt[0], dt[0]) if len(dt) == 1 else (dt.min(), dt.max())
         if not (lo > MIN_DT and hi <= self.pre.max_gap):
             return None
+        if self._rest_warm > 0 and not (tt - self._t0 > self._rest_warm).all():
+            return None  # a stream's first rest_warm s: the general path (r = u)
         xs = self._xs
         xi = x[:, xs] if xs is not None else self._in_matrix(x)  # (S, K), a view where it runs
         h = np.maximum(dt, DT_MIN)[:, None] if lo != hi else max(float(lo), DT_MIN)  # s
@@ -282,7 +299,13 @@ class TrackerMap(Stepper):
         np.divide(g, q, out=q)
         q *= e
         u += q  # u += g / (1 + g) e
-        np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
+        if self._rest_tau > 0:  # v += (1 - exp(-h / tau)) (u - v), then the rest r = min(r, v)
+            q = u - self._v
+            q *= -np.expm1(-h / self._rest_tau)
+            self._v += q
+            np.minimum(self._r, self._v, out=self._r)
+        else:
+            np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
         y = u @ self._ab  # (S, M+L)
         y += self._r @ self._nb
         if len(self._do):  # the detail: + d (x - u), the -d u being in _ab
@@ -324,6 +347,26 @@ class TrackerMap(Stepper):
         self._y = out
         return out
 
+    def _rest(self, u, dt, start, advance, tt) -> None:
+        """The rest r (S, K) after this frame (module docstring): min(r, v) on the rows
+        that moved, NaN-aware (a stream's first frame sets it); v restarts from u where the
+        filter does; r = v = u in a stream's first ``rest_warm`` s."""
+        moved = start | advance
+        v = u
+        if self._rest_tau > 0:
+            h = np.maximum(np.where(advance, dt, 1.0), DT_MIN)[:, None]  # s
+            v = self._v + -np.expm1(-h / self._rest_tau) * (u - self._v)  # exact at any rate
+            v = np.where(start[:, None] | np.isnan(v), u, v)
+            self._v = v if moved.all() else np.where(moved[:, None], v, self._v)
+        low = np.fmin(self._r, v)  # NaN-aware: the first frame sets it
+        if self._rest_warm > 0:
+            self._t0 = np.where(moved & np.isnan(self._t0), tt, self._t0)
+            warm = (tt - self._t0 <= self._rest_warm)[:, None]
+            low = np.where(warm, u, low)
+            if self._rest_tau > 0:  # v starts from u when the warm-up ends
+                self._v = np.where(warm & moved[:, None], u, self._v)
+        self._r = low if moved.all() else np.where(moved[:, None], low, self._r)
+
     def _in_matrix(self, x: np.ndarray) -> np.ndarray:
         xi = np.zeros((len(x), len(self.weights.inputs)))
         xi[:, self._in.have] = x[:, self._in.cols]  # absent inputs read 0
@@ -333,8 +376,6 @@ class TrackerMap(Stepper):
         """(S, K) filtered inputs u and raw ones xi -> (S, M) outputs; rows not started
         yet stay NaN."""
         a = self.weights.arrays
-        low = np.fmin(self._r, u)  # NaN-aware: the first frame sets it
-        self._r = low if moved.all() else np.where(moved[:, None], low, self._r)
         lin = u @ a["a"].T + a["c"]
         rest = (u - self._r) if self.rest else None
         if rest is not None:

@@ -1,7 +1,8 @@
 """A tracker map's causal features and its output on them, as the fits see them.
 
 Per pair (``features``): the pre-filtered input u (the runtime's own One Euro, stepped as
-the cleaner steps it), its resting level r (the running minimum since reset), the truth y
+the cleaner steps it), its resting level r (``rest``: the running minimum since reset, of
+u smoothed with the config's ``rest_tau``, after its ``rest_warm``), the truth y
 and the detail e = x - u, (F, K) each; ``predict`` is the runtime's output on them
 (learned/tracker_map.py, deadband and blink lift included) and ``score`` its MSE, jitter,
 lag and blink closure. Every fit of neural/ (tracker_map.py, map_rises.py, blink_lift.py)
@@ -88,10 +89,32 @@ def features(w: MapWeights, pairs: Sequence[Pair]) -> list[Feature]:
         t, x, y = p.tracked.times[valid], np.nan_to_num(x[valid]), y[valid]
         # clean: reset, then step every frame
         u = pre.clean(Animation(t, x, names)).values if w.config["prefilter"] and len(t) else x
-        r = np.minimum.accumulate(u, axis=0)
+        r = rest(t, u, w.config.get("rest_tau", 0.0), w.config.get("rest_warm", 0.0))
         ok = ~np.isnan(y).any(axis=1)
         out.append(Feature(t[ok], u[ok], r[ok], y[ok], x[ok] - u[ok]))
     return out
+
+
+def rest(t: np.ndarray, u: np.ndarray, tau: float = 0.0, warm: float = 0.0) -> np.ndarray:
+    """(F, K) the runtime's rest (learned/tracker_map.py ``_rest``) of one stream whose
+    every frame advances, times t (F,) s: r = min(r, v), v += (1 - exp(-h / tau)) (u - v) (v = u
+    for tau 0), and r = v = u while t - t0 <= warm."""
+    if not len(t):
+        return u.copy()
+    k = int(np.sum(t - t[0] <= warm)) if warm > 0 else 0  # frames of the warm-up: r = v = u
+    v = u
+    if tau > 0:
+        from faceclean.filters.one_euro import DT_MIN
+
+        h = np.maximum(np.diff(t), DT_MIN)  # (F - 1,) s
+        v = u.copy()
+        for n in range(max(k, 1), len(t)):  # the runtime's order: v + a (u - v)
+            v[n] = v[n - 1] + -np.expm1(-h[n - 1] / tau) * (u[n] - v[n - 1])
+    r = u.copy()
+    if k < len(t):  # then min(r, v) on, from the last frame's r
+        start = v[k:] if k == 0 else np.concatenate([u[k - 1 : k], v[k:]])
+        r[k:] = np.fmin.accumulate(start, axis=0)[-(len(t) - k) :]
+    return r
 
 
 def own_inputs(w: MapWeights) -> np.ndarray:

@@ -61,6 +61,8 @@ class MapReference:
         band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), (self.M,))
         self.band = t64(band)
         self.noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py
+        self.rest_tau = float(w.config.get("rest_tau", 0.0))  # s: the rest's smoothing
+        self.rest_warm = float(w.config.get("rest_warm", 0.0))  # s: r = u before
         self.state: tuple | None = None
 
     @property
@@ -68,7 +70,8 @@ class MapReference:
         """Per stream: u, its slope, the rest level (K each), the map's output (M), the
         lift's top (L), with a noise band its last map value, step and noise (M each),
         float64."""
-        return 8 * (3 * self.K + self.M + len(self.lo) + (3 * self.M if self.noise_c else 0))
+        rest = (self.K if self.rest_tau else 0) + (1 if self.rest_warm else 0)  # v, age
+        return 8 * (3 * self.K + self.M + len(self.lo) + (3 * self.M if self.noise_c else 0) + rest)
 
     def _inputs(self, x: torch.Tensor) -> torch.Tensor:
         """(S, C) frame -> (S, K) model inputs (0 where the frame lacks one)."""
@@ -102,6 +105,7 @@ class MapReference:
         m, top = self._map(u, u.clone(), u, top)
         self.state = (u, torch.zeros_like(u), u.clone(), m, top)
         self.noise = (m.clone(), m.clone(), torch.zeros_like(m))  # m_{n-1}, m_{n-2}, s
+        self.v, self.age = u.clone(), torch.zeros(len(xt), 1, dtype=torch.float64)  # the rest's
 
     @torch.no_grad()
     def step(self, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -117,7 +121,15 @@ class MapReference:
             u = u + (1.0 / (1.0 + 1.0 / (2 * np.pi * fc * h))) * (xi - u)
         else:
             u = xi
-        r = torch.minimum(r, u)
+        v = u  # the rest: min(r, v), v = u smoothed over rest_tau s; r = u until rest_warm s
+        if self.rest_tau > 0:
+            v = self.v + -torch.expm1(-h / self.rest_tau) * (u - self.v)
+            self.v = v
+        self.age = self.age + torch.from_numpy(np.asarray(dt, np.float64)).reshape(-1, 1)  # s
+        r = torch.minimum(r, v)
+        if self.rest_warm > 0:  # r = v = u in the warm-up
+            r = torch.where(self.age <= self.rest_warm, u, r)
+            self.v = torch.where(self.age <= self.rest_warm, u, self.v)
         m, top = self._map(u, r, xi, top)
         band = self.band
         if self.noise_c > 0:  # widened by the noise: c s, s the mean reversal

@@ -99,6 +99,15 @@ HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes 
 # to nine, on the families' folds; docs/MODEL.md).
 HARM_REAL = 1.5
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
+# The rest (learned/tracker_map.py): the running minimum of u smoothed over REST[0] s,
+# from REST[1] s after a stream's first frame. The plain minimum of u finds the noise's
+# lowest dips and MediaPipe's often low first reading, so a still face rises by their depth.
+# On the families' folds (a look and a source out; benchmarks/rest_study.py, shrinkage 0.1;
+# painted / dressed / photo) a face at rest was 0.10 / 0.10 / 0.14 off at worst, with
+# (0.15, 0.2) 0.06 / 0.07 / 0.07; the real performances 0.55 / 0.43 / 0.56 -> 0.52 / 0.43 /
+# 0.56 x raw, the made-up ones, who rest seldom and briefly, 0.81 / 0.84 / 0.88 -> 0.84 /
+# 0.87 / 0.89 (docs/MODEL.md, eighth round). Longer (0.25 s) buys little more.
+REST = (0.15, 0.2)  # (rest_tau, rest_warm) s
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -128,7 +137,8 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         knees: Sequence[float | None] = blink_lift.KNEES, report: Report | None = None,
         details: Sequence[float] = DETAILS,
         noise_bands: Sequence[float] = NOISE_BANDS,
-        harm_real: float | None = HARM_REAL) -> MapWeights:  # fmt: skip
+        harm_real: float | None = HARM_REAL,
+        rest: tuple[float, float] = REST) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband and its
     widening by the noise, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
@@ -136,7 +146,8 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     pair. A group worse than raw in any family passes through levelled (its own rise),
     never as read; an output worse than
     ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
-    ``own_rise`` read their own rise, whatever the folds say."""
+    ``own_rise`` read their own rise, whatever the folds say. ``rest``: (rest_tau,
+    rest_warm) s, the runtime's rest (REST)."""
     report = report or (lambda _e: None)
     names = map_features.channels(pairs)
     folds = _folds(pairs)
@@ -146,6 +157,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     found, data = [], {}  # (Scored, pre, (band, c), detail, lam); pre -> (features, moments)
     for pre in prefilters:
         w = map_features.blank(names, 0, pre, rest=True)
+        w.config.update(rest_tau=rest[0], rest_warm=rest[1])
         feats = map_features.features(w, pairs)
         data[pre] = feats, [_moments(f) for f in feats]
         for lam in lams:
@@ -168,6 +180,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     own = sorted({*own_rise, *harmful})
     alone = _harmful_outputs(cv, names, passed, own, harm_real)
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
+    w.config.update(rest_tau=rest[0], rest_warm=rest[1])
     set_rises(w, solve(moments, lam), passed, own, detail, alone)
     w.config.update(fitted="rises", noise_band=c, lam=lam, passed=passed, own_rise=own,
                     alone=alone,
