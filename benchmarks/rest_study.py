@@ -5,10 +5,12 @@ Every fold leaves one appearance family and one performance source out at once, 
 appearance table does (evaluation/family_eval.py), and fits the map over rises on the
 rest with the shipped choices fixed (pre-filter (1, 10, 2), shrinkage 0.1, band 0.01
 widened x16, no lift; the outputs it leaves alone chosen on the fold's own training
-folds), for each rest (``map_rises.fit(rest=(tau, warm))``). Scored through the runtime's
-own output (``map_features.predict``) on the held-out pairs, per family: MSE x raw over
-every performance, the real ones (the shared takes) and the made-up ones, gaze, and a face
-at rest (the worst channel's mean |output - truth| over the neutral holds after 0.5 s).
+folds; a group they find worse than raw passes levelled, never as read: under a smoothed
+rest as read kept a photographed face's resting lids), for each rest
+(``map_rises.fit(rest=(tau, warm))``). Scored through the runtime's own output
+(``map_features.predict``) on the held-out pairs, per family: MSE x raw over every
+performance, the real ones (the shared takes), the made-up ones and each group, and a
+face at rest (the worst channel's mean |output - truth| over the neutral holds after 0.5 s).
 
     .venv/bin/python benchmarks/rest_study.py ~/.cache/faceclean/families-gaze \\
         --rests 0:0 0.1:0.1 0.15:0.2 0.25:0.2      # about 15 s a rest on 2 cores
@@ -27,7 +29,7 @@ from faceclean.neural import map_features, map_rises
 from faceclean.neural.map_groups import real
 
 FIXED = {"lams": (0.1,), "prefilters": ((1.0, 10.0, 2.0),), "deadbands": (0.01,),
-         "noise_bands": (16.0,), "knees": (None,)}  # fmt: skip
+         "noise_bands": (16.0,), "knees": (None,), "as_read": False}  # fmt: skip
 
 
 def folds(pairs):
@@ -58,7 +60,10 @@ def study(pairs, rest: tuple[float, float]) -> dict:
             kind = "real" if real(p.group) else "made-up"
             e, e0 = (y - f.y) ** 2, (f.u + f.e - f.y) ** 2  # the map's, raw's (F, M)
             cell = sq.setdefault(fam, {})
-            for key, cols in (("all", slice(None)), (kind, slice(None)), ("gaze", gaze)):
+            groups = [(g, [w.outputs.index(n) for n in members if n in w.outputs])
+                      for g, members in TABLE_GROUPS.items() if g != "gaze"]  # fmt: skip
+            for key, cols in (("all", slice(None)), (kind, slice(None)), ("gaze", gaze),
+                              *groups):  # fmt: skip
                 s = cell.setdefault(key, np.zeros(2))
                 s += (e[:, cols].sum(), e0[:, cols].sum())
     out = {}
@@ -78,7 +83,7 @@ def main() -> None:
                    help="TAU:WARM s, each a rest to study")  # fmt: skip
     args = p.parse_args()
     pairs = paired.load(args.pairs, require_meta=True)
-    keys = ("all", "real", "made-up", "gaze", "rest")
+    keys = ("all", "real", "made-up", "gaze", *list(TABLE_GROUPS)[1:], "rest")
     print("| rest_tau, rest_warm s | family | " + " | ".join(keys) + " |")
     print("|---|---|" + "---|" * len(keys))
     for spec in args.rests:

@@ -54,8 +54,9 @@ def test_the_map_row_is_the_cleaner_clean_tracker_mediapipe_runs(tmp_path):
 
 
 def _richer_map():
-    """The shipped map with a lift (its top kept), a hidden layer and the band widened by
-    the noise: every branch of the step the shipped file does not take."""
+    """The shipped map with a lift (its top kept), a hidden layer, the band widened by the
+    noise and the rest smoothed after a warm-up: every branch of the step the shipped file
+    does not take."""
     from faceclean.learned.map_weights import MapWeights
     from faceclean.learned.tracker_map import TrackerMap
     from faceclean.settings import MODELS
@@ -76,7 +77,8 @@ def _richer_map():
         mu=rng.normal(0, 0.1, 2 * k),
         sd=rng.uniform(0.5, 2.0, 2 * k),
     )
-    config = dict(w.config, hidden=h, lift_top=True, noise_band=16.0)
+    config = dict(w.config, hidden=h, lift_top=True, noise_band=16.0, rest_tau=0.15,
+                  rest_warm=0.2)  # fmt: skip
     return TrackerMap(weights=MapWeights.build(config, arrays), names=ARKIT52, detail=0.5)
 
 

@@ -415,3 +415,37 @@ def test_a_rest_out_of_range_is_refused(key, value):
     w = weights(hidden=0)
     with pytest.raises(FacecleanError, match=key):
         MapWeights.build(dict(w.config, **{key: value}), w.arrays)
+
+
+def test_a_smoothed_rest_is_the_same_in_the_step_the_whole_take_and_the_fits_features():
+    # the fits score map_features.predict on map_features.features (neural/): the runtime's
+    # own output, step by step and as a compiled whole take, through a gap (a restart)
+    from faceclean.filters import compiled
+    from faceclean.neural import map_features
+
+    w = weights(hidden=0, deadband=0.01, detail=0.3, noise=16.0, rest_s=(0.15, 0.2))
+    a = take(n=400, fps=60.0, seed=4)
+    (u, r, _, e), t = map_features.features(w, [_Pair(a)])[0][1:], a.times
+    stepped = TrackerMap(weights=w)
+    got = np.array([stepped.step(a.values[i], a.times[i]) for i in range(a.n_frames)])
+    np.testing.assert_allclose(got, map_features.predict(w, u, r, e, t), atol=1e-12)
+    was = compiled.enabled()
+    if not compiled.enable(warm=False):
+        pytest.skip("numba not installed: a whole take steps in numpy")
+    try:
+        gap = Animation(np.where(a.times > 3.0, a.times + 1.0, a.times), a.values, NAMES)
+        tm = TrackerMap(weights=w)
+        whole = tm.clean(gap).values
+        tm.reset()
+        want = np.array([tm.step(gap.values[i], gap.times[i]) for i in range(gap.n_frames)])
+        np.testing.assert_allclose(whole, want, atol=1e-12)
+    finally:
+        if not was:
+            compiled.disable()
+
+
+class _Pair:
+    """A pair as map_features reads one: the take, and itself as the truth."""
+
+    def __init__(self, anim: Animation) -> None:
+        self.tracked = self.truth = anim
