@@ -14,6 +14,7 @@ face at rest (the worst channel's mean |output - truth| over the neutral holds a
 
     .venv/bin/python benchmarks/rest_study.py ~/.cache/faceclean/families-gaze \\
         --rests 0:0 0.1:0.1 0.15:0.2 0.25:0.2      # about 15 s a rest on 2 cores
+        [--plain lids]       # the lids' inputs keep the plain minimum (one rest per input)
 """
 
 from __future__ import annotations
@@ -44,8 +45,19 @@ def folds(pairs):
     return out
 
 
-def study(pairs, rest: tuple[float, float]) -> dict:
-    """family -> {"all", "real", "made-up", "gaze": MSE x raw; "rest", "channel"}."""
+def per_input(pairs, rest: tuple[float, float], plain=()) -> tuple[list, list]:
+    """(tau, warm) s one per input: ``rest``, but the plain minimum (0, 0) on the inputs of
+    the table's groups named in ``plain`` (``TABLE_GROUPS``: gaze, lids, ...)."""
+    names = map_features.channels(pairs)
+    keep = {n for g in plain for n in TABLE_GROUPS[g]}
+    return ([0.0 if n in keep else rest[0] for n in names],
+            [0.0 if n in keep else rest[1] for n in names])  # fmt: skip
+
+
+def study(pairs, rest: tuple, plain=()) -> dict:
+    """family -> {"all", "real", "made-up", "gaze" and the other groups: MSE x raw; "rest",
+    "channel"}; the groups in ``plain`` keep the plain minimum."""
+    rest = per_input(pairs, rest, plain) if plain else rest
     sq: dict = {}
     at_rest: dict = {}
     for fam, group, train, test in folds(pairs):
@@ -81,6 +93,8 @@ def main() -> None:
     p.add_argument("pairs", help="a folder of pairs in several families (make pairs)")
     p.add_argument("--rests", nargs="+", default=["0:0", "0.15:0.2"],
                    help="TAU:WARM s, each a rest to study")  # fmt: skip
+    p.add_argument("--plain", nargs="*", default=[], choices=list(TABLE_GROUPS),
+                   help="groups whose inputs keep the plain minimum")  # fmt: skip
     args = p.parse_args()
     pairs = paired.load(args.pairs, require_meta=True)
     keys = ("all", "real", "made-up", "gaze", *list(TABLE_GROUPS)[1:], "rest")
@@ -89,7 +103,7 @@ def main() -> None:
     for spec in args.rests:
         tau, warm = (float(v) for v in spec.split(":"))
         started = time.perf_counter()
-        for fam, s in sorted(study(pairs, (tau, warm)).items()):
+        for fam, s in sorted(study(pairs, (tau, warm), args.plain).items()):
             cells = [f"{s[k]:.3f}" if k in s else "-" for k in keys]
             cells[-1] += f" ({s['channel']})" if "channel" in s else ""
             print(f"| {tau:g}, {warm:g} | {fam} | " + " | ".join(cells) + " |", flush=True)

@@ -77,7 +77,8 @@ def _richer_map():
         mu=rng.normal(0, 0.1, 2 * k),
         sd=rng.uniform(0.5, 2.0, 2 * k),
     )
-    config = dict(w.config, hidden=h, lift_top=True, noise_band=16.0, rest_tau=0.15,
+    tau = [0.0 if j % 3 == 0 else 0.15 for j in range(k)]  # s: a third of the inputs plain
+    config = dict(w.config, hidden=h, lift_top=True, noise_band=16.0, rest_tau=tau,
                   rest_warm=0.2)  # fmt: skip
     return TrackerMap(weights=MapWeights.build(config, arrays), names=ARKIT52, detail=0.5)
 

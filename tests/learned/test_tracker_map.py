@@ -148,7 +148,8 @@ def test_the_inline_pre_filter_is_one_euro():
     (0.0, None, None, False, 0.0, (0, 0)), (0.05, None, None, False, 0.0, (0, 0)),
     (0.05, (2.5, 0.2), 0.6, False, 0.0, (0, 0)), (0.02, (6.0, 0.1), 0.3, True, 0.0, (0, 0)),
     (0.01, None, 0.3, False, 16.0, (0.15, 0.2)), (0.0, (2.5, 0.2), None, False, 8.0, (0, 0.3)),
-    (0.0, None, None, False, 0.0, (0.3, 0))])  # fmt: skip
+    (0.0, None, None, False, 0.0, (0.3, 0)),
+    (0.01, None, 0.3, False, 16.0, ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1]))])  # fmt: skip
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
 def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top,
                                                                noise, rest_s):  # fmt: skip
@@ -409,21 +410,24 @@ def test_a_smoothed_rest_keeps_a_noisy_still_face_at_rest():
     assert smoothed[205:230].mean() > 0.3  # the movement (0.4) comes through
 
 
-@pytest.mark.parametrize("key, value", [("rest_tau", -0.1), ("rest_warm", 11.0),
-                                        ("rest_tau", True), ("rest_warm", "0.2")])  # fmt: skip
+@pytest.mark.parametrize("key, value", [
+    ("rest_tau", -0.1), ("rest_warm", 11.0), ("rest_tau", True), ("rest_warm", "0.2"),
+    ("rest_tau", [0.1, 0.2]), ("rest_warm", [0, 0, -1])])  # fmt: skip
 def test_a_rest_out_of_range_is_refused(key, value):
     w = weights(hidden=0)
     with pytest.raises(FacecleanError, match=key):
         MapWeights.build(dict(w.config, **{key: value}), w.arrays)
 
 
-def test_a_smoothed_rest_is_the_same_in_the_step_the_whole_take_and_the_fits_features():
+@pytest.mark.parametrize("rest_s", [(0.15, 0.2), ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1])])
+def test_a_smoothed_rest_is_the_same_in_the_step_the_whole_take_and_the_fits_features(rest_s):
     # the fits score map_features.predict on map_features.features (neural/): the runtime's
-    # own output, step by step and as a compiled whole take, through a gap (a restart)
+    # own output, step by step and as a compiled whole take, through a gap (a restart); one
+    # rest for every input, or one per input (the second keeps the plain minimum)
     from faceclean.filters import compiled
     from faceclean.neural import map_features
 
-    w = weights(hidden=0, deadband=0.01, detail=0.3, noise=16.0, rest_s=(0.15, 0.2))
+    w = weights(hidden=0, deadband=0.01, detail=0.3, noise=16.0, rest_s=rest_s)
     a = take(n=400, fps=60.0, seed=4)
     (u, r, _, e), t = map_features.features(w, [_Pair(a)])[0][1:], a.times
     stepped = TrackerMap(weights=w)

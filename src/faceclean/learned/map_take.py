@@ -75,7 +75,7 @@ def clean(tm: Map, anim: Animation, run_of=None) -> Animation:
         while k < len(x):
             if ok[k] and tm._y is not None and tm._y.shape == (1, x.shape[1]):
                 dt = t[k] - float(tm._t[0])
-                warm = tm._rest_warm > 0 and not t[k] - tm._t0[0] > tm._rest_warm
+                warm = tm._rest_warm is not None and not t[k] - tm._t0[0] > tm._rest_warm_max
                 if MIN_DT < dt <= tm.pre.max_gap and not warm:  # _usual's (NaN fails)
                     end = int(breaks[np.searchsorted(breaks, k, side="right")])
                     if whole and run_of is None:  # written in place
@@ -105,7 +105,7 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
     np.maximum(h, DT_MIN, out=h)
     u, edx, r, v = (a[0].copy() for a in (tm._u, tm._edx, tm._r, tm._v))  # (K,)
     consts = [np.array(c, np.float64) for c in (tm._tau_d, tm._mc2pi, tm._beta2pi)]
-    consts.append(tm._rest_tau)
+    consts.append(np.zeros(len(u)) if tm._rest_tau is None else tm._rest_tau)  # (K,) s
     y = _one_pass(tm, (u, edx, r, v), xi, h, consts)
     if y is None:
         y = _apart(tm, (u, edx, r, v), xi, h, consts)

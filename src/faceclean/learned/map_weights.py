@@ -11,8 +11,8 @@ input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_D
 gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
 user's ``detail`` setting; config ``lift_top`` true or false (absent: false); config
 ``noise_band`` c in [0, MAX_NOISE] (absent: 0), the band's widening (learned/band.py);
-config ``rest_tau`` and ``rest_warm`` in [0, MAX_REST] s (absent: 0), the rest's smoothing
-and warm-up (learned/tracker_map.py).
+config ``rest_tau`` and ``rest_warm`` in [0, MAX_REST] s, a number or one per input (absent:
+0), the rest's smoothing and warm-up (learned/tracker_map.py).
 """
 
 from __future__ import annotations
@@ -125,9 +125,11 @@ class MapWeights:
             raise FacecleanError(f"{label}: noise_band must be a number within [0, {MAX_NOISE}]")
         for key in ("rest_tau", "rest_warm"):
             v = config.get(key, 0.0)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= MAX_REST:
+            values = v if isinstance(v, list) and len(v) == k else [v]
+            if not all(not isinstance(x, bool) and isinstance(x, (int, float))
+                       and 0 <= x <= MAX_REST for x in values):  # fmt: skip
                 raise FacecleanError(f"{label}: {key} must be a number of seconds within "
-                                     f"[0, {MAX_REST:g}]")  # fmt: skip
+                                     f"[0, {MAX_REST:g}], or one per input")  # fmt: skip
         scale = config.get("detail_scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
             raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")

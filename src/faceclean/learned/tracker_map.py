@@ -188,8 +188,15 @@ class TrackerMap(Stepper):
         self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if on else None
         eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
         self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
-        self._rest_tau = float(w.config.get("rest_tau", 0.0))  # s: the rest's smoothing
-        self._rest_warm = float(w.config.get("rest_warm", 0.0))  # s: no rest before it
+        k = len(w.inputs)  # the rest's smoothing tau and warm-up (K,) s, per input
+        tau = np.broadcast_to(np.asarray(w.config.get("rest_tau", 0.0), np.float64), (k,))
+        warm = np.broadcast_to(np.asarray(w.config.get("rest_warm", 0.0), np.float64), (k,))
+        self._rest_smooth = tau > 0  # (K,) inputs whose rest is smoothed; the others: v = u
+        self._rest_plain = np.flatnonzero(~self._rest_smooth)
+        self._rest_rate = np.divide(1.0, tau, out=np.full(k, np.inf), where=tau > 0)  # 1/s
+        self._rest_tau = tau.copy() if self._rest_smooth.any() else None
+        self._rest_warm = warm.copy() if (warm > 0).any() else None
+        self._rest_warm_max = float(warm.max())
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
         self.reset()
 
@@ -277,7 +284,7 @@ class TrackerMap(Stepper):
         lo, hi = (dt[0], dt[0]) if len(dt) == 1 else (dt.min(), dt.max())
         if not (lo > MIN_DT and hi <= self.pre.max_gap):
             return None
-        if self._rest_warm > 0 and not (tt - self._t0 > self._rest_warm).all():
+        if self._rest_warm is not None and not (tt - self._t0 > self._rest_warm_max).all():
             return None  # a stream's first rest_warm s: the general path (r = u)
         xs = self._xs
         xi = x[:, xs] if xs is not None else self._in_matrix(x)  # (S, K), a view where it runs
@@ -299,10 +306,12 @@ class TrackerMap(Stepper):
         np.divide(g, q, out=q)
         q *= e
         u += q  # u += g / (1 + g) e
-        if self._rest_tau > 0:  # v += (1 - exp(-h / tau)) (u - v), then the rest r = min(r, v)
+        if self._rest_tau is not None:  # v += (1 - exp(-h / tau)) (u - v), r = min(r, v)
             q = u - self._v
-            q *= -np.expm1(-h / self._rest_tau)
+            q *= -np.expm1(-h * self._rest_rate)
             self._v += q
+            if len(self._rest_plain):  # inputs with no smoothing: v = u
+                self._v[:, self._rest_plain] = u[:, self._rest_plain]
             np.minimum(self._r, self._v, out=self._r)
         else:
             np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
@@ -353,17 +362,17 @@ class TrackerMap(Stepper):
         filter does; r = v = u in a stream's first ``rest_warm`` s."""
         moved = start | advance
         v = u
-        if self._rest_tau > 0:
+        if self._rest_tau is not None:
             h = np.maximum(np.where(advance, dt, 1.0), DT_MIN)[:, None]  # s
-            v = self._v + -np.expm1(-h / self._rest_tau) * (u - self._v)  # exact at any rate
-            v = np.where(start[:, None] | np.isnan(v), u, v)
+            v = self._v + -np.expm1(-h * self._rest_rate) * (u - self._v)  # exact at any rate
+            v = np.where(start[:, None] | np.isnan(v) | ~self._rest_smooth, u, v)
             self._v = v if moved.all() else np.where(moved[:, None], v, self._v)
         low = np.fmin(self._r, v)  # NaN-aware: the first frame sets it
-        if self._rest_warm > 0:
+        if self._rest_warm is not None:
             self._t0 = np.where(moved & np.isnan(self._t0), tt, self._t0)
-            warm = (tt - self._t0 <= self._rest_warm)[:, None]
+            warm = (tt - self._t0)[:, None] <= self._rest_warm  # (S, K)
             low = np.where(warm, u, low)
-            if self._rest_tau > 0:  # v starts from u when the warm-up ends
+            if self._rest_tau is not None:  # v starts from u when the warm-up ends
                 self._v = np.where(warm & moved[:, None], u, self._v)
         self._r = low if moved.all() else np.where(moved[:, None], low, self._r)
 

@@ -95,12 +95,22 @@ def features(w: MapWeights, pairs: Sequence[Pair]) -> list[Feature]:
     return out
 
 
-def rest(t: np.ndarray, u: np.ndarray, tau: float = 0.0, warm: float = 0.0) -> np.ndarray:
+def rest(t: np.ndarray, u: np.ndarray, tau=0.0, warm=0.0) -> np.ndarray:
     """(F, K) the runtime's rest (learned/tracker_map.py ``_rest``) of one stream whose
-    every frame advances, times t (F,) s: r = min(r, v), v += (1 - exp(-h / tau)) (u - v) (v = u
-    for tau 0), and r = v = u while t - t0 <= warm."""
+    every frame advances, times t (F,) s: r = min(r, v), v += (1 - exp(-h / tau)) (u - v)
+    (v = u for tau 0), and r = v = u while t - t0 <= warm; tau and warm s, a number or one
+    per input (K,)."""
     if not len(t):
         return u.copy()
+    taus = np.broadcast_to(np.asarray(tau, np.float64), (u.shape[1],))
+    warms = np.broadcast_to(np.asarray(warm, np.float64), (u.shape[1],))
+    if np.ptp(taus) or np.ptp(warms):  # per input: each distinct setting's columns alone
+        r = np.empty_like(u)
+        for tw in {(float(a), float(b)) for a, b in zip(taus, warms, strict=True)}:
+            cols = np.flatnonzero((taus == tw[0]) & (warms == tw[1]))
+            r[:, cols] = rest(t, u[:, cols], *tw)
+        return r
+    tau, warm = float(taus[0]), float(warms[0])
     k = int(np.sum(t - t[0] <= warm)) if warm > 0 else 0  # frames of the warm-up: r = v = u
     v = u
     if tau > 0:

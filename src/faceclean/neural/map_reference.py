@@ -61,8 +61,11 @@ class MapReference:
         band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), (self.M,))
         self.band = t64(band)
         self.noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py
-        self.rest_tau = float(w.config.get("rest_tau", 0.0))  # s: the rest's smoothing
-        self.rest_warm = float(w.config.get("rest_warm", 0.0))  # s: r = u before
+        rest = (
+            np.broadcast_to(np.asarray(w.config.get(key, 0.0), np.float64), (self.K,))
+            for key in ("rest_tau", "rest_warm")
+        )  # (K,) s each, per input
+        self.rest_tau, self.rest_warm = (t64(v.copy()) for v in rest)  # smoothing, r = u before
         self.state: tuple | None = None
 
     @property
@@ -70,7 +73,7 @@ class MapReference:
         """Per stream: u, its slope, the rest level (K each), the map's output (M), the
         lift's top (L), with a noise band its last map value, step and noise (M each),
         float64."""
-        rest = (self.K if self.rest_tau else 0) + (1 if self.rest_warm else 0)  # v, age
+        rest = (self.K if self.rest_tau.any() else 0) + (1 if self.rest_warm.any() else 0)
         return 8 * (3 * self.K + self.M + len(self.lo) + (3 * self.M if self.noise_c else 0) + rest)
 
     def _inputs(self, x: torch.Tensor) -> torch.Tensor:
@@ -122,12 +125,14 @@ class MapReference:
         else:
             u = xi
         v = u  # the rest: min(r, v), v = u smoothed over rest_tau s; r = u until rest_warm s
-        if self.rest_tau > 0:
-            v = self.v + -torch.expm1(-h / self.rest_tau) * (u - self.v)
+        if self.rest_tau.any():  # tau 0: v = u
+            rate = torch.where(self.rest_tau > 0, 1.0 / self.rest_tau, torch.inf)
+            v = self.v + -torch.expm1(-h * rate) * (u - self.v)
+            v = torch.where(self.rest_tau > 0, v, u)
             self.v = v
         self.age = self.age + torch.from_numpy(np.asarray(dt, np.float64)).reshape(-1, 1)  # s
         r = torch.minimum(r, v)
-        if self.rest_warm > 0:  # r = v = u in the warm-up
+        if self.rest_warm.any():  # r = v = u in the warm-up
             r = torch.where(self.age <= self.rest_warm, u, r)
             self.v = torch.where(self.age <= self.rest_warm, u, self.v)
         m, top = self._map(u, r, xi, top)

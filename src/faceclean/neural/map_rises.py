@@ -190,9 +190,12 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     return w
 
 
-def _rest_keys(rest: tuple[float, float]) -> dict[str, float]:
-    """The config keys of a rest (none for the plain minimum: a map as fitted before)."""
-    return {"rest_tau": rest[0], "rest_warm": rest[1]} if any(rest) else {}
+def _rest_keys(rest: tuple) -> dict[str, Any]:
+    """The config keys of a rest, (tau, warm) s, numbers or one per input (none for the
+    plain minimum: a map as fitted before)."""
+    keys = ("rest_tau", "rest_warm")
+    out = {k: np.asarray(v, np.float64).tolist() for k, v in zip(keys, rest, strict=True)}
+    return out if any(np.any(np.asarray(v) > 0) for v in out.values()) else {}
 
 
 def _choose(found: Sequence[tuple]) -> tuple:
