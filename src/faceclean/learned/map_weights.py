@@ -51,6 +51,16 @@ class MapWeights:
     def outputs(self) -> tuple[str, ...]:
         return tuple(self.config["outputs"])
 
+    @property
+    def rest(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rest_tau, rest_warm) (K,) s each, one per input (config: a number or one per
+        input, absent 0: the plain running minimum)."""
+        k = len(self.inputs)
+        tau, warm = (
+            np.asarray(self.config.get(key, 0.0), np.float64) for key in ("rest_tau", "rest_warm")
+        )
+        return np.broadcast_to(tau, (k,)), np.broadcast_to(warm, (k,))
+
     @classmethod
     def load(cls, path: str | os.PathLike) -> MapWeights:
         config, arrays = formats.read(path)

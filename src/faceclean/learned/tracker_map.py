@@ -48,7 +48,8 @@ Why the rest may be smoothed: the running minimum of a noisy reading finds its n
 lowest dips, so a still face's rise is that noise's depth and grows with time (MediaPipe
 on a photographed face at rest: 0.1-0.14 off); the minimum of a smoothed reading finds
 the face's rest, and the first frames (MediaPipe's first reading of a face is often low)
-set nothing (docs/MODEL.md, eighth round).
+set nothing. The shipped map keeps the plain minimum: smoothed, its lids went above raw
+(docs/MODEL.md, eighth round).
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
@@ -188,9 +189,8 @@ class TrackerMap(Stepper):
         self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if on else None
         eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
         self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
-        k = len(w.inputs)  # the rest's smoothing tau and warm-up (K,) s, per input
-        tau = np.broadcast_to(np.asarray(w.config.get("rest_tau", 0.0), np.float64), (k,))
-        warm = np.broadcast_to(np.asarray(w.config.get("rest_warm", 0.0), np.float64), (k,))
+        k = len(w.inputs)
+        tau, warm = w.rest  # (K,) s each: the rest's smoothing and warm-up, per input
         self._rest_smooth = tau > 0  # (K,) inputs whose rest is smoothed; the others: v = u
         self._rest_plain = np.flatnonzero(~self._rest_smooth)
         self._rest_rate = np.divide(1.0, tau, out=np.full(k, np.inf), where=tau > 0)  # 1/s

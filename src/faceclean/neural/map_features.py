@@ -89,7 +89,7 @@ def features(w: MapWeights, pairs: Sequence[Pair]) -> list[Feature]:
         t, x, y = p.tracked.times[valid], np.nan_to_num(x[valid]), y[valid]
         # clean: reset, then step every frame
         u = pre.clean(Animation(t, x, names)).values if w.config["prefilter"] and len(t) else x
-        r = rest(t, u, w.config.get("rest_tau", 0.0), w.config.get("rest_warm", 0.0))
+        r = rest(t, u, *w.rest)
         ok = ~np.isnan(y).any(axis=1)
         out.append(Feature(t[ok], u[ok], r[ok], y[ok], x[ok] - u[ok]))
     return out

@@ -61,11 +61,7 @@ class MapReference:
         band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), (self.M,))
         self.band = t64(band)
         self.noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py
-        rest = (
-            np.broadcast_to(np.asarray(w.config.get(key, 0.0), np.float64), (self.K,))
-            for key in ("rest_tau", "rest_warm")
-        )  # (K,) s each, per input
-        self.rest_tau, self.rest_warm = (t64(v.copy()) for v in rest)  # smoothing, r = u before
+        self.rest_tau, self.rest_warm = (t64(v.copy()) for v in w.rest)  # (K,) s, per input
         self.state: tuple | None = None
 
     @property
