@@ -194,7 +194,7 @@ class TrackerMap(Stepper):
         self._rest_smooth = tau > 0  # (K,) inputs whose rest is smoothed; the others: v = u
         self._rest_plain = np.flatnonzero(~self._rest_smooth)
         self._rest_rate = np.divide(1.0, tau, out=np.full(k, np.inf), where=tau > 0)  # 1/s
-        self._rest_tau = tau.copy() if self._rest_smooth.any() else None
+        self._smoothed = bool(self._rest_smooth.any())  # any input's rest smoothed
         self._rest_warm = warm.copy() if (warm > 0).any() else None
         self._rest_warm_max = float(warm.max())
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
@@ -306,7 +306,7 @@ class TrackerMap(Stepper):
         np.divide(g, q, out=q)
         q *= e
         u += q  # u += g / (1 + g) e
-        if self._rest_tau is not None:  # v += (1 - exp(-h / tau)) (u - v), r = min(r, v)
+        if self._smoothed:  # v += (1 - exp(-h / tau)) (u - v), r = min(r, v)
             q = u - self._v
             q *= -np.expm1(-h * self._rest_rate)
             self._v += q
@@ -362,7 +362,7 @@ class TrackerMap(Stepper):
         filter does; r = v = u in a stream's first ``rest_warm`` s."""
         moved = start | advance
         v = u
-        if self._rest_tau is not None:
+        if self._smoothed:
             h = np.maximum(np.where(advance, dt, 1.0), DT_MIN)[:, None]  # s
             v = self._v + -np.expm1(-h * self._rest_rate) * (u - self._v)  # exact at any rate
             v = np.where(start[:, None] | np.isnan(v) | ~self._rest_smooth, u, v)
@@ -372,7 +372,7 @@ class TrackerMap(Stepper):
             self._t0 = np.where(moved & np.isnan(self._t0), tt, self._t0)
             warm = (tt - self._t0)[:, None] <= self._rest_warm  # (S, K)
             low = np.where(warm, u, low)
-            if self._rest_tau is not None:  # v starts from u when the warm-up ends
+            if self._smoothed:  # v starts from u when the warm-up ends
                 self._v = np.where(warm & moved[:, None], u, self._v)
         self._r = low if moved.all() else np.where(moved[:, None], low, self._r)
 
