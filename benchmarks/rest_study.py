@@ -30,7 +30,7 @@ from faceclean.neural import map_features, map_rises
 from faceclean.neural.map_groups import real
 
 FIXED = {"lams": (0.1,), "prefilters": ((1.0, 10.0, 2.0),), "deadbands": (0.01,),
-         "noise_bands": (16.0,), "knees": (None,), "as_read": False}  # fmt: skip
+         "noise_bands": (16.0,), "knees": (None,)}  # fmt: skip
 
 
 def folds(pairs):
@@ -45,23 +45,14 @@ def folds(pairs):
     return out
 
 
-def per_input(pairs, rest: tuple[float, float], plain=()) -> tuple[list, list]:
-    """(tau, warm) s one per input: ``rest``, but the plain minimum (0, 0) on the inputs of
-    the table's groups named in ``plain`` (``TABLE_GROUPS``: gaze, lids, ...)."""
-    names = map_features.channels(pairs)
-    keep = {n for g in plain for n in TABLE_GROUPS[g]}
-    return ([0.0 if n in keep else rest[0] for n in names],
-            [0.0 if n in keep else rest[1] for n in names])  # fmt: skip
-
-
 def study(pairs, rest: tuple, plain=()) -> dict:
     """family -> {"all", "real", "made-up", "gaze" and the other groups: MSE x raw; "rest",
     "channel"}; the groups in ``plain`` keep the plain minimum."""
-    rest = per_input(pairs, rest, plain) if plain else rest
+    plain = [n for g in plain for n in TABLE_GROUPS[g]]
     sq: dict = {}
     at_rest: dict = {}
     for fam, group, train, test in folds(pairs):
-        w = map_rises.fit(paired.with_clips(train), rest=rest, **FIXED)
+        w = map_rises.fit(paired.with_clips(train), rest=rest, plain=plain, **FIXED)
         gaze = [w.outputs.index(n) for n in TABLE_GROUPS["gaze"] if n in w.outputs]
         for p, f in zip(test, map_features.features(w, test), strict=True):
             y = map_features.predict(w, f.u, f.r, f.e, f.t)

@@ -101,9 +101,10 @@ def test_a_group_made_worse_than_raw_on_the_folds_passes_through_levelled():
     assert "mouth" not in w.config["passed"] + w.config["own_rise"]
 
 
-def test_a_group_whose_own_rise_is_worse_too_passes_through_as_read():
+def test_a_group_whose_own_rise_is_worse_too_passes_as_read_only_when_asked():
     # every face holds its gaze 0.5 off centre, and the tracker reads it: a rise (the map's
-    # or its own) drops that level, raw keeps it, so gaze passes through as read
+    # or its own) drops that level, raw keeps it, so gaze passes through as read when the
+    # fit may (the rule under the plain minimum), levelled by default (a smoothed rest)
     def held(p):
         x, y = p.tracked.values.copy(), p.truth.values.copy()
         x[:, GAZE] = np.clip(x[:, GAZE] + 0.5, 0, 1)
@@ -112,10 +113,29 @@ def test_a_group_whose_own_rise_is_worse_too_passes_through_as_read():
                        truth=Animation(p.truth.times, y, NAMES))  # fmt: skip
 
     train = [held(p) for p in pairs(1) + pairs(2) if p.group != "neutral"]
-    w = map_rises.fit(train, prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
+    kw = dict(prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
+    w = map_rises.fit(train, as_read=True, **kw)
     assert "gaze" in w.config["passed"] and "gaze" not in w.config["own_rise"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["b"][GAZE].any()
+    w = map_rises.fit(train, **kw)
+    assert "gaze" in w.config["own_rise"] and "gaze" not in w.config["passed"]
+    assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
+
+
+def test_the_fit_smooths_the_rest_of_every_input_but_the_lids():
+    # the lids keep the plain minimum (a smoothed one reads blinks short between long
+    # lowered stretches); every other input its smoothed rest, written per input
+    w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, lams=(0.01,), knees=(None,))
+    tau, warm = w.rest
+    lids = [k for k, n in enumerate(w.inputs) if n in map_rises.PLAIN_REST]
+    rest = [k for k, n in enumerate(w.inputs) if n not in map_rises.PLAIN_REST]
+    assert lids and rest
+    assert not tau[lids].any() and not warm[lids].any()
+    assert np.all(tau[rest] == map_rises.REST[0]) and np.all(warm[rest] == map_rises.REST[1])
+    plain = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, lams=(0.01,), knees=(None,),
+                          rest=(0.0, 0.0))  # fmt: skip
+    assert "rest_tau" not in plain.config and "rest_warm" not in plain.config
 
 
 def test_a_lift_that_breaks_the_frame_rate_contract_is_refused(fitted):

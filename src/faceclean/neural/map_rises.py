@@ -5,8 +5,9 @@ browInnerUp 0.7, a photographed one browDown 0.3 (docs/RESULTS.md, the neutral c
 A map over the readings themselves learns the training looks' resting readings and gives
 them back as expressions on a new look (issue 34: a face at rest comes out sneering; the
 map over every input 1.02x raw on photo-textured faces). This map reads no level at all:
-per output j, over the causal features of map_features.py (u the pre-filtered input, r its
-running minimum since reset, the stream's rest so far):
+per output j, over the causal features of map_features.py (u the pre-filtered input, r
+the stream's rest so far: the running minimum of u smoothed over REST s, the lids' own
+plain):
 
     y_j = clip(sum_k W_jk (u_k - r_k) + s W_jj e_j, 0, 1)   no offset, no u, (M,) from (K,)
 
@@ -30,15 +31,15 @@ output through the origin, 0.23 by covariance, where the truth averages 0.5); on
 takes the channels that move together are evidence (docs/MODEL.md: noseSneer, which
 MediaPipe barely reads, from the brows and the upper lip). An output group
 (map_groups.SELECT) the map makes worse than raw in any family of the folds passes
-through instead: levelled (y_j = u_j - r_j) where that is no worse than raw, else as read
-(y_j = u_j). So does an output the map makes clearly worse than raw (HARM_REAL) on the
-folds' *real* performances (the shared takes, not the made-up performers), levelled
-always (as read keeps a look's resting reading): the made-up performers move every
-channel as often as any other, so a channel MediaPipe cannot see
-(jawLeft) is read from one it can (mouthLeft moves with the jaw); real faces shift the
-lips far more often than the jaw, and there that reading is a habit of the made-up
-performers (on the families' folds, the jaw group 1.48x raw on real performances, 0.76x
-on made-up ones; docs/MODEL.md, sixth round).
+through instead, levelled (y_j = u_j - r_j; ``as_read``: as read, y_j = u_j, where
+levelled is worse than raw, the rule under the plain minimum). So does an output the
+map makes clearly worse than raw (HARM_REAL) on the folds' *real* performances (the
+shared takes, not the made-up performers), levelled always (as read keeps a look's
+resting reading): the made-up performers move every channel as often as any other, so a
+channel MediaPipe cannot see (jawLeft) is read from one it can (mouthLeft moves with
+the jaw); real faces shift the lips far more often than the jaw, and there that reading
+is a habit of the made-up performers (on the families' folds, the jaw group 1.48x raw on
+real performances, 0.76x on made-up ones; docs/MODEL.md, sixth round).
 
 The choice of ``lam`` is made on folds that leave a look and a source out at once (with
 one family, a source), the held-out pairs never seen by the fit they score.
@@ -51,6 +52,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from faceclean.channels import GROUPS
 from faceclean.datasets.paired import Pair, performances
 from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
 from faceclean.neural import blink_lift, map_features, tracker_map
@@ -100,13 +102,14 @@ HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes 
 HARM_REAL = 1.5
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
 # The rest (learned/tracker_map.py): the running minimum of u smoothed over REST[0] s,
-# from REST[1] s after a stream's first frame; (0, 0): the plain running minimum of u. A
-# smoothed rest (0.15, 0.2) takes a face at rest from 0.10 / 0.10 / 0.16 off to 0.06 /
-# 0.06 / 0.09 (painted / dressed / photo, held out: docs/MODEL.md, eighth round) and the
-# real performances from 0.53 to 0.51x raw, but the lids group goes above raw on the
-# rendered looks (1.04 / 1.06: the made-up performers' lids, 1.09) and blinks close less
-# (0.51 / 0.45 / 0.48): not shipped, not the fit's default, until the lids keep theirs.
-REST = (0.0, 0.0)  # (rest_tau, rest_warm) s
+# from REST[1] s after a stream's first frame ((0, 0): the plain running minimum). The
+# smoothed rest finds a face's rest, not its noise's lowest dip nor its first low reading
+# (a face at rest 0.10 / 0.10 / 0.14 off -> 0.07 / 0.08 / 0.09, painted / dressed /
+# photo, held out), but on the lids it reaches a brief rest between long lowered stretches
+# less deep and blinks read short (the lids group above raw: docs/MODEL.md, eighth and
+# ninth rounds), so the lids' inputs (PLAIN_REST) keep the plain minimum.
+REST = (0.1, 0.1)  # (rest_tau, rest_warm) s
+PLAIN_REST = tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook"))
 Report = Callable[[dict[str, Any]], None]
 
 
@@ -137,7 +140,8 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         details: Sequence[float] = DETAILS,
         noise_bands: Sequence[float] = NOISE_BANDS,
         harm_real: float | None = HARM_REAL,
-        rest: tuple[float, float] = REST, as_read: bool = True) -> MapWeights:  # fmt: skip
+        rest: tuple[float, float] = REST, plain: Sequence[str] = PLAIN_REST,
+        as_read: bool = False) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband and its
     widening by the noise, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
@@ -146,10 +150,13 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     where that is no worse than raw in every family, else as read; an output worse than
     ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
     ``own_rise`` read their own rise, whatever the folds say. ``rest``: (rest_tau,
-    rest_warm) s, the runtime's rest (REST); ``as_read`` False: a group passes levelled,
-    never as read (a smoothed rest needs it: docs/MODEL.md, eighth round)."""
+    rest_warm) s, the runtime's rest (REST), but the plain minimum on the inputs named in
+    ``plain``; ``as_read`` False: a harmful group passes levelled, never as read (under a
+    smoothed rest as read keeps a photographed face's lids 0.3-0.5 up at rest:
+    docs/MODEL.md, eighth round)."""
     report = report or (lambda _e: None)
     names = map_features.channels(pairs)
+    rest = per_input(names, rest, plain)
     folds = _folds(pairs)
     if not folds:  # one source: nothing to choose on; the first candidates, the middle lam
         prefilters, lams = prefilters[:1], [lams[len(lams) // 2]]
@@ -190,9 +197,18 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     return w
 
 
+def per_input(
+    names: Sequence[str], rest: tuple[float, float], plain: Sequence[str] = ()
+) -> tuple[list[float], list[float]]:
+    """(tau, warm) s, one per input of ``names``: ``rest``, but (0, 0), the plain minimum,
+    on the inputs named in ``plain``."""
+    return ([0.0 if n in plain else float(rest[0]) for n in names],
+            [0.0 if n in plain else float(rest[1]) for n in names])  # fmt: skip
+
+
 def _rest_keys(rest: tuple) -> dict[str, Any]:
-    """The config keys of a rest, (tau, warm) s, numbers or one per input (none for the
-    plain minimum: a map as fitted before)."""
+    """The config keys of a rest, (tau, warm) s one per input (none for the plain minimum
+    everywhere: a map as fitted before)."""
     keys = ("rest_tau", "rest_warm")
     out = {k: np.asarray(v, np.float64).tolist() for k, v in zip(keys, rest, strict=True)}
     return out if any(np.any(np.asarray(v) > 0) for v in out.values()) else {}
