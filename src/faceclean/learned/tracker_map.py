@@ -48,8 +48,9 @@ Why the rest may be smoothed: the running minimum of a noisy reading finds its n
 lowest dips, so a still face's rise is that noise's depth and grows with time (MediaPipe
 on a photographed face at rest: 0.1-0.14 off); the minimum of a smoothed reading finds
 the face's rest, and the first frames (MediaPipe's first reading of a face is often low)
-set nothing. The shipped map keeps the plain minimum: smoothed, its lids went above raw
-(docs/MODEL.md, eighth round).
+set nothing. The shipped map smooths it (0.1 s, after 0.1 s) on every input but the
+lids', which keep the plain minimum: smoothed, the lids went above raw (docs/MODEL.md,
+eighth and ninth rounds).
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts

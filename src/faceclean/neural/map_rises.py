@@ -104,10 +104,10 @@ SETTLE_S = 0.5  # s into a neutral hold before it is judged
 # The rest (learned/tracker_map.py): the running minimum of u smoothed over REST[0] s,
 # from REST[1] s after a stream's first frame ((0, 0): the plain running minimum). The
 # smoothed rest finds a face's rest, not its noise's lowest dip nor its first low reading
-# (a face at rest 0.10 / 0.10 / 0.14 off -> 0.07 / 0.08 / 0.09, painted / dressed /
+# (a face at rest 0.10 / 0.10 / 0.16 off -> 0.07 / 0.06 / 0.11, painted / dressed /
 # photo, held out), but on the lids it reaches a brief rest between long lowered stretches
-# less deep and blinks read short (the lids group above raw: docs/MODEL.md, eighth and
-# ninth rounds), so the lids' inputs (PLAIN_REST) keep the plain minimum.
+# less deep and blinks read short (the lids group above raw: docs/MODEL.md, eighth
+# round), so the lids' inputs (PLAIN_REST) keep the plain minimum (ninth round, shipped).
 REST = (0.1, 0.1)  # (rest_tau, rest_warm) s
 PLAIN_REST = tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook"))
 Report = Callable[[dict[str, Any]], None]
