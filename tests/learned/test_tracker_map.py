@@ -154,11 +154,14 @@ def test_the_inline_pre_filter_is_one_euro():
 def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top,
                                                                noise, rest_s):  # fmt: skip
     """``_usual`` (every stream present and advancing) against the general path, forced, on
-    streams with uneven steps, a lost frame, an old time, a gap and passthrough columns;
-    three streams together and one alone."""
+    streams with uneven steps, then even ones (one step for every stream, the rest's
+    factor kept), a lost frame, an old time, a gap and passthrough columns; three streams
+    together and one alone."""
     rng = np.random.default_rng(5)
     n = 150
-    t = np.cumsum(rng.uniform(0.01, 0.05, (n, 3)), axis=0)
+    dt = rng.uniform(0.01, 0.05, (n, 3))
+    dt[110:130] = 1 / 30  # even steps, then uneven again
+    t = np.cumsum(dt, axis=0)
     t[60, 1] = t[59, 1] - 0.01  # an old time: that stream holds
     t[90:, 2] += 1.0  # a gap: that stream restarts
     t[100:, 0] += 1.0  # ... and the one stream stepped alone

@@ -223,6 +223,8 @@ class TrackerMap(Stepper):
             self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
             self._v = np.full((s, k), np.nan)  # (S, K) u smoothed for the rest (rest_tau)
             self._t0 = np.full(s, np.nan)  # (S,) s, the stream's first frame (rest_warm)
+            self._rest_h, self._rest_f = None, None  # ``_usual``'s last h, its rest factor
+            self._warm_over = False  # every stream past its rest's warm-up
             self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
             self._top = np.full((s, len(self._lo)), -np.inf)  # (S, L) largest lift so far
             self._noise = noise.Noise(s, len(self.weights.outputs))  # the band's noise
@@ -285,8 +287,10 @@ class TrackerMap(Stepper):
         lo, hi = (dt[0], dt[0]) if len(dt) == 1 else (dt.min(), dt.max())
         if not (lo > MIN_DT and hi <= self.pre.max_gap):
             return None
-        if self._rest_warm is not None and not (tt - self._t0 > self._rest_warm_max).all():
-            return None  # a stream's first rest_warm s: the general path (r = u)
+        if self._rest_warm is not None and not self._warm_over:
+            if not (tt - self._t0 > self._rest_warm_max).all():
+                return None  # a stream's first rest_warm s: the general path (r = u)
+            self._warm_over = True  # for good: accepted times only increase (filters/base.py)
         xs = self._xs
         xi = x[:, xs] if xs is not None else self._in_matrix(x)  # (S, K), a view where it runs
         h = np.maximum(dt, DT_MIN)[:, None] if lo != hi else max(float(lo), DT_MIN)  # s
@@ -308,8 +312,11 @@ class TrackerMap(Stepper):
         q *= e
         u += q  # u += g / (1 + g) e
         if self._smoothed:  # v += (1 - exp(-h / tau)) (u - v), r = min(r, v)
+            if not (isinstance(h, float) and h == self._rest_h):  # (K,) again for a new h
+                self._rest_f = -np.expm1(-h * self._rest_rate)
+                self._rest_h = h if isinstance(h, float) else None  # a float, or none kept
             q = u - self._v
-            q *= -np.expm1(-h * self._rest_rate)
+            q *= self._rest_f
             self._v += q
             if len(self._rest_plain):  # inputs with no smoothing: v = u
                 self._v[:, self._rest_plain] = u[:, self._rest_plain]

@@ -146,8 +146,8 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     widening by the noise, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
     docstring), accuracy first, then jitter and lag (``_choose``); then fitted on every
-    pair. A group worse than raw in any family passes through levelled (its own rise)
-    where that is no worse than raw in every family, else as read; an output worse than
+    pair. A group worse than raw in any family passes through levelled (its own rise;
+    with ``as_read``, as read where levelled is worse than raw in some family); an output worse than
     ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
     ``own_rise`` read their own rise, whatever the folds say. ``rest``: (rest_tau,
     rest_warm) s, the runtime's rest (REST), but the plain minimum on the inputs named in
