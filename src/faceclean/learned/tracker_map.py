@@ -193,7 +193,7 @@ class TrackerMap(Stepper):
         k = len(w.inputs)
         tau, warm = w.rest  # (K,) s each: the rest's smoothing and warm-up, per input
         self._rest_smooth = tau > 0  # (K,) inputs whose rest is smoothed; the others: v = u
-        self._rest_plain = np.flatnonzero(~self._rest_smooth)
+        self._rest_plain = ~self._rest_smooth if not self._rest_smooth.all() else None  # (K,)
         self._rest_rate = np.divide(1.0, tau, out=np.full(k, np.inf), where=tau > 0)  # 1/s
         self._smoothed = bool(self._rest_smooth.any())  # any input's rest smoothed
         self._rest_warm = warm.copy() if (warm > 0).any() else None
@@ -318,8 +318,8 @@ class TrackerMap(Stepper):
             q = u - self._v
             q *= self._rest_f
             self._v += q
-            if len(self._rest_plain):  # inputs with no smoothing: v = u
-                self._v[:, self._rest_plain] = u[:, self._rest_plain]
+            if self._rest_plain is not None:  # inputs with no smoothing: v = u (one call)
+                np.copyto(self._v, u, where=self._rest_plain)
             np.minimum(self._r, self._v, out=self._r)
         else:
             np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
