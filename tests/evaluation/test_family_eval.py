@@ -1,5 +1,6 @@
 """evaluation/family_eval.py's pooling by kind of performance: the real performers' takes
-apart from the made-up performers', every held-out family together, in the table too."""
+apart from the made-up performers', every held-out family together and each apart, in the
+table too."""
 
 from __future__ import annotations
 
@@ -35,7 +36,16 @@ def test_kinds_pool_real_and_made_up_performances_over_families():
         assert kind["raw"]["pairs"] == 2
         assert np.isclose(kind["half"]["mse"] / kind["raw"]["mse"], 0.25)
     fams = {f: {r: family_eval._scores(v) for r, v in rows.items()} for f, rows in per.items()}
+    apart = family_eval._family_and_kind(per)
+    assert {f: sorted(k) for f, k in apart.items()} == {
+        "painted": ["made-up", "real"],
+        "photo": ["made-up", "real"],
+    }
+    assert apart["photo"]["real"]["raw"]["pairs"] == 1  # neurosync's pair, photo alone
+    assert np.isclose(apart["photo"]["real"]["raw"]["mse"],
+                      family_eval._scores(per["photo"]["raw"][:1])["mse"])  # fmt: skip
     result = {"families": fams, "neutral": {}, "kinds": kinds, "pairs": {}, "gaze": True,
-              "channels": family_eval._channels(per)}  # fmt: skip
+              "channels": family_eval._channels(per), "family_kinds": apart}  # fmt: skip
     table = family_eval.markdown(result)
     assert "| real | half | 0.25 |" in table and "| made-up | half | 0.25 |" in table
+    assert "| photo | real | half | 0.25 |" in table

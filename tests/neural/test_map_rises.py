@@ -212,3 +212,38 @@ def test_an_output_read_from_a_made_up_habit_reads_its_own_rise_on_real_performa
     habit = map_rises.fit(train, harm_real=None, **kw)  # the rule off: the habit comes back
     assert habit.config["alone"] == []
     assert max(np.abs(out[:, jaw]).mean() for out, _ in cleaned(habit, real)) > 0.03
+
+
+@pytest.mark.slow
+def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_another_choice():
+    # The made-up performers move five channels the tracker cannot see (it reads 0) with
+    # ones it can (jawLeft with mouthLeft, ...), which a loose fit learns; the real ones
+    # never move them, where that habit is harm and a stiffer fit is right. Judged on every
+    # fold, the loose fit wins; on the real ones, the stiff one, and the real faces' jaw
+    # stays nearer put.
+    hidden = {"jawLeft": "mouthLeft", "jawRight": "mouthRight", "jawForward": "mouthFunnel",
+              "cheekPuff": "mouthPucker", "mouthClose": "mouthRollLower"}  # fmt: skip
+
+    def performer(p, made_up: bool):
+        y, x = p.truth.values.copy(), p.tracked.values.copy()
+        for h, seen in hidden.items():
+            y[:, NAMES.index(h)] = y[:, NAMES.index(seen)] if made_up else 0.0
+            x[:, NAMES.index(h)] = 0.0
+        group = ("independent", "synthetic")[int(p.name[-1])] if made_up else p.group
+        return replace(p, tracked=Animation(p.tracked.times, x, NAMES),
+                       truth=Animation(p.truth.times, y, NAMES), group=group)  # fmt: skip
+
+    train = [performer(p, p.group != "src0") for look in (1, 2)
+             for p in pairs(look) if p.group != "neutral"]  # fmt: skip
+    kw = dict(prefilters=PRE, lams=(0.03, 1.0), own_rise=(), knees=(None,),
+              noise_bands=(0.0,), deadbands=(0.01,), harm_real=None)  # fmt: skip
+    every, real = (map_rises.fit(train, judge=j, **kw) for j in ("all", "real"))
+    assert every.config["lam"] == 0.03 and real.config["lam"] == 1.0
+    assert real.config["val_real"] < every.config["val_real"] * 0.95
+    assert every.config["val_mse"] < real.config["val_mse"]
+    faces = [p for p in train if p.group == "src0"]
+    jaw = NAMES.index("jawLeft")
+    moved = [max(np.abs(out[:, jaw]).mean() for out, _ in cleaned(w, faces)) for w in (every, real)]
+    assert moved[1] < moved[0]
+    with pytest.raises(ValueError, match="judge"):
+        map_rises.fit(train, judge="made-up", **kw)
