@@ -210,9 +210,12 @@ def oracle(test: Test, y: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 def cleaned(tracked: Animation, adjust=None) -> np.ndarray:
     """What ``clean --tracker mediapipe [--calibration]`` writes for ``tracked``: (N, 51)."""
+    from faceclean.adaptation import attach
     from faceclean.guided.fit import shipped_cleaner
 
     cleaner, _ = shipped_cleaner("mediapipe", tracked.names)
+    if adjust is not None:  # its rest reading, as the command hands it to the cleaner
+        attach(cleaner, adjust.adaptation)
     if adjust is not None and not adjust.is_identity:
         tracked = tracked.with_values(adjust.apply(tracked.values, tracked.names))
     y = cleaner.clean(tracked).values
@@ -298,6 +301,7 @@ def evaluate(face: Face, studio: Studio, takes: list[str], seconds: float) -> di
 
 def model_version() -> dict:
     """Which shipped model the numbers are of: its last commit and sha256."""
+    from faceclean.adaptation import attach
     from faceclean.guided.fit import shipped_cleaner
     from faceclean.trackers.mediapipe import NAMES
 

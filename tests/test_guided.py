@@ -12,14 +12,14 @@ import json
 import numpy as np
 import pytest
 
-from faceclean.adaptation import Adaptation
+from faceclean.adaptation import Adaptation, attach
 from faceclean.adjust import Adjust, Adjusted
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.guided import align as al
-from faceclean.guided.fit import guided
+from faceclean.guided.fit import REST_INPUTS, REST_OUTPUTS, guided
 from faceclean.guided.script import load
 
 SCRIPT = load()
@@ -142,6 +142,53 @@ def test_the_adaptation_section_round_trips_and_runs_after_the_cleaner(tmp_path)
         assert np.allclose(got, want, equal_nan=True)
 
 
+def test_a_rest_reading_round_trips_and_clean_hands_it_to_the_tracker_map(tmp_path):
+    # A MediaPipe take whose smile is held from the first frame (0.35, the face's own rest
+    # reading 0.05), let go at 3 s: with the reading the smile reads as held, without it
+    # as a rest; the channels the reading does not name come out bit for bit the same.
+    from faceclean import io
+    from faceclean.trackers.mediapipe import NAMES
+
+    t = np.arange(150) / 30.0
+    x = np.full((150, len(NAMES)), 0.02)
+    smile = NAMES.index("mouthSmileLeft")
+    x[:, smile] = np.where(t < 3.0, 0.35, 0.05)
+    take = tmp_path / "t.csv"
+    io.save(Animation(t, x, NAMES), take, fmt="csv")
+    out = {}
+    for label, rest in (("with", {"mouthSmileLeft": 0.05}), ("without", {})):
+        ad = Adaptation({}, {}, "mediapipe", {"cleaner": "test"}, rest,
+                        ("mouthSmileLeft",) if rest else ())  # fmt: skip
+        path = tmp_path / f"{label}.json"
+        Adjust((), {}, adaptation=ad).save(path)
+        assert Adjust.load(path).adaptation == ad
+        assert ("rest" in json.loads(path.read_text())["adaptation"]) == bool(rest)
+        dest = tmp_path / f"{label}.csv"
+        assert main(["clean", str(take), "-o", str(dest), "--tracker", "mediapipe",
+                     "--calibration", str(path)]) == 0  # fmt: skip
+        out[label] = io.load(dest)
+    j = out["with"].names.index("mouthSmileLeft")
+    early = (t > 1.0) & (t < 3.0)
+    held, rested = out["with"].values[early, j], out["without"].values[early, j]
+    assert held.min() > rested.max() + 0.2
+    others = [k for k, n in enumerate(out["with"].names) if n != "mouthSmileLeft"]
+    assert np.array_equal(out["with"].values[:, others], out["without"].values[:, others])
+
+
+@pytest.mark.parametrize("rest, says", [
+    ({"reading": {"mouthSmileLeft": 2.0}, "outputs": []}, "rest reading mouthSmileLeft"),
+    ({"reading": {"smile": 0.1}, "outputs": []}, "not an ARKit channel name"),
+    ({"reading": {"mouthSmileLeft": -0.1}, "outputs": []}, "within \\[0, 1\\]"),
+    ([0.1], "rest must be")])  # fmt: skip
+def test_a_bad_rest_reading_is_refused_in_one_line(tmp_path, rest, says):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
+                               "adaptation": {"format": "faceclean-adaptation/1",
+                                              "rest": rest}}))  # fmt: skip
+    with pytest.raises(FacecleanError, match=says):
+        Adjust.load(bad)
+
+
 def test_a_calibration_from_another_tracker_is_one_line(tmp_path, capsys):
     path = tmp_path / "mp.json"
     Adjust((), {}, adaptation=adaptation()).save(path)
@@ -251,6 +298,8 @@ def _mse(face, adjust: Adjust | None) -> float:
 
     other = face["other"]
     cleaner, _ = shipped_cleaner("mediapipe", other.names)
+    if adjust is not None:  # its rest reading, as ``clean --calibration`` hands it over
+        attach(cleaner, adjust.adaptation)
     y = cleaner.clean(other).values
     if adjust is not None:
         y = adjust.adapt(y, other.names)
@@ -275,6 +324,11 @@ def test_rendered_alignment_finds_the_prompts(face):
 @pytest.mark.slow
 def test_rendered_guided_calibration_beats_the_shipped_map_on_another_clip(face):
     fit = guided(face["script"], "mediapipe")
+    ad = fit.adjust.adaptation
+    assert ad.rest and set(ad.rest) <= set(REST_INPUTS) and ad.rest_outputs == REST_OUTPUTS
+    from faceclean.cli.calibrate_guided import report
+
+    assert any(line.startswith(f"rest reading of {len(ad.rest)} mouth") for line in report(fit))
     shipped, calibrated = _mse(face, None), _mse(face, fit.adjust)
     assert calibrated < shipped, (calibrated, shipped)  # a little: docs/CALIBRATION.md
 

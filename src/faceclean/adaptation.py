@@ -18,7 +18,12 @@ older than it ignore::
                    "offset": {"jawOpen": -0.03, ...},
                    "matrix": {"eyeBlinkLeft": {"eyeBlinkLeft": 0.21, "eyeSquintLeft": -0.1}, ...}}
 
-``matrix[out][in]`` is D's entry (the change from the identity).
+``matrix[out][in]`` is D's entry (the change from the identity). A guided calibration of
+MediaPipe also carries the face's own resting reading of the mouth's inputs, and the
+outputs that measure their rise from it (learned/tracker_map.py ``set_rest_reading``; the
+cleaner takes it, ``Adjust.attach``)::
+
+    "rest": {"reading": {"mouthSmileLeft": 0.03, ...}, "outputs": ["mouthSmileLeft", ...]}
 """
 
 from __future__ import annotations
@@ -46,6 +51,8 @@ class Adaptation:
     matrix: dict[str, dict[str, float]]
     tracker: str | None = None
     facts: dict[str, Any] = field(default_factory=dict)  # other keys, kept as they are
+    rest: dict[str, float] = field(default_factory=dict)  # input -> the face's reading at rest
+    rest_outputs: tuple[str, ...] = ()  # the outputs that measure a rise from ``rest``
 
     @classmethod
     def from_dict(cls, data: Any, label: str = "adaptation") -> Adaptation:
@@ -70,10 +77,12 @@ class Adaptation:
         tracker = data.get("tracker")
         if tracker is not None and not isinstance(tracker, str):
             raise FacecleanError(f"{where}: tracker must be a name")
-        rest = {k: v for k, v in data.items() if k not in ("format", "offset", "matrix", "tracker")}
+        keys = ("format", "offset", "matrix", "tracker", "rest")
+        others = {k: v for k, v in data.items() if k not in keys}
         offset = {n: float(v) for n, v in offset.items()}
         matrix = {o: {i: float(v) for i, v in row.items()} for o, row in matrix.items()}
-        return cls(offset, matrix, tracker, rest)
+        reading, outputs = _rest(data.get("rest"), where)
+        return cls(offset, matrix, tracker, others, reading, outputs)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"format": FORMAT, "tracker": self.tracker, **self.facts}
@@ -81,6 +90,9 @@ class Adaptation:
         out["matrix"] = {
             o: {i: round(v, 6) for i, v in row.items()} for o, row in self.matrix.items()
         }
+        if self.rest:
+            reading = {n: round(v, 6) for n, v in self.rest.items()}
+            out["rest"] = {"reading": reading, "outputs": list(self.rest_outputs)}
         return out
 
     @property
@@ -123,6 +135,34 @@ class Applier:
             z = np.where(np.isnan(y[..., self.cols]), np.nan, np.clip(z, 0.0, 1.0))
         y[..., self.cols] = z
         return y
+
+
+def attach(cleaner: Any, adaptation: Adaptation | None) -> None:
+    """Hands ``adaptation``'s rest reading to ``cleaner`` where both have one (the tracker
+    map takes it: ``set_rest_reading``); any other cleaner keeps the stream's own rest, and
+    the correction after it applies as before."""
+    take = getattr(cleaner, "set_rest_reading", None)
+    if adaptation is not None and adaptation.rest and take is not None:
+        take(adaptation.rest, adaptation.rest_outputs)
+
+
+def _rest(data: Any, where: str) -> tuple[dict[str, float], tuple[str, ...]]:
+    """The "rest" section checked: (reading, outputs); none: ({}, ())."""
+    if data is None:
+        return {}, ()
+    reading, outputs = (data.get(k) if isinstance(data, dict) else None
+                        for k in ("reading", "outputs"))  # fmt: skip
+    if not isinstance(reading, dict) or not isinstance(outputs, list):
+        raise FacecleanError(f"{where}: rest must be {{\"reading\": {{channel: number}}, "
+                             "\"outputs\": [channel, ...]}")  # fmt: skip
+    bad = [n for n in [*reading, *outputs] if not isinstance(n, str) or canonical(n) != n]
+    if bad:
+        raise FacecleanError(f"{where}: rest: {bad[0]!r} is not an ARKit channel name")
+    for n, v in reading.items():
+        _bounded(v, 1.0, f"{where} rest reading {n}")
+        if v < 0:
+            raise FacecleanError(f"{where} rest reading {n}: must be within [0, 1]")
+    return {n: float(v) for n, v in reading.items()}, tuple(outputs)
 
 
 def _bounded(v: Any, limit: float, where: str) -> None:

@@ -436,8 +436,9 @@ class Adjusted(Stepper):
         self._levels = adjust.levels(self.names)
         self._after = None
         if adjust.adaptation is not None:
-            from faceclean.adaptation import Applier
+            from faceclean.adaptation import Applier, attach
 
+            attach(inner, adjust.adaptation)
             self._after = Applier(adjust.adaptation, self.names)
         self.reset()
 

@@ -212,8 +212,9 @@ class LiveCalibration(Stepper):
         self._tops = tops_of(self.base)
         self._after = None  # a guided calibration's adaptation, after the cleaner
         if self.base.adaptation is not None:
-            from faceclean.adaptation import Applier
+            from faceclean.adaptation import Applier, attach
 
+            attach(inner, self.base.adaptation)
             self._after = Applier(self.base.adaptation, names)
         self.reset()
 

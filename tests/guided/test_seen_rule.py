@@ -88,12 +88,12 @@ def test_the_seen_rule_reads_the_tracker_not_the_cleaner(monkeypatch):
     shipped = fit.response
 
     def cleaner(anim, tracker):
-        y, present, label = shipped(anim, tracker)
+        y, present, label, built = shipped(anim, tracker)
         y = y.copy()
         y[:, [ARKIT52.index(n) for n in WIDE]] = 0.0
         up = s >= next(p for p in SCRIPT.prompts if p.id == "brows_up").start
         y[np.ix_(up, [ARKIT52.index("browInnerUp")])] = 0.9
-        return y, present, label
+        return y, present, label, built
 
     monkeypatch.setattr(fit, "response", cleaner)
     a = guided(Animation(tau, x, NAMES), "mediapipe").alignment

@@ -78,6 +78,10 @@ def report(result) -> list[str]:
         for _, o, i, v in big:
             what = "gain" if o == i else f"+ {i} x"
             lines.append(f"  {o:<20} {what} {1 + v if o == i else v:+.3f}")
+        if ad.rest:
+            n, m = len(ad.rest), len(ad.rest_outputs)
+            lines.append(f"rest reading of {n} mouth channels (this face's neutral): "
+                         f"{m} mouth and cheek channels rise from it")  # fmt: skip
     else:
         chans = adjust.facts.get("channels", {})
         lifted = adjust.facts.get("lifted", [])

@@ -30,6 +30,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     from pathlib import Path
 
     from faceclean import io
+    from faceclean.adaptation import attach
     from faceclean.adjust import Adjusted, check_range
     from faceclean.filters import rotation
     from faceclean.io import stream
@@ -66,6 +67,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     adjust = build_levels(args, choice, anim.names)
     # no level mapping: the take itself, not a copy (an hour is 92 MB; issue 38)
     mapped = anim if adjust.is_identity else anim.with_values(adjust.apply(anim.values, anim.names))
+    attach(cleaner, adjust.adaptation)  # a guided calibration's rest reading, if any
     cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
     if adjust.adaptation is not None:  # a guided calibration's correction, after the cleaner
         cleaned = cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))

@@ -19,6 +19,11 @@
   neighbour must move clearly to correct a channel). A channel no seen prompt aims at
   is not touched; a channel that did not move (a still face) keeps D near 0. The result
   is ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
+  With it, the face's own resting reading of the mouth's inputs (REST_INPUTS: u, as the
+  cleaner's pre-filter gives it, the median over the same rests): the cleaner then
+  measures the mouth's and the cheeks' rises (REST_OUTPUTS) from the lower of it and the
+  stream's own rest, so a mouth a performer holds slightly set from the first frame reads
+  as set, not as a rest (learned/tracker_map.py ``set_rest_reading``).
 - ``arkit``: per-channel levels before the cleaner (faceclean.adjust, as ``calibrate``
   writes): neutral = median over the neutral holds; a channel that a seen prompt aims at
   (target v) and that rose there maps the HOLD_Q-th percentile of its hold onto v (gain
@@ -33,6 +38,7 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,6 +62,13 @@ MAX_OFFSET = 0.3
 MAX_COEF = 2.0
 HOLD = 0.8  # the part of a prompt whose envelope is above this is its hold
 HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it reached
+# A face's rest reading (module docstring): of the mouth's inputs, for the mouth's and the
+# cheeks' outputs. On three faces chosen on (painted:7, dressed:5, photo:47:obama) every
+# input for every output did best; on the four faces of docs/CALIBRATION.md it took
+# photographed faces' jaw and brows above raw (a photograph's brows and lids read their
+# own rest), where the mouth alone gained on all seven (docs/CALIBRATION.md).
+REST_INPUTS = GROUPS["mouth"]
+REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"]
 
 
 @dataclass(frozen=True)
@@ -83,17 +96,38 @@ def shipped_cleaner(tracker: str, names: tuple[str, ...]):
     return choice.build(names), label
 
 
-def response(anim: Animation, tracker: str) -> tuple[np.ndarray, np.ndarray, str]:
-    """(y (N, 52) ARKit weights NaN where absent, present (52,) bool, cleaner label): what
-    the guided fit sees: the shipped cleaner's output for MediaPipe, the values for ARKit."""
+def response(anim: Animation, tracker: str) -> tuple[np.ndarray, np.ndarray, str, Any]:
+    """(y (N, 52) ARKit weights NaN where absent, present (52,) bool, cleaner label, the
+    cleaner): what the guided fit sees: the shipped cleaner's output for MediaPipe, the
+    values for ARKit (no cleaner: None)."""
     if tracker == "mediapipe":
         cleaner, label = shipped_cleaner(tracker, anim.names)
         cleaned = cleaner.clean(anim)
         y, present = cleaned.arkit()
         y = np.where(anim.valid[:, None], y, np.nan)  # a lost face is no response
-        return y, present, label
+        return y, present, label, cleaner
     y, present = anim.arkit()
-    return y, present, "levels"
+    return y, present, "levels", None
+
+
+def rest_reading(anim: Animation, cleaner: Any, at_rest: np.ndarray) -> dict[str, float]:
+    """REST_INPUTS' reading at rest: u, ``cleaner``'s pre-filter (a tracker map's One
+    Euro) over ``anim``, its median over the frames ``at_rest`` (N,) bool; {}: no rest
+    frames, or a cleaner with no such pre-filter."""
+    from faceclean.filters.one_euro import OneEuro
+
+    pre, inputs = getattr(cleaner, "pre", None), getattr(cleaner, "weights", None)
+    names = [n for n in REST_INPUTS if inputs is not None and n in inputs.inputs]
+    names = [n for n in names if n in anim.names]
+    keep = at_rest & anim.valid
+    if pre is None or not names or not keep.any():
+        return {}
+    k = [inputs.inputs.index(n) for n in names]
+    each = {key: np.broadcast_to(getattr(pre, key), (len(inputs.inputs),))[k].tolist()
+            for key in ("min_cutoff", "beta", "d_cutoff")}  # fmt: skip
+    x = anim.values[:, [anim.names.index(n) for n in names]]
+    u = OneEuro(names=names, **each).clean(Animation(anim.times, x, names)).values
+    return {n: float(np.median(u[keep, j])) for j, n in enumerate(names)}
 
 
 def guided(
@@ -107,7 +141,7 @@ def guided(
     x, present = anim.arkit()
     if not present.any():
         raise FacecleanError("guided calibration: the take has no ARKit blendshape channels")
-    y, present, label = response(anim, tracker)
+    y, present, label, cleaner = response(anim, tracker)
     alignment = al.align(anim.times, x, script, tracker)  # on what the tracker itself read
     t = anim.times
     s = alignment.script_time(t)  # (N,) s, NaN outside the aligned span
@@ -127,7 +161,10 @@ def guided(
     }
     if tracker == "mediapipe":
         adaptation = fit_adaptation(y, target, weight, present)
-        adaptation = Adaptation(adaptation.offset, adaptation.matrix, tracker, {"cleaner": label})
+        still = (weight > 0) & (target.max(axis=1) == 0)  # the rests it was pivoted on
+        reading = rest_reading(anim, cleaner, still)
+        adaptation = Adaptation(adaptation.offset, adaptation.matrix, tracker, {"cleaner": label},
+                                reading, REST_OUTPUTS if reading else ())  # fmt: skip
         adjust = Adjust((), facts, adaptation=adaptation)
         y_after = adaptation.apply(np.nan_to_num(y), ARKIT52)
     else:

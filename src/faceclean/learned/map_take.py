@@ -49,6 +49,7 @@ def clean(tm: Map, anim: Animation, run_of=None) -> Animation:
     if (
         not tm.prefilter
         or tm._hidden
+        or tm._lvl is not None  # a face's own rest reading: stepped (tracker_map.py)
         or anim.n_channels != len(tm.names)
         or not compiled.for_take(len(idx))
     ):

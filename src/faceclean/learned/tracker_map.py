@@ -45,12 +45,10 @@ hidden layer (``hidden`` > 0) adds what is not linear; on the pairs we have it o
 function of (u, r, x - u) only; on a still face u converges to x, so the detail goes to 0,
 r is constant, and m converges and y with it; a missing frame holds u and so y.
 Why the rest may be smoothed: the running minimum of a noisy reading finds its noise's
-lowest dips, so a still face's rise is that noise's depth and grows with time (MediaPipe
-on a photographed face at rest: 0.1-0.14 off); the minimum of a smoothed reading finds
-the face's rest, and the first frames (MediaPipe's first reading of a face is often low)
-set nothing. The shipped map smooths it (0.1 s, after 0.1 s) on every input but the
-lids', which keep the plain minimum: smoothed, the lids went above raw (docs/MODEL.md,
-eighth and ninth rounds).
+lowest dips (a still face's rise grows with time); the minimum of a smoothed reading finds
+the face's rest, and the first frames (MediaPipe's first reading is often low) set
+nothing. The shipped map smooths it (0.1 s, after 0.1 s) on every input but the lids'
+(smoothed, they went above raw: docs/MODEL.md, eighth and ninth rounds).
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
@@ -199,7 +197,26 @@ class TrackerMap(Stepper):
         self._rest_warm = warm.copy() if (warm > 0).any() else None
         self._rest_warm_max = float(warm.max())
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
+        self._ceil, self._lvl = None, None  # ``set_rest_reading``'s (K,) and (K, M+L)
         self.reset()
+
+    def set_rest_reading(self, reading: dict[str, float] | None, outputs: Sequence[str] = ()):
+        """A face's own reading at rest of some inputs (u over a guided calibration's rests),
+        for ``outputs``, which then measure those inputs' rises from min(r, reading): a level
+        held from the stream's start reads as held. m += L max(0, r - r0), L = B on those
+        outputs and inputs (0 elsewhere); None: the map alone."""
+        self._ceil, self._lvl = None, None
+        if not reading or not self.rest:
+            return
+        w = self.weights
+        r0 = np.full(len(w.inputs), np.inf)  # (K,) +inf: max(0, r - inf) = 0
+        for name, v in reading.items():
+            if name in w.inputs:
+                r0[w.inputs.index(name)] = float(v)
+        on = np.isin(w.outputs, list(outputs))  # (M,)
+        lvl = np.zeros_like(self._nb)  # (K, M+L): the lift's columns take none
+        lvl[:, : self._m_cols] = -self._nb[:, : self._m_cols] * on * np.isfinite(r0)[:, None]
+        self._ceil, self._lvl = (r0, lvl) if lvl.any() else (None, None)
 
     def reset(self) -> None:
         self._y: np.ndarray | None = None  # (S, M) last output; the rest is set with it
@@ -325,6 +342,10 @@ class TrackerMap(Stepper):
             np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
         y = u @ self._ab  # (S, M+L)
         y += self._r @ self._nb
+        if self._lvl is not None:  # a face's own rest reading (``set_rest_reading``)
+            q = self._r - self._ceil
+            q.clip(0.0, None, out=q)
+            y += q @ self._lvl
         if len(self._do):  # the detail: + d (x - u), the -d u being in _ab
             q = (xi if self._dis is None else xi[:, self._dis]) * self._dd
             if self._dos is None:
@@ -397,6 +418,8 @@ class TrackerMap(Stepper):
         rest = (u - self._r) if self.rest else None
         if rest is not None:
             lin = lin + rest @ a["b"].T
+        if self._lvl is not None:  # a face's own rest reading (``set_rest_reading``)
+            lin = lin + np.maximum(self._r - self._ceil, 0.0) @ self._lvl[:, : self._m_cols]
         if len(self._do):  # the detail, on each output's own input
             lin[:, self._do] += self._d[self._do] * (xi[:, self._di] - u[:, self._di])
         if self._hidden:

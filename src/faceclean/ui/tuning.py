@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from faceclean import filters
+from faceclean.adaptation import attach
 from faceclean.adjust import MAP_KEYS, Adjust, Adjusted, apply_levels
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, GROUPS
@@ -95,7 +96,9 @@ class Tuning:
         cleaner's ``clean``."""
         adjust = self.levels(anim.names)
         mapped = anim.with_values(adjust.apply(anim.values, anim.names))
-        cleaned = self.choice.build(anim.names).clean(mapped)
+        cleaner = self.choice.build(anim.names)
+        attach(cleaner, adjust.adaptation)  # a guided calibration's rest reading, if any
+        cleaned = cleaner.clean(mapped)
         if adjust.adaptation is None:
             return cleaned
         return cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
