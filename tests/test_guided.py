@@ -175,6 +175,30 @@ def test_a_rest_reading_round_trips_and_clean_hands_it_to_the_tracker_map(tmp_pa
     assert np.array_equal(out["with"].values[:, others], out["without"].values[:, others])
 
 
+def test_the_stream_wrappers_hand_the_rest_reading_to_the_map():
+    # relay and the page step through Adjusted (a calibration file) or LiveCalibration (a
+    # neutral measured live over a file's base): both give the map the face's reading.
+    from faceclean.calibration import LiveCalibration
+    from faceclean.learned.tracker_map import TrackerMap
+    from faceclean.settings import MODELS
+    from faceclean.trackers.mediapipe import NAMES
+
+    t = np.arange(90) / 30.0
+    x = np.full((90, len(NAMES)), 0.02)
+    smile = NAMES.index("mouthSmileLeft")
+    x[:, smile] = 0.35  # held from the first frame; the face's own rest reads 0.05
+    early = t > 1.0
+    for wrap in (lambda c, a: Adjusted(c, a, NAMES),
+                 lambda c, a: LiveCalibration(c, 100.0, base=a, names=NAMES)):  # fmt: skip
+        got = {}
+        for label, rest in (("with", {"mouthSmileLeft": 0.05}), ("without", {})):
+            ad = Adaptation({}, {}, "mediapipe", {}, rest, ("mouthSmileLeft",) if rest else ())
+            stream = wrap(TrackerMap(model=MODELS / "mediapipe.npz", names=NAMES),
+                          Adjust((), {}, adaptation=ad))  # fmt: skip
+            got[label] = np.array([stream.step(x[i], t[i]) for i in range(len(t))])
+        assert got["with"][early, smile].min() > got["without"][early, smile].max() + 0.2
+
+
 @pytest.mark.parametrize("rest, says", [
     ({"reading": {"mouthSmileLeft": 2.0}, "outputs": []}, "rest reading mouthSmileLeft"),
     ({"reading": {"smile": 0.1}, "outputs": []}, "not an ARKit channel name"),
