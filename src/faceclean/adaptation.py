@@ -21,7 +21,7 @@ older than it ignore::
 ``matrix[out][in]`` is D's entry (the change from the identity). A guided calibration of
 MediaPipe also carries the face's own resting reading of the mouth's inputs, and the
 outputs that measure their rise from it (learned/tracker_map.py ``set_rest_reading``; the
-cleaner takes it, ``Adjust.attach``)::
+cleaner takes it: ``attach``)::
 
     "rest": {"reading": {"mouthSmileLeft": 0.03, ...}, "outputs": ["mouthSmileLeft", ...]}
 """

@@ -66,7 +66,8 @@ HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it r
 # cheeks' outputs. On three faces chosen on (painted:7, dressed:5, photo:47:obama) every
 # input for every output did best; on the four faces of docs/CALIBRATION.md it took
 # photographed faces' jaw and brows above raw (a photograph's brows and lids read their
-# own rest), where the mouth alone gained on all seven (docs/CALIBRATION.md).
+# own rest), where the mouth alone gained on all seven and on three more rendered after
+# the choice (docs/CALIBRATION.md, "The rest reading").
 REST_INPUTS = GROUPS["mouth"]
 REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"]
 

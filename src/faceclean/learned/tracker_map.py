@@ -12,7 +12,8 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
                                         many s (v += (1 - exp(-h / tau)) (u - v)); with
                                         ``rest_warm``, r = v = u for that many s after
                                         the stream's first frame (every rise 0), then
-                                        min(r, v)
+                                        min(r, v); a face's own reading r0 adds
+                                        L max(0, r - r0) to m (``set_rest_reading``)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
     m  = clip(A u + B (u - r) + c + d (x - u)_own + W2 tanh(W1 z + b1) + b2, 0, 1)  (M,)
     m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))  a lift, where g_j > 0 (blinks):
@@ -197,14 +198,13 @@ class TrackerMap(Stepper):
         self._rest_warm = warm.copy() if (warm > 0).any() else None
         self._rest_warm_max = float(warm.max())
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
-        self._ceil, self._lvl = None, None  # ``set_rest_reading``'s (K,) and (K, M+L)
+        self.set_rest_reading(None)  # (K,) r0 and (K, M+L) L: none until a face's is set
         self.reset()
 
     def set_rest_reading(self, reading: dict[str, float] | None, outputs: Sequence[str] = ()):
-        """A face's own reading at rest of some inputs (u over a guided calibration's rests),
-        for ``outputs``, which then measure those inputs' rises from min(r, reading): a level
-        held from the stream's start reads as held. m += L max(0, r - r0), L = B on those
-        outputs and inputs (0 elsewhere); None: the map alone."""
+        """A face's own reading at rest r0 of some inputs (u over a guided calibration's
+        rests): ``outputs`` measure their rises from min(r, r0), a level held from the first
+        frame reads as held. m += L max(0, r - r0), L = B there (else 0); None: none."""
         self._ceil, self._lvl = None, None
         if not reading or not self.rest:
             return
