@@ -301,7 +301,6 @@ def evaluate(face: Face, studio: Studio, takes: list[str], seconds: float) -> di
 
 def model_version() -> dict:
     """Which shipped model the numbers are of: its last commit and sha256."""
-    from faceclean.adaptation import attach
     from faceclean.guided.fit import shipped_cleaner
     from faceclean.trackers.mediapipe import NAMES
 
