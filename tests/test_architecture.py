@@ -55,6 +55,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "ui": {
         *("resolve", "adjust", "calibration", "filters", "io", "relay", "report", "face"),
         "guided",  # the page's guided calibration (the fit calibrate --guided uses)
+        "adaptation",  # a guided calibration's rest reading, handed to the page's cleaner
     },
     "neural": {"filters", "learned", "datasets", "evaluation", "face", "io", "cli"},
     "cli": {"*"},  # the command line may use anything (heavy imports inside run)

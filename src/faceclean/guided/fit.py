@@ -112,23 +112,23 @@ def response(anim: Animation, tracker: str) -> tuple[np.ndarray, np.ndarray, str
 
 
 def rest_reading(anim: Animation, cleaner: Any, at_rest: np.ndarray) -> dict[str, float]:
-    """REST_INPUTS' reading at rest: u, ``cleaner``'s pre-filter (a tracker map's One
-    Euro) over ``anim``, its median over the frames ``at_rest`` (N,) bool; {}: no rest
-    frames, or a cleaner with no such pre-filter."""
-    from faceclean.filters.one_euro import OneEuro
+    """REST_INPUTS' reading at rest: u, ``cleaner``'s own pre-filter (a tracker map's One
+    Euro, a copy) over ``anim``, its median over the frames ``at_rest`` (N,) bool; {}: no
+    rest frames, or a cleaner with no such pre-filter."""
+    import copy
 
-    pre, inputs = getattr(cleaner, "pre", None), getattr(cleaner, "weights", None)
-    names = [n for n in REST_INPUTS if inputs is not None and n in inputs.inputs]
-    names = [n for n in names if n in anim.names]
+    pre, w = copy.deepcopy(getattr(cleaner, "pre", None)), getattr(cleaner, "weights", None)
+    names = [n for n in REST_INPUTS if w is not None and n in w.inputs and n in anim.names]
     keep = at_rest & anim.valid
     if pre is None or not names or not keep.any():
         return {}
-    k = [inputs.inputs.index(n) for n in names]
-    each = {key: np.broadcast_to(getattr(pre, key), (len(inputs.inputs),))[k].tolist()
-            for key in ("min_cutoff", "beta", "d_cutoff")}  # fmt: skip
-    x = anim.values[:, [anim.names.index(n) for n in names]]
-    u = OneEuro(names=names, **each).clean(Animation(anim.times, x, names)).values
-    return {n: float(np.median(u[keep, j])) for j, n in enumerate(names)}
+    x = np.zeros((anim.n_frames, len(w.inputs)))  # (N, K): absent inputs read 0, as fed
+    for j, n in enumerate(w.inputs):
+        if n in anim.names:
+            x[:, j] = anim.values[:, anim.names.index(n)]
+    pre.reset()
+    u = pre.clean(Animation(anim.times, x, tuple(w.inputs))).values
+    return {n: float(np.median(u[keep, w.inputs.index(n)])) for n in names}
 
 
 def guided(
