@@ -137,6 +137,15 @@ class Applier:
         return y
 
 
+def after(cleaner: Any, adaptation: Adaptation | None, names: Sequence[str]) -> Applier | None:
+    """A stream wrapper's correction after ``cleaner`` for columns ``names`` (None without
+    an adaptation), its rest reading handed to ``cleaner`` (``attach``)."""
+    if adaptation is None:
+        return None
+    attach(cleaner, adaptation)
+    return Applier(adaptation, names)
+
+
 def attach(cleaner: Any, adaptation: Adaptation | None) -> None:
     """Hands ``adaptation``'s rest reading to ``cleaner`` where both have one (the tracker
     map takes it: ``set_rest_reading``); any other cleaner keeps the stream's own rest, and

@@ -434,12 +434,9 @@ class Adjusted(Stepper):
         self.inner, self.adjust, self.names = inner, adjust, tuple(names)
         self.name = getattr(inner, "name", "cleaner")
         self._levels = adjust.levels(self.names)
-        self._after = None
-        if adjust.adaptation is not None:
-            from faceclean.adaptation import Applier, attach
+        from faceclean.adaptation import after
 
-            attach(inner, adjust.adaptation)
-            self._after = Applier(adjust.adaptation, self.names)
+        self._after = after(inner, adjust.adaptation, self.names)  # None without one
         self.reset()
 
     def reset(self) -> None:

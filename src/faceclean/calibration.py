@@ -210,12 +210,9 @@ class LiveCalibration(Stepper):
         self.base, self.overrides = base or Adjust(), overrides or Adjust()
         self._before = self.base.merged(self.overrides).levels(names)
         self._tops = tops_of(self.base)
-        self._after = None  # a guided calibration's adaptation, after the cleaner
-        if self.base.adaptation is not None:
-            from faceclean.adaptation import Applier, attach
+        from faceclean.adaptation import after
 
-            attach(inner, self.base.adaptation)
-            self._after = Applier(self.base.adaptation, names)
+        self._after = after(inner, self.base.adaptation, names)  # a guided calibration's
         self.reset()
 
     def reset(self) -> None:

@@ -243,6 +243,12 @@ def _channels(per: dict) -> dict[str, dict[str, float]]:
     return out
 
 
+def _groups(s: dict[str, float], raw: dict[str, float]) -> str:
+    """A row's group cells: each group's MSE x raw's ("-" where raw's is 0)."""
+    return " | ".join(f"{s[f'mse_{g}'] / raw[f'mse_{g}']:.2f}" if raw[f"mse_{g}"] > 0 else "-"
+                      for g in TABLE_GROUPS)  # fmt: skip
+
+
 def _family_kinds(found: dict | None) -> list[str]:
     """The table per held-out family and kind of performance, with closure, jitter, lag."""
     if not found:
@@ -258,10 +264,7 @@ def _family_kinds(found: dict | None) -> list[str]:
         for kind, rows in kinds.items():
             raw = rows["raw"]
             for name, s in rows.items():
-                groups = " | ".join(
-                    f"{s[f'mse_{g}'] / raw[f'mse_{g}']:.2f}" if raw[f"mse_{g}"] > 0 else "-"
-                    for g in TABLE_GROUPS
-                )
+                groups = _groups(s, raw)
                 lines.append(f"| {fam} | {kind} | {name} | {s['mse'] / raw['mse']:.2f} | "
                              f"{groups} | {s['blink_closure']:.2f} | {s['jitter_ratio']:.2f} | "
                              f"{s['lag_ms']:.0f} |")  # fmt: skip
@@ -305,10 +308,7 @@ def markdown(result: dict[str, Any]) -> str:
     for fam, rows in result["families"].items():
         raw = rows["raw"]
         for name, s in rows.items():
-            groups = " | ".join(
-                f"{s[f'mse_{g}'] / raw[f'mse_{g}']:.2f}" if raw[f"mse_{g}"] > 0 else "-"
-                for g in TABLE_GROUPS
-            )
+            groups = _groups(s, raw)
             neu = result["neutral"].get(fam, {}).get(name)
             neutral = f"{neu['worst']:.3f} ({neu['channel']})" if neu else "-"
             lines.append(
@@ -326,10 +326,7 @@ def markdown(result: dict[str, Any]) -> str:
         for kind, rows in kinds.items():
             raw = rows["raw"]
             for name, s in rows.items():
-                groups = " | ".join(
-                    f"{s[f'mse_{g}'] / raw[f'mse_{g}']:.2f}" if raw[f"mse_{g}"] > 0 else "-"
-                    for g in TABLE_GROUPS
-                )
+                groups = _groups(s, raw)
                 lines.append(f"| {kind} | {name} | {s['mse'] / raw['mse']:.2f} | {groups} |")
     lines += _family_kinds(result.get("family_kinds"))
     lines += ["", *NOTES]
