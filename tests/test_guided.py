@@ -405,3 +405,42 @@ def test_live_records_the_script_from_a_vmc_stream_while_prompting():
     assert any("Big smile" in line for line in lines)
     assert take.n_frames > 60 and take.times[-1] > mini.seconds
     assert np.nanmax(take.values[:, COL["mouthSmileLeft"]]) > 0.9
+
+
+def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_path, capsys):
+    # calibrate neutral.csv --tracker mediapipe: the levels as before, and the face's rest
+    # reading of the mouth as the map sees it after them; a smile held from a take's first
+    # frame then reads as held. An ARKit calibration has no reading.
+    from faceclean import io
+    from faceclean.calibration import calibrate
+    from faceclean.trackers.mediapipe import NAMES
+
+    rng = np.random.default_rng(3)
+    smile = NAMES.index("mouthSmileLeft")
+    x = np.clip(0.05 + rng.normal(0, 0.003, (60, len(NAMES))), 0, 1)  # 2 s at rest
+    neutral = Animation(np.arange(60) / 30.0, x, NAMES)
+    io.save(neutral, tmp_path / "neutral.csv", fmt="csv")
+    calib = tmp_path / "c.json"
+    assert main(["calibrate", str(tmp_path / "neutral.csv"), "-o", str(calib),
+                 "--tracker", "mediapipe"]) == 0  # fmt: skip
+    assert "rest reading of" in capsys.readouterr().out
+    got = Adjust.load(calib)
+    assert got.rules == calibrate(neutral, tracker="mediapipe").rules  # the levels as before
+    rest = got.adaptation.rest
+    assert set(rest) <= set(REST_INPUTS) and "mouthSmileLeft" in rest
+    assert rest["mouthSmileLeft"] == pytest.approx(0.0, abs=0.01)  # levelled: neutral is 0
+    t = np.arange(90) / 30.0
+    y = np.full((90, len(NAMES)), 0.05)
+    y[:, smile] = 0.4  # held from the first frame
+    io.save(Animation(t, y, NAMES), tmp_path / "take.csv", fmt="csv")
+    outs = {}
+    for label, path in (("with", calib), ("without", None)):
+        dest = tmp_path / f"{label}.csv"
+        more = ["--calibration", str(path)] if path else []
+        assert main(["clean", str(tmp_path / "take.csv"), "-o", str(dest),
+                     "--tracker", "mediapipe", *more]) == 0  # fmt: skip
+        outs[label] = io.load(dest).values[t > 1.0, smile]
+    assert outs["with"].min() > outs["without"].max() + 0.2
+    arkit = tmp_path / "a.json"
+    assert main(["calibrate", str(tmp_path / "neutral.csv"), "-o", str(arkit)]) == 0
+    assert Adjust.load(arkit).adaptation is None

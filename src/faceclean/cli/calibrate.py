@@ -41,6 +41,8 @@ guided (a script of prompts; its take adapts the cleaner to one face):
   faceclean calibrate --print-script                 the prompts, their times and aims
   faceclean calibrate --guided guided.csv -o calib.json --tracker mediapipe
   faceclean calibrate --guided --live vmc://:39540 -o calib.json --tracker mediapipe
+with --tracker mediapipe (no --rom) the file also holds the face's rest reading of the
+mouth, which the shipped MediaPipe map measures the mouth's and cheeks' rises from;
 neutral maps to 0; with --rom (or for a tracker's weak channels) each channel's observed
 top (99.5th percentile) maps to 1, the gain capped; eyelids stay blink-aware (blinks still
 close fully); every channel whose gain exceeds 2 is printed.
@@ -121,6 +123,10 @@ def run(args: argparse.Namespace) -> int:
     adjust = calibrate(
         anim, args.neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker
     )
+    if args.tracker == "mediapipe" and not args.rom:  # the face's rest reading, for the map
+        from faceclean.guided.fit import with_rest_reading
+
+        adjust = with_rest_reading(anim, adjust, adjust.facts["neutral_s"])
     adjust.save(args.output)
     facts = adjust.facts
     print(
@@ -129,6 +135,10 @@ def run(args: argparse.Namespace) -> int:
         f"lifted to their top ({'range of motion' if args.rom else f'tracker {args.tracker}'}), "
         f"{len(facts['closed'])} eyelids scaled to close (their blinks)"
     )
+    if adjust.adaptation is not None:
+        n, m = len(adjust.adaptation.rest), len(adjust.adaptation.rest_outputs)
+        print(f"rest reading of {n} mouth channels for the shipped MediaPipe map: {m} mouth "
+              "and cheek channels rise from it")  # fmt: skip
     high = high_gains(adjust)
     if high:
         print(f"gain above {REPORT_GAIN:g} on {len(high)} channel{'s' * (len(high) > 1)}:")

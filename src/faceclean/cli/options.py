@@ -89,7 +89,7 @@ def calibration(args: argparse.Namespace):
         from faceclean.errors import FacecleanError
 
         raise FacecleanError(
-            f"--calibration {path}: a guided calibration for tracker {made_for}, not "
+            f"--calibration {path}: a calibration for tracker {made_for}, not "
             f"{tracker}: give --tracker {made_for}, or calibrate again with --tracker {tracker}"
         )
     return adjust
