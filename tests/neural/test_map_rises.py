@@ -19,8 +19,10 @@ from faceclean.neural import tracker_map as fit
 @pytest.fixture(scope="module")
 def fitted():
     train = pairs(1) + pairs(2)
-    rises = map_rises.fit(train, prefilters=PRE, own_rise=(), noise_bands=(0.0, 16.0))
-    every = fit.fit(train, [], prefilters=PRE, knees=(None,))
+    # a small grid of choices (shrinkage, band, lift) that the folds choose among
+    rises = map_rises.fit(train, prefilters=PRE, own_rise=(), lams=(0.01, 0.1),
+                          deadbands=(0.01, 0.03), noise_bands=(0.0, 16.0))  # fmt: skip
+    every = fit.fit(train, [], prefilters=PRE, knees=(None,), lams=(0.1,))
     return rises, every, pairs(3)
 
 
@@ -77,11 +79,48 @@ def test_groups_told_to_read_their_own_rise_do_whatever_the_folds_say():
     # pairs whose eyes do not turn (pairs --eyes still): gaze is not fitted, but a look's
     # resting reading still goes
     w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, knees=(None,), own_rise=("gaze",),
-                      noise_bands=(0.0,))  # fmt: skip
+                      lams=(0.01,), deadbands=(0.01,), noise_bands=(0.0,))  # fmt: skip
     assert "gaze" in w.config["own_rise"]
     assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not np.delete(w.arrays["b"][GAZE], GAZE, axis=1).any()
     assert not w.arrays["a"][GAZE].any()
+
+
+def test_gaze_reads_its_own_rise_alone_at_a_fitted_gain(fitted):
+    # each look's tracker re-mixes gaze its own way: a re-mix learned on two looks is a
+    # habit of their eyes, so gaze reads its own input alone, at a gain fitted (the other
+    # looks' share in a reading is noise to it: under 1 here), not set to 1
+    rises, _, _ = fitted
+    b = rises.arrays["b"][GAZE]
+    if "gaze" not in rises.config["own_rise"]:  # the folds may level it (gain 1) instead
+        gain = np.diag(b[:, GAZE])
+        assert np.all((gain > 0.5) & (gain < 1.5)) and np.abs(gain - 1.0).max() > 0.05
+    assert (
+        not np.delete(b, GAZE, axis=1).any()
+        and not (b[:, GAZE] - np.diag(np.diag(b[:, GAZE]))).any()
+    )
+    assert rises.config["own_gain"] == [NAMES[j] for j in GAZE]
+    one = dict(prefilters=PRE, lams=(0.01,), knees=(None,), deadbands=(0.01,), noise_bands=(0.0,))
+    mixed = map_rises.fit(pairs(1) + pairs(2), own_rise=(), own_gain=(), **one)
+    assert "gaze" not in mixed.config["own_rise"]
+    assert np.abs(np.delete(mixed.arrays["b"][GAZE], GAZE, axis=1)).max() > 0.05  # the re-mix
+
+
+def test_an_own_gain_is_the_ridge_of_its_own_rise_alone():
+    rng = np.random.default_rng(0)
+    z = rng.normal(0, 0.1, (500, 3))
+    y = z @ np.array([[2.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.3, 0.0, 0.5]]).T
+    m = [(z.T @ z, z.T @ y, z.sum(0), y.sum(0), len(z))]
+    zc, yc = z - z.mean(0), y - y.mean(0)
+    for lam in (0.0, 0.01, 1e6):
+        w = map_rises.solve(m, lam, only=[0, 2])
+        assert not w[[0, 2]][:, 1].any() and w[0, 2] == 0.0 and w[2, 0] == 0.0
+        for j in (0, 2):  # 1 + (cov(z_j, y_j) - var(z_j)) / (var(z_j) + lam), per frame
+            v, c = (zc[:, j] ** 2).mean(), (zc[:, j] * yc[:, j]).mean()
+            assert w[j, j] == pytest.approx(1 + (c - v) / (v + lam), rel=1e-9)
+    assert map_rises.solve(m, 1e6, only=[0, 2])[0, 0] == pytest.approx(1.0, abs=1e-3)
+    assert map_rises.solve(m, 0.0, only=[0, 2])[0, 0] == pytest.approx(2.0, rel=0.1)
+    assert map_rises.solve(m, 0.0)[1] == pytest.approx([0.0, 1.0, 0.0], abs=1e-9)
 
 
 def test_a_group_made_worse_than_raw_on_the_folds_passes_through_levelled():
@@ -94,7 +133,15 @@ def test_a_group_made_worse_than_raw_on_the_folds_passes_through_levelled():
         return replace(p, tracked=Animation(p.tracked.times, v, NAMES))
 
     train = pairs(1) + [inverted(p) for p in pairs(2)]
-    w = map_rises.fit(train, prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
+    w = map_rises.fit(
+        train,
+        prefilters=PRE,
+        lams=(0.01,),
+        own_rise=(),
+        knees=(None,),
+        deadbands=(0.01,),
+        noise_bands=(0.0,),
+    )
     assert "gaze" in w.config["own_rise"] and "gaze" not in w.config["passed"]
     assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["a"][GAZE].any()
@@ -113,7 +160,14 @@ def test_a_group_whose_own_rise_is_worse_too_passes_as_read_only_when_asked():
                        truth=Animation(p.truth.times, y, NAMES))  # fmt: skip
 
     train = [held(p) for p in pairs(1) + pairs(2) if p.group != "neutral"]
-    kw = dict(prefilters=PRE, lams=(0.01,), own_rise=(), knees=(None,))
+    kw = dict(
+        prefilters=PRE,
+        lams=(0.01,),
+        own_rise=(),
+        knees=(None,),
+        deadbands=(0.01,),
+        noise_bands=(0.0,),
+    )
     w = map_rises.fit(train, as_read=True, **kw)
     assert "gaze" in w.config["passed"] and "gaze" not in w.config["own_rise"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
@@ -126,15 +180,15 @@ def test_a_group_whose_own_rise_is_worse_too_passes_as_read_only_when_asked():
 def test_the_fit_smooths_the_rest_of_every_input_but_the_lids():
     # the lids keep the plain minimum (a smoothed one reads blinks short between long
     # lowered stretches); every other input its smoothed rest, written per input
-    w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, lams=(0.01,), knees=(None,))
+    one = dict(prefilters=PRE, lams=(0.01,), knees=(None,), deadbands=(0.01,), noise_bands=(0.0,))
+    w = map_rises.fit(pairs(1) + pairs(2), **one)
     tau, warm = w.rest
     lids = [k for k, n in enumerate(w.inputs) if n in map_rises.PLAIN_REST]
     rest = [k for k, n in enumerate(w.inputs) if n not in map_rises.PLAIN_REST]
     assert lids and rest
     assert not tau[lids].any() and not warm[lids].any()
     assert np.all(tau[rest] == map_rises.REST[0]) and np.all(warm[rest] == map_rises.REST[1])
-    plain = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, lams=(0.01,), knees=(None,),
-                          rest=(0.0, 0.0))  # fmt: skip
+    plain = map_rises.fit(pairs(1) + pairs(2), rest=(0.0, 0.0), **one)
     assert "rest_tau" not in plain.config and "rest_warm" not in plain.config
 
 

@@ -82,6 +82,11 @@ DETAILS = (0.1,)
 # every group is; on the pairs made before, whose eyes did not, a fit learned gaze
 # reversed: pass ("gaze",) for those).
 OWN_RISE: tuple[str, ...] = ()
+# Groups whose outputs read their own input's rise alone, at a gain fitted (ridge toward
+# 1), never another channel; levelled (gain 1) where the folds find that worse than raw.
+# Gaze: a re-mix of MediaPipe's gaze scores learned on rendered eyes fails on photographed
+# ones (real performances 1.09x raw held out, own gain 0.88x: docs/MODEL.md, 11th round).
+OWN_GAIN: tuple[str, ...] = ("gaze",)
 JITTER_BUDGET = tracker_map.JITTER_BUDGET  # x the truth's jitter, past which a fit pays
 LAG_BUDGET = 25.0  # ms of lag (issue 34's target at 30 fps), past which a fit pays
 # The runtime's deadband (weight units): a map that sums 51 inputs' rises gathers their
@@ -156,7 +161,8 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         noise_bands: Sequence[float] = NOISE_BANDS,
         harm_real: float | None = HARM_REAL,
         rest: tuple[float, float] = REST, plain: Sequence[str] = PLAIN_REST,
-        as_read: bool = False, judge: str = JUDGE) -> MapWeights:  # fmt: skip
+        as_read: bool = False, judge: str = JUDGE,
+        own_gain: Sequence[str] = OWN_GAIN) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband and its
     widening by the noise, the detail,
     the groups that pass through and the blink lift chosen on their folds (module
@@ -169,11 +175,13 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     ``plain``; ``as_read`` False: a harmful group passes levelled, never as read (under a
     smoothed rest as read keeps a photographed face's lids 0.3-0.5 up at rest:
     docs/MODEL.md, eighth round). ``judge``: the MSE the choice is made on, the folds'
-    real performances ("real", the made-up ones where there are none) or all ("all")."""
+    real performances ("real", the made-up ones where there are none) or all ("all").
+    The groups in ``own_gain`` read their own input's rise alone, at a fitted gain."""
     if judge not in ("real", "all"):
         raise ValueError(f"judge is 'real' or 'all', not {judge!r}")
     report = report or (lambda _e: None)
     names = map_features.channels(pairs)
+    only = [j for j, n in enumerate(names) if group_of(n) in own_gain]
     rest = per_input(names, rest, plain)
     folds = _folds(pairs)
     if not folds:  # one source: nothing to choose on; the first candidates, the middle lam
@@ -186,7 +194,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         feats = map_features.features(w, pairs)
         data[pre] = feats, [_moments(f) for f in feats]
         for lam in lams:
-            fits = _fold_fits(w, pairs, data[pre][1], folds, lam, (), own_rise)
+            fits = _fold_fits(w, pairs, data[pre][1], folds, lam, (), own_rise, only)
             for band, c, detail in [(b, c, d) for b in deadbands for c in noise_bands
                                     for d in details]:  # fmt: skip
                 w.config.update(deadband=band, noise_band=c, detail_scale=detail)
@@ -207,13 +215,13 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     alone = _harmful_outputs(cv, names, passed, own, harm_real)
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
     w.config.update(_rest_keys(rest))
-    set_rises(w, solve(moments, lam), passed, own, detail, alone)
+    set_rises(w, solve(moments, lam, only=only), passed, own, detail, alone)
     w.config.update(fitted="rises", noise_band=c, lam=lam, passed=passed, own_rise=own,
-                    alone=alone,
+                    alone=alone, own_gain=[names[j] for j in only],
                     val_mse=cv.mse, val_real=cv.real_mse, judge=judge,
                     val_jitter=cv.jitter, val_lag=cv.lag, neutral_off=cv.off,
                     frames=int(sum(m[4] for m in moments)))  # fmt: skip
-    _choose_lift(w, pairs, feats, moments, folds, lam, passed, own, knees, report)
+    _choose_lift(w, pairs, feats, moments, folds, lam, passed, own, knees, report, only)
     return w
 
 
@@ -260,10 +268,12 @@ def _harmful_outputs(cv: Scored, names, passed, own, harm: float | None) -> list
             if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]]  # fmt: skip
 
 
-def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarray:
+def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0,
+          only: Sequence[int] = ()) -> np.ndarray:  # fmt: skip
     """W (M, K) from summed per-pair moments (Z'Z, Z'T, sum Z, sum T, frames): per output
     j, ridge on the centred covariances toward its own input's rise (module docstring),
-    another channel's gain shrunk ``cross`` times harder than its own."""
+    another channel's gain shrunk ``cross`` times harder than its own; the outputs ``only``
+    (indices) their own input's alone: W_jj = 1 + (cov_jj(Z, T) - var_j(Z)) / (var_j(Z) + lam)."""
     zz, zt, sz, st, n = (sum(m[i] for m in moments) for i in range(5))
     n = max(n, 1)
     cov_zz = zz / n - np.outer(sz, sz) / n**2
@@ -277,6 +287,9 @@ def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0) -> np.ndarra
             reg[j], prior[j] = lam, 1.0
         rhs = cov_zt[:, j] - cov_zz @ prior
         w[j] = prior + np.linalg.solve(cov_zz + np.diag(reg), rhs)
+    for j in only:
+        w[j] = 0.0
+        w[j, j] = 1.0 + (cov_zt[j, j] - cov_zz[j, j]) / (cov_zz[j, j] + lam)
     return w
 
 
@@ -321,13 +334,13 @@ def _folds(pairs: Sequence[Pair]) -> dict[str, list[int]]:
     return folds if len({k.rpartition("/")[2] for k in folds}) >= 3 else {}
 
 
-def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=()):
+def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=(), only=()):
     """fold key -> (A, c, d) of the map fitted without the fold (map_features.set_linear's
     arguments: coef over [u, u - r])."""
     out = {}
     for key in folds:
         left = {i for i, p in enumerate(pairs) if tracker_map.left_out(p, key)}
-        set_rises(w, solve([m for i, m in enumerate(moments) if i not in left], lam),
+        set_rises(w, solve([m for i, m in enumerate(moments) if i not in left], lam, only=only),
                   passed, own_rise)  # fmt: skip
         a = w.arrays
         out[key] = (np.concatenate([a["a"], a["b"]], axis=1), a["c"].copy(), a["detail"].copy())
@@ -380,7 +393,8 @@ def _cross_validate(w, feats, folds, fits) -> Scored:
     )
 
 
-def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report) -> None:
+def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, report,
+                 only=()) -> None:  # fmt: skip
     """The blink lift (neural/blink_lift.py) on this map's folds: its knee and top chosen
     leaving a look and a source out (each fold's map and gains fitted without it); the
     gains then fitted on every performance. ``w``'s linear part is kept."""
@@ -392,7 +406,7 @@ def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, 
     if not any(blink_lift.gains(w, performed, 0.0)):
         return  # no blink channel, or none that closes
     linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
-    fits = _fold_fits(w, pairs, moments, folds, lam, passed, own_rise)
+    fits = _fold_fits(w, pairs, moments, folds, lam, passed, own_rise, only)
     w.arrays.update(linear)
     lift_folds = {}
     for key, idx in folds.items():
