@@ -5,6 +5,7 @@ a real receiver. Needs Debian's chromium and playwright (tests/headless.py)."""
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import subprocess
@@ -84,10 +85,15 @@ class Tab:
         self.page.goto(url)
         self.until("window.faceclean && window.faceclean.ready && window.faceclean.faceReady")
 
-    def until(self, condition: str) -> None:
+    def until(self, condition: str, seconds: float = 120.0) -> None:
+        """Wait, frame by frame, until the JS condition holds; past ``seconds`` (the live
+        recording is 37 s) the test fails naming it, never hangs."""
+        give_up = f"fail(new Error('still false: ' + {json.dumps(condition)}))"
         self.page.evaluate(
-            "() => new Promise((done) => { const check = () => (" + condition + ")"
-            " ? done(true) : requestAnimationFrame(check); check(); })"
+            "([s]) => new Promise((done, fail) => { const end = performance.now() + 1000 * s;"
+            f" const check = () => ({condition}) ? done(true) : performance.now() > end ?"
+            f" {give_up} : requestAnimationFrame(check); check(); }})",
+            [seconds],
         )
 
     def js(self, expression: str):
