@@ -7,6 +7,7 @@ Needs Debian's ``chromium`` (/usr/bin/chromium, installed by .ci/run) and the
 from __future__ import annotations
 
 import io as pyio
+import json
 import re
 from pathlib import Path
 
@@ -58,12 +59,7 @@ class Page:
         self.until("window.faceclean && window.faceclean.ready")
 
     def until(self, condition: str) -> None:
-        """Wait, frame by frame, until the JS condition holds (wait_for_function would
-        need eval, which the report's Content-Security-Policy forbids)."""
-        self.page.evaluate(
-            "() => new Promise((done) => { const check = () => (" + condition + ")"
-            " ? done(true) : requestAnimationFrame(check); check(); })"
-        )
+        until(self.page, condition)
 
     def _block(self, route) -> None:
         self.blocked.append(route.request.url)
@@ -80,3 +76,16 @@ class Page:
             self.page.evaluate(f"window.faceclean.seek({t})")
         png = self.page.locator("#fc-canvas").screenshot()
         return imread(pyio.BytesIO(png))[..., :3]
+
+
+def until(page, condition: str, seconds: float = 120.0) -> None:
+    """Wait, frame by frame, until the JS condition holds (wait_for_function would need
+    eval, which the pages' Content-Security-Policy forbids); past ``seconds`` the test
+    fails naming the condition, never hangs (a live recording is 37 s)."""
+    give_up = f"fail(new Error('still false: ' + {json.dumps(condition)}))"
+    page.evaluate(
+        "([s]) => new Promise((done, fail) => { const end = performance.now() + 1000 * s;"
+        f" const check = () => ({condition}) ? done(true) : performance.now() > end ?"
+        f" {give_up} : requestAnimationFrame(check); check(); }})",
+        [seconds],
+    )

@@ -23,7 +23,7 @@ from faceclean.channels import ARKIT52
 pytest.importorskip("websockets")
 pytestmark = pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
 JAW = ARKIT52.index("jawOpen")
-REPEAT = 150  # the rendered second, 150 times: a stand-in camera that outlasts the test
+REPEAT = 60  # the rendered second, 60 times: a stand-in camera that outlasts the test (13-22 s)
 _spec = importlib.util.spec_from_file_location(
     "tracker_videos", Path(__file__).parents[1] / "trackers" / "conftest.py"
 )

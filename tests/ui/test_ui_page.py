@@ -5,7 +5,6 @@ a real receiver. Needs Debian's chromium and playwright (tests/headless.py)."""
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import re
 import subprocess
@@ -14,7 +13,7 @@ import time
 
 import numpy as np
 import pytest
-from headless import BROWSER_ARGS, CHROMIUM, browser_missing
+from headless import BROWSER_ARGS, CHROMIUM, browser_missing, until
 from helpers import REPO, first_take, interrupt, reaped
 
 from faceclean import io
@@ -86,15 +85,7 @@ class Tab:
         self.until("window.faceclean && window.faceclean.ready && window.faceclean.faceReady")
 
     def until(self, condition: str, seconds: float = 120.0) -> None:
-        """Wait, frame by frame, until the JS condition holds; past ``seconds`` (the live
-        recording is 37 s) the test fails naming it, never hangs."""
-        give_up = f"fail(new Error('still false: ' + {json.dumps(condition)}))"
-        self.page.evaluate(
-            "([s]) => new Promise((done, fail) => { const end = performance.now() + 1000 * s;"
-            f" const check = () => ({condition}) ? done(true) : performance.now() > end ?"
-            f" {give_up} : requestAnimationFrame(check); check(); }})",
-            [seconds],
-        )
+        until(self.page, condition, seconds)
 
     def js(self, expression: str):
         return self.page.evaluate(expression)
