@@ -15,6 +15,9 @@ from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import map_rises
 from faceclean.neural import tracker_map as fit
 
+# one candidate of every choice: the tests below are about a rule of the fit, not a choice
+ONE = dict(prefilters=PRE, lams=(0.01,), knees=(None,), deadbands=(0.01,), noise_bands=(0.0,))
+
 
 @pytest.fixture(scope="module")
 def fitted():
@@ -78,8 +81,7 @@ def test_the_runtime_gives_what_the_fit_scored(fitted):
 def test_groups_told_to_read_their_own_rise_do_whatever_the_folds_say():
     # pairs whose eyes do not turn (pairs --eyes still): gaze is not fitted, but a look's
     # resting reading still goes
-    w = map_rises.fit(pairs(1) + pairs(2), prefilters=PRE, knees=(None,), own_rise=("gaze",),
-                      lams=(0.01,), deadbands=(0.01,), noise_bands=(0.0,))  # fmt: skip
+    w = map_rises.fit(pairs(1) + pairs(2), own_rise=("gaze",), **ONE)
     assert "gaze" in w.config["own_rise"]
     assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not np.delete(w.arrays["b"][GAZE], GAZE, axis=1).any()
@@ -100,8 +102,7 @@ def test_gaze_reads_its_own_rise_alone_at_a_fitted_gain(fitted):
         and not (b[:, GAZE] - np.diag(np.diag(b[:, GAZE]))).any()
     )
     assert rises.config["own_gain"] == [NAMES[j] for j in GAZE]
-    one = dict(prefilters=PRE, lams=(0.01,), knees=(None,), deadbands=(0.01,), noise_bands=(0.0,))
-    mixed = map_rises.fit(pairs(1) + pairs(2), own_rise=(), own_gain=(), **one)
+    mixed = map_rises.fit(pairs(1) + pairs(2), own_rise=(), own_gain=(), **ONE)
     assert "gaze" not in mixed.config["own_rise"]
     assert np.abs(np.delete(mixed.arrays["b"][GAZE], GAZE, axis=1)).max() > 0.05  # the re-mix
 
@@ -133,15 +134,7 @@ def test_a_group_made_worse_than_raw_on_the_folds_passes_through_levelled():
         return replace(p, tracked=Animation(p.tracked.times, v, NAMES))
 
     train = pairs(1) + [inverted(p) for p in pairs(2)]
-    w = map_rises.fit(
-        train,
-        prefilters=PRE,
-        lams=(0.01,),
-        own_rise=(),
-        knees=(None,),
-        deadbands=(0.01,),
-        noise_bands=(0.0,),
-    )
+    w = map_rises.fit(train, own_rise=(), **ONE)
     assert "gaze" in w.config["own_rise"] and "gaze" not in w.config["passed"]
     assert np.array_equal(w.arrays["b"][GAZE][:, GAZE], np.eye(len(GAZE)))
     assert not w.arrays["a"][GAZE].any()
@@ -160,14 +153,7 @@ def test_a_group_whose_own_rise_is_worse_too_passes_as_read_only_when_asked():
                        truth=Animation(p.truth.times, y, NAMES))  # fmt: skip
 
     train = [held(p) for p in pairs(1) + pairs(2) if p.group != "neutral"]
-    kw = dict(
-        prefilters=PRE,
-        lams=(0.01,),
-        own_rise=(),
-        knees=(None,),
-        deadbands=(0.01,),
-        noise_bands=(0.0,),
-    )
+    kw = dict(ONE, own_rise=())
     w = map_rises.fit(train, as_read=True, **kw)
     assert "gaze" in w.config["passed"] and "gaze" not in w.config["own_rise"]
     assert np.array_equal(w.arrays["a"][GAZE][:, GAZE], np.eye(len(GAZE)))
@@ -180,15 +166,14 @@ def test_a_group_whose_own_rise_is_worse_too_passes_as_read_only_when_asked():
 def test_the_fit_smooths_the_rest_of_every_input_but_the_lids():
     # the lids keep the plain minimum (a smoothed one reads blinks short between long
     # lowered stretches); every other input its smoothed rest, written per input
-    one = dict(prefilters=PRE, lams=(0.01,), knees=(None,), deadbands=(0.01,), noise_bands=(0.0,))
-    w = map_rises.fit(pairs(1) + pairs(2), **one)
+    w = map_rises.fit(pairs(1) + pairs(2), **ONE)
     tau, warm = w.rest
     lids = [k for k, n in enumerate(w.inputs) if n in map_rises.PLAIN_REST]
     rest = [k for k, n in enumerate(w.inputs) if n not in map_rises.PLAIN_REST]
     assert lids and rest
     assert not tau[lids].any() and not warm[lids].any()
     assert np.all(tau[rest] == map_rises.REST[0]) and np.all(warm[rest] == map_rises.REST[1])
-    plain = map_rises.fit(pairs(1) + pairs(2), rest=(0.0, 0.0), **one)
+    plain = map_rises.fit(pairs(1) + pairs(2), rest=(0.0, 0.0), **ONE)
     assert "rest_tau" not in plain.config and "rest_warm" not in plain.config
 
 
