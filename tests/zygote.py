@@ -40,6 +40,14 @@ _server: tuple[subprocess.Popen, socket.socket, dict] | None = None
 
 
 # -- the server (runs as ``python tests/zygote.py FD``) ------------------------------------
+# What commands import when they run, loaded once in the server: the tuner's scipy alone is
+# 1.2 s of every `tune` and `eval` child (none starts a thread or warns on import).
+PRELOAD = ("faceclean.cli.clean_take", "faceclean.cli.clean_batch", "faceclean.io.stream",
+           "faceclean.relay.loop", "faceclean.report.build", "faceclean.filters.compiled",
+           "faceclean.filters.tune", "faceclean.evaluation.evaluate",
+           "faceclean.learned.tracker_map")  # fmt: skip
+
+
 def _serve(fd: int) -> None:
     import resource
     import signal
@@ -47,9 +55,13 @@ def _serve(fd: int) -> None:
 
     with warnings.catch_warnings(record=True) as caught:  # warm: what every command loads
         warnings.simplefilter("always")
+        import importlib
+
         import faceclean.cli
 
         faceclean.cli.parser()
+        for name in PRELOAD:
+            importlib.import_module(name)
     if caught:  # a warning shown here would be hidden from every child: never preload one
         raise SystemExit(f"zygote: preloading warned: {caught[0].message}")
     control = socket.socket(fileno=fd)
