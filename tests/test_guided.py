@@ -8,6 +8,7 @@ score the calibration on another clip of the same face.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from faceclean.guided.script import load
 SCRIPT = load()
 RATE = 24.0
 RENDERED = 12.0  # fps of the rendered face: a webcam's low end, half the render and track time
+RESOLUTION = 256  # px, the webcam setting's smallest frame: a third of the studio's pixels
 COL = {n: i for i, n in enumerate(ARKIT52)}
 
 
@@ -302,11 +304,12 @@ def _render(cache, times: np.ndarray, weights: np.ndarray, seed: int = 7) -> np.
     from faceclean.trackers.mediapipe import NAMES, Tracker
 
     key = hashlib.sha256(times.tobytes() + weights.tobytes()).hexdigest()[:12]
-    path = cache / f"painted{seed}_{key}.npy"
+    path = cache / f"painted{seed}_{RESOLUTION}px_{key}.npy"
     if path.is_file():
         return np.load(path)
     head = Head.load(mesh_file("ict_full.npz"))
-    renderer = Renderer(head, Scene.draw(seed, "studio", head.n_identity, family="painted"))
+    scene = Scene.draw(seed, "studio", head.n_identity, family="painted")
+    renderer = Renderer(head, replace(scene, resolution=RESOLUTION))
     out = np.full((len(times), len(NAMES)), np.nan)
     with Tracker(tracker_model()) as tracker:
         for k, t in enumerate(times):
