@@ -128,7 +128,10 @@ def fail(reason: str):
 
 
 def _env() -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k != "FACECLEAN_DEBUG"}
+    # PYTEST_CURRENT_TEST names each test: kept, it would differ from the fork server's
+    # environment at every test and send every run to a fresh interpreter (tests/zygote.py)
+    drop = ("FACECLEAN_DEBUG", "PYTEST_CURRENT_TEST")
+    env = {k: v for k, v in os.environ.items() if k not in drop}
     env["PYTHONPATH"] = os.pathsep.join([str(REPO / "src"), env.get("PYTHONPATH", "")])
     env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     env.update(NUMBA_NUM_THREADS="1", LC_ALL="C.UTF-8")
