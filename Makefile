@@ -33,9 +33,11 @@ lint: $(STAMP)
 # one pytest worker per core (pytest-xdist): most cases run the CLI in a child process.
 # One BLAS/OpenMP thread each: the workers already fill the cores, and a pool thread that
 # spins waiting for a core the other worker holds slows both.
+# Bytecode cached (__pycache__, ignored by git) even where the environment says not to
+# (PYTHONDONTWRITEBYTECODE): hundreds of test processes would each compile faceclean anew.
 TEST_THREADS := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 test: $(STAMP) $(NODE_STAMP) lint
-	$(TEST_THREADS) $(BIN)/python -m pytest -n auto
+	env -u PYTHONDONTWRITEBYTECODE $(TEST_THREADS) $(BIN)/python -m pytest -n auto
 
 bench: $(STAMP)
 	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md
