@@ -43,7 +43,7 @@ bench: $(STAMP)
 	$(BIN)/faceclean bench --openblas-core detect --json docs/benchmarks.json --markdown docs/BENCHMARKS.md
 
 PAIRS ?= $(HOME)/.cache/faceclean/pairs
-FAMILIES ?= $(HOME)/.cache/faceclean/families-gaze
+FAMILIES ?= $(HOME)/.cache/faceclean/families-net
 PORTRAITS ?= $(HOME)/.cache/faceclean/portraits
 
 eval: $(STAMP)

@@ -67,6 +67,22 @@ def test_many_channels_move_and_the_jaw_speaks(take):
     assert spectrum[(freq > 2) & (freq < 8)].sum() > 0.1 * spectrum[freq > 0.5].sum()
 
 
+def test_netted_opposites_keep_their_difference_and_are_never_held_at_once():
+    x = performer.independent(30.0, seed=3).values
+    y = performer.independent(30.0, seed=3, net=True).values
+    moved = 0
+    for a, b in performer.OPPOSITES:
+        i, j = INDEX[a], INDEX[b]
+        assert np.allclose(y[:, i] - y[:, j], x[:, i] - x[:, j])  # what a face shows
+        assert not ((y[:, i] > 0) & (y[:, j] > 0)).any()
+        moved += int(((x[:, i] > 0.1) & (x[:, j] > 0.1)).sum())
+    assert moved > 100  # drawn on their own, the opposites were held at once
+    others = [k for k in range(52) if ARKIT52[k] not in sum(performer.OPPOSITES, ())]
+    assert np.array_equal(y[:, others], x[:, others])
+    full = performer.perform(30.0, seed=3, full_range=True, net=True).values
+    assert full.min() >= 0.0 and full.max() <= 1.0
+
+
 def test_other_rates_and_bad_arguments():
     assert performer.perform(2.0, seed=1, fps=30.0).n_frames == 61
     for bad in (dict(seconds=0.0), dict(seconds=float("nan")), dict(seconds=1.0, fps=0.0)):

@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from PIL import Image
 
+from faceclean.channels import INDEX
+from faceclean.datasets.performer import OPPOSITES
 from faceclean.errors import FacecleanError
 from faceclean.settings import mesh_file, tracker_model
 from faceclean.synthetic import engine
@@ -120,12 +123,30 @@ def test_turning_eyes_are_a_job_of_their_own_and_older_pairs_keep_their_names():
         assert t.name.replace("gaze-", "")[:-8] == s.name[:-8] and t.name[-8:] != s.name[-8:]
 
 
+def test_made_up_performers_never_hold_opposite_directions_and_takes_keep_their_names():
+    takes = [("/takes/a/0.csv", "a", 20.0)]
+    jobs = engine.plan(takes, 2, 10.0, ("studio",), (30.0,), independent=2, neutral=2.0)
+    made_up = [j for j in jobs if j.group in ("synthetic", "independent")]
+    assert len(made_up) == 4 and all(j.net for j in made_up)
+    assert not any(j.net for j in jobs if j not in made_up)  # takes and holds: as before
+    take = next(j for j in jobs if j.group == "a")
+    assert take.name.endswith(_digest(take))  # hashed without the flag: the same name
+    both = 0  # frames where the performers drawn before held an opposite pair at once
+    for j in made_up:
+        w, old = engine.performance(j)[1], engine.performance(replace(j, net=False))[1]
+        for a, b in OPPOSITES:
+            assert not ((w[:, INDEX[a]] > 0) & (w[:, INDEX[b]] > 0)).any(), (j.source, a, b)
+            both += int(((old[:, INDEX[a]] > 0.1) & (old[:, INDEX[b]] > 0.1)).sum())
+        assert replace(j, net=False).name != j.name  # a new pair, never the one made before
+    assert both > 100
+
+
 def _digest(job) -> str:
     import hashlib
     import json
     from dataclasses import asdict
 
-    fields = {k: v for k, v in asdict(job).items() if k != "gaze"}
+    fields = {k: v for k, v in asdict(job).items() if k not in ("gaze", "net") or v}
     return hashlib.sha1(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:8]
 
 

@@ -19,12 +19,13 @@ from faceclean.errors import FacecleanError
 from faceclean.errors import seed as check_seed
 
 
-def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = False) -> Animation:
+def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = False,
+            net: bool = False) -> Animation:  # fmt: skip
     """A synthetic ARKit-52 performance of ``seconds`` s sampled at ``fps`` Hz.
 
     ``full_range``: add a range-of-motion layer (:func:`_range_of_motion`) that moves
     every channel, the rare ones too (tongueOut, jawLeft/Right, cheekPuff, noseSneer...),
-    through its whole range."""
+    through its whole range. ``net``: opposite directions never held at once (``net``)."""
     if not (np.isfinite(seconds) and 0.0 < seconds <= 24 * 3600.0):
         raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
     if not (np.isfinite(fps) and 1.0 <= fps <= 1000.0):
@@ -39,20 +40,46 @@ def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = Fal
     _blinks(x, t, rng)
     if full_range:  # drawn after every other layer: plain takes keep their draws
         _range_of_motion(x, t, rng)
-    return Animation.from_arkit(t, np.clip(x, 0.0, 1.0))
+    x = np.clip(x, 0.0, 1.0)
+    return Animation.from_arkit(t, netted(x) if net else x)
 
 
-def independent(seconds: float, seed: int, fps: float = 60.0) -> Animation:
+def independent(seconds: float, seed: int, fps: float = 60.0, net: bool = False) -> Animation:
     """A performer with no habits: every channel moves on its own over its whole range (the
     range-of-motion layer alone, events twice as dense), so that no source's co-activation
-    (a smile that always comes with a squint) is learned as truth. Values in [0, 1]."""
+    (a smile that always comes with a squint) is learned as truth. Values in [0, 1].
+    ``net``: opposite directions never held at once (``netted``)."""
     if not (np.isfinite(seconds) and 0.0 < seconds <= 24 * 3600.0):
         raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
     rng = np.random.default_rng(check_seed(seed))
     t = np.arange(max(int(round(seconds * fps)), 1) + 1) / fps
     x = np.zeros((len(t), 52))
     _range_of_motion(x, t, rng, density=2.0)
-    return Animation.from_arkit(t, np.clip(x, 0.0, 1.0))
+    x = np.clip(x, 0.0, 1.0)
+    return Animation.from_arkit(t, netted(x) if net else x)
+
+
+# Channels that move one part in opposite directions: an eye cannot look in and out at
+# once, nor a jaw or a mouth go left and right. Drawn on their own, both are held at once
+# (a made-up performer held jawLeft and jawRight near 0.4 each), and a face shows their
+# difference: the rendered eyeball turns by eyeLookOut - eyeLookIn exactly, ICT's jawLeft +
+# jawRight deltas are a quarter of either's. A truth no image shows is nothing a tracker
+# can be judged on, nor a map fitted to.
+OPPOSITES = tuple(
+    (f"{a}{side}", f"{b}{side}")
+    for a, b in (("eyeLookIn", "eyeLookOut"), ("eyeLookUp", "eyeLookDown"))
+    for side in ("Left", "Right")
+) + (("jawLeft", "jawRight"), ("mouthLeft", "mouthRight"))
+
+
+def netted(x: np.ndarray) -> np.ndarray:
+    """(N, 52) weights with each pair of OPPOSITES replaced by their difference, on the
+    side it falls: (a, b) -> (max(a - b, 0), max(b - a, 0))."""
+    x = x.copy()
+    for a, b in OPPOSITES:
+        d = x[:, INDEX[a]] - x[:, INDEX[b]]
+        x[:, INDEX[a]], x[:, INDEX[b]] = np.maximum(d, 0.0), np.maximum(-d, 0.0)
+    return x
 
 
 def _range_of_motion(x: np.ndarray, t: np.ndarray, rng: np.random.Generator,

@@ -54,6 +54,8 @@ class Job:
     family: str = "painted"  # appearance family (scene.FAMILIES)
     portrait: str = ""  # the photo family's portrait
     gaze: bool = False  # the eyeballs turn with the eyeLook weights (gaze.py); off: ahead
+    # a made-up performer's opposite directions never held at once (performer.netted)
+    net: bool = False
 
     @property
     def name(self) -> str:
@@ -62,8 +64,9 @@ class Job:
             src = src.removeprefix(prefix)
         stem = re.sub(r"[^A-Za-z0-9_-]+", "-", Path(src or "hold").stem)
         fields = asdict(self)
-        if not self.gaze:  # pairs made before the eyes turned keep their names
-            del fields["gaze"]
+        for flag in ("gaze", "net"):  # pairs made before either keep their names
+            if not fields[flag]:
+                del fields[flag]
         digest = hashlib.sha1(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:8]
         timing = "webcam" if self.webcam else f"{self.rate:g}fps"
         look = f"{self.family}-" + (f"{self.portrait}-" if self.portrait else "")
@@ -130,11 +133,12 @@ def plan(
                 family=family,
                 portrait=portrait,
                 gaze=gaze,
+                net=path.startswith((SYNTH, INDEPENDENT)),
             )
             jobs.append(job)
             if neutral > 0:  # the same face, light and camera, at rest
                 jobs.append(replace(job, source=NEUTRAL, group="neutral", start=0.0,
-                                    seconds=float(neutral), webcam=False))  # fmt: skip
+                                    seconds=float(neutral), webcam=False, net=False))  # fmt: skip
     return jobs
 
 
@@ -172,12 +176,13 @@ def performance(
     if job.source.startswith(SYNTH):
         from faceclean.datasets.performer import perform
 
-        anim = perform(job.seconds, int(job.source[len(SYNTH) :]), fps=60.0, full_range=True)
+        seed = int(job.source[len(SYNTH) :])
+        anim = perform(job.seconds, seed, fps=60.0, full_range=True, net=job.net)
         return anim.times, anim.values, None
     if job.source.startswith(INDEPENDENT):
         from faceclean.datasets.performer import independent
 
-        anim = independent(job.seconds, int(job.source[len(INDEPENDENT) :]), fps=60.0)
+        anim = independent(job.seconds, int(job.source[len(INDEPENDENT) :]), 60.0, job.net)
         return anim.times, anim.values, None
     if job.source == NEUTRAL:
         t = np.arange(int(job.seconds * 60.0) + 1) / 60.0
