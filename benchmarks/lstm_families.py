@@ -11,7 +11,7 @@ holds apart), as MSE x raw MediaPipe. The residual LSTM trains on (the map's out
 truth) pairs, so it corrects what the map leaves; at run time it steps after the map. The
 budget is stated by ``--epochs`` (``--epochs-alone``) and the wall time printed.
 
-    .venv/bin/python benchmarks/lstm_families.py ~/.cache/faceclean/families-gaze \\
+    .venv/bin/python benchmarks/lstm_families.py ~/.cache/faceclean/families-net \\
         --family photo --source alexdjulin --epochs 20 --json /tmp/lstm-photo-alexdjulin.json
 """
 

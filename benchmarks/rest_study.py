@@ -12,7 +12,7 @@ rest as read kept a photographed face's resting lids), for each rest
 performance, the real ones (the shared takes), the made-up ones and each group, and a
 face at rest (the worst channel's mean |output - truth| over the neutral holds after 0.5 s).
 
-    .venv/bin/python benchmarks/rest_study.py ~/.cache/faceclean/families-gaze \\
+    .venv/bin/python benchmarks/rest_study.py ~/.cache/faceclean/families-net \\
         --rests 0:0 0.1:0.1 0.15:0.2 0.25:0.2      # about 15 s a rest on 2 cores
         [--plain lids]       # the lids' inputs keep the plain minimum (one rest per input)
 """
