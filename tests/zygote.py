@@ -74,13 +74,13 @@ def _serve(fd: int) -> None:
     while True:
         try:
             head, fds, _, _ = socket.recv_fds(control, 8, 4)
-            if not head:
-                return  # the test process closed its end
-            size, msg = int.from_bytes(head, "big"), b""
-            while len(msg) < size:  # a stream: the message may come in pieces
-                msg += control.recv(size - len(msg))
+            head += _read(control, 8 - len(head))  # a stream: anything may come in pieces
+            size = int.from_bytes(head, "big")
+            msg = _read(control, size) if len(head) == 8 else b""
         except OSError:
             return
+        if not msg or len(msg) < size:
+            return  # the test process closed its end
         if os.fork() == 0:  # the monitor
             control.close()
             signal.signal(signal.SIGCHLD, signal.SIG_DFL)
@@ -107,6 +107,17 @@ def _serve(fd: int) -> None:
             os._exit(0)
         for f in fds:
             os.close(f)
+
+
+def _read(sock: socket.socket, size: int) -> bytes:
+    """``size`` bytes, or fewer where the other end closed first."""
+    got = b""
+    while len(got) < size:
+        chunk = sock.recv(size - len(got))
+        if not chunk:
+            break
+        got += chunk
+    return got
 
 
 def _command(argv: list[str]) -> None:

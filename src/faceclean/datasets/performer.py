@@ -25,7 +25,7 @@ def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = Fal
 
     ``full_range``: add a range-of-motion layer (:func:`_range_of_motion`) that moves
     every channel, the rare ones too (tongueOut, jawLeft/Right, cheekPuff, noseSneer...),
-    through its whole range. ``net``: opposite directions never held at once (``net``)."""
+    through its whole range. ``net``: opposite directions never held at once (``netted``)."""
     if not (np.isfinite(seconds) and 0.0 < seconds <= 24 * 3600.0):
         raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
     if not (np.isfinite(fps) and 1.0 <= fps <= 1000.0):
