@@ -256,7 +256,8 @@ def _family_kinds(found: dict | None) -> list[str]:
     lines = ["", "Each held-out family by kind of performance. The *real* rows are the kind of "
              "test issue 34 was found on (a shared take's performer on a face no fit saw); "
              "the *made-up* performers hold every channel near 0.4 on average, many of which "
-             "MediaPipe cannot see (jawLeft with jawRight, eyeWide under eyeBlink):", "",
+             "MediaPipe cannot see (eyeWide under eyeBlink), never opposite directions at "
+             "once (an eye in and out, a jaw left and right: performer.OPPOSITES):", "",
              "| held-out family | performances | cleaner | MSE x raw | " + " | ".join(TABLE_GROUPS)
              + " | blink closure | jitter (x truth) | lag ms |",
              "|---|---|---|---|" + "---|" * len(TABLE_GROUPS) + "---|---|---|"]  # fmt: skip
