@@ -35,7 +35,7 @@ def test_kinds_pool_real_and_made_up_performances_over_families():
     for kind in kinds.values():  # half of raw's error: a quarter of its square
         assert kind["raw"]["pairs"] == 2
         assert np.isclose(kind["half"]["mse"] / kind["raw"]["mse"], 0.25)
-    fams = {f: {r: family_eval._scores(v) for r, v in rows.items()} for f, rows in per.items()}
+    fams = {f: {r: family_eval.scores(v) for r, v in rows.items()} for f, rows in per.items()}
     apart = family_eval._family_and_kind(per)
     assert {f: sorted(k) for f, k in apart.items()} == {
         "painted": ["made-up", "real"],
@@ -43,7 +43,7 @@ def test_kinds_pool_real_and_made_up_performances_over_families():
     }
     assert apart["photo"]["real"]["raw"]["pairs"] == 1  # neurosync's pair, photo alone
     assert np.isclose(apart["photo"]["real"]["raw"]["mse"],
-                      family_eval._scores(per["photo"]["raw"][:1])["mse"])  # fmt: skip
+                      family_eval.scores(per["photo"]["raw"][:1])["mse"])  # fmt: skip
     result = {"families": fams, "neutral": {}, "kinds": kinds, "pairs": {}, "gaze": True,
               "channels": family_eval._channels(per), "family_kinds": apart}  # fmt: skip
     table = family_eval.markdown(result)

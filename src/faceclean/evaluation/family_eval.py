@@ -101,10 +101,10 @@ def evaluate(folder: str | Path, shipped: str | Path | None = None,
     per = {f: {r: sorted(v, key=lambda o: o[1].name) for r, v in rows.items()}
            for f, rows in sorted(per.items())}  # fmt: skip
     return {
-        "families": {f: {r: _scores(v) for r, v in rows.items()} for f, rows in per.items()},
+        "families": {f: {r: scores(v) for r, v in rows.items()} for f, rows in per.items()},
         "kinds": _kinds(per),
         "family_kinds": _family_and_kind(per),
-        "neutral": {f: {r: _neutral(v) for r, v in rows.items()} for f, rows in per.items()},
+        "neutral": {f: {r: at_rest(v) for r, v in rows.items()} for f, rows in per.items()},
         "channels": _channels(per),
         "chosen": dict(sorted(chosen.items())),
         "pairs": paired.summary_json(pairs),
@@ -151,7 +151,7 @@ def fold(folder: str, fam: str, group: str, shipped, pairs=None) -> tuple:
 def _kinds(per: dict) -> dict[str, dict[str, dict[str, float]]]:
     """Every held-out family pooled, by kind of performance: "real" (the shared takes'
     sources) and "made-up" (the synthetic and independent performers): kind -> row ->
-    ``_scores``."""
+    ``scores``."""
     from faceclean.neural.map_groups import MADE_UP
 
     out: dict[str, dict[str, list]] = {}
@@ -160,16 +160,16 @@ def _kinds(per: dict) -> dict[str, dict[str, dict[str, float]]]:
             for o, p in outs:
                 kind = "made-up" if p.group in MADE_UP else "real"
                 out.setdefault(kind, {}).setdefault(name, []).append((o, p))
-    return {k: {r: _scores(v) for r, v in rows.items()} for k, rows in sorted(out.items())}
+    return {k: {r: scores(v) for r, v in rows.items()} for k, rows in sorted(out.items())}
 
 
 def _family_and_kind(per: dict) -> dict[str, dict[str, dict[str, dict[str, float]]]]:
     """Each held-out family apart, by kind of performance: family -> kind -> row ->
-    ``_scores``."""
+    ``scores``."""
     return {fam: _kinds({fam: rows}) for fam, rows in per.items()}
 
 
-def _scores(outs: Sequence[tuple]) -> dict[str, float]:
+def scores(outs: Sequence[tuple]) -> dict[str, float]:
     """Frame-weighted MSE and per-group MSE over performances (neutral holds apart), mean
     blink closure, jitter and lag."""
     from faceclean.evaluation.metrics import summary
@@ -204,7 +204,7 @@ def _err(out, p: Pair, members: Sequence[str] | None) -> np.ndarray:
     return e[np.isfinite(e)]
 
 
-def _neutral(outs: Sequence[tuple]) -> dict[str, Any] | None:
+def at_rest(outs: Sequence[tuple]) -> dict[str, Any] | None:
     """The worst channel's mean |output - truth| on neutral holds after SETTLE_S."""
     holds = [(o, p) for o, p in outs if p.group == NEUTRAL]
     if not holds:
