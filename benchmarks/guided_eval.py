@@ -66,15 +66,17 @@ class Face:
     portrait: str = ""  # the photo family's portrait
 
     @classmethod
-    def parse(cls, spec: str) -> Face:
-        """``FAMILY:SEED`` or ``photo:SEED:PORTRAIT``."""
+    def parse(cls, spec: str, reserved: bool = False) -> Face:
+        """``FAMILY:SEED`` or ``photo:SEED:PORTRAIT`` (a reserved portrait only with
+        ``reserved``: a report, never a choice)."""
         from faceclean.synthetic.portrait import RESERVED
 
         parts = spec.split(":")
         if len(parts) not in (2, 3) or (parts[0] == "photo") != (len(parts) == 3):
             raise FacecleanError(f"face {spec!r}: FAMILY:SEED, or photo:SEED:PORTRAIT")
-        if len(parts) == 3 and any(r in parts[2].lower() for r in RESERVED):
-            raise FacecleanError(f"portrait {parts[2]!r} is reserved for independent checks")
+        if len(parts) == 3 and (parts[2] in RESERVED) != reserved:
+            raise FacecleanError(f"portrait {parts[2]!r}: --reserved takes only "
+                                 f"{' and '.join(RESERVED)}, and they only with it")  # fmt: skip
         return cls(parts[0], int(parts[1]), parts[2] if len(parts) == 3 else "")
 
     @property
@@ -85,8 +87,8 @@ class Face:
 class Studio:
     """Renders and tracks clips on faces, each clip's scores cached under ``cache``."""
 
-    def __init__(self, cache: Path, gaze: bool = True) -> None:
-        self.cache, self.gaze = cache, gaze
+    def __init__(self, cache: Path, gaze: bool = True, reserved: bool = False) -> None:
+        self.cache, self.gaze, self.reserved = cache, gaze, reserved
         self._worker = None
 
     def worker(self, face: Face):
@@ -94,10 +96,14 @@ class Studio:
         from faceclean.synthetic import engine
 
         if self._worker is None:
-            portraits = [str(engine.portrait_cache())] if engine.portrait_cache().is_dir() else []
-            self._worker = engine.Worker(
-                settings.mesh_file("ict_full.npz"), settings.tracker_model(), portraits
-            )
+            args = (settings.mesh_file("ict_full.npz"), settings.tracker_model())
+            if self.reserved:  # the reserved photographs as its portraits (reserved_faces.py)
+                from reserved_faces import Worker
+
+                self._worker = Worker(*args)
+            else:
+                cache = engine.portrait_cache()
+                self._worker = engine.Worker(*args, [str(cache)] if cache.is_dir() else [])
         if face.portrait:
             ok, skipped = self._worker.usable()
             if face.portrait not in ok:
@@ -359,16 +365,19 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument("--cache", default="/tmp/faceclean-guided-cache")
     p.add_argument("--no-gaze", action="store_true", help="render with the eyes ahead")
+    p.add_argument("--reserved", action="store_true",
+                   help="faces of the reserved photographs (photo:SEED:astronaut, "
+                   "photo:SEED:grace_hopper): reported, never a choice")  # fmt: skip
     p.add_argument("--json", help="write the numbers here")
     p.add_argument("--table", metavar="JSON", help="print the markdown tables of a result")
     args = p.parse_args()
     if args.table:
         print("\n".join(table(json.loads(Path(args.table).read_text()))))
         return
-    faces = [Face.parse(f) for f in args.faces]
+    faces = [Face.parse(f, args.reserved) for f in args.faces]
     takes = sorted(glob.glob(TAKES))
     takes = [takes[int(k)] for k in np.linspace(0, len(takes) - 1, args.takes)]
-    studio = Studio(Path(args.cache), gaze=not args.no_gaze)
+    studio = Studio(Path(args.cache), gaze=not args.no_gaze, reserved=args.reserved)
     result = {"model": model_version(), "gaze": studio.gaze, "rate": RATE, "seconds": args.seconds,
               "takes": [Path(t).stem for t in takes], "faces": []}  # fmt: skip
     for face in faces:
