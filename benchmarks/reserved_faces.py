@@ -125,8 +125,9 @@ def render(todo: list[engine.Job], out: Path, n_jobs: int) -> None:
             print(f"rendered {k}/{len(todo)}: {f.result()}", file=sys.stderr, flush=True)
 
 
-def evaluate(cache: Path, training: Path) -> dict:
-    """{"kinds": {kind: {row: scores}}, "portraits": {...}, "neutral": {row: worst}, ...}."""
+def evaluate(cache: Path, training: Path | None, model: Path = MODEL) -> dict:
+    """{"kinds": {kind: {row: scores}}, "portraits": {...}, "neutral": {row: worst}, ...};
+    no ``training``: the raw and shipped rows only (no refits)."""
     from faceclean.datasets import paired
     from faceclean.evaluation.family_eval import NEUTRAL, at_rest, scores
     from faceclean.evaluation.tracker_eval import outputs, tune_one_euro
@@ -135,10 +136,16 @@ def evaluate(cache: Path, training: Path) -> dict:
     from faceclean.neural import map_rises
 
     tests = paired.load(cache, require_meta=True)
-    pool = paired.load(training, require_meta=True)
-    shipped = lambda n: TrackerMap(model=MODEL, names=n)  # noqa: E731
+    pool = paired.load(training, require_meta=True) if training else []
+    shipped = lambda n: TrackerMap(model=model, names=n)  # noqa: E731
     per: dict[str, list] = {r: [] for r in ROWS}  # row -> [(output, pair)]
     folds = [((g,), (g,)) for g in REAL] + [(MADE_UP, MADE_UP)]
+    if not pool:
+        perf = [p for p in tests if p.group != NEUTRAL]
+        for row, build in (("raw", lambda n: None), ("shipped", shipped)):
+            per[row] += list(zip(outputs(build, perf), perf, strict=True))
+        per = {r: v for r, v in per.items() if v}
+        folds = []
     for left_out, groups in folds:
         test = [p for p in tests if p.group in groups]
         train = paired.with_clips([p for p in pool if p.group not in left_out])
@@ -213,7 +220,9 @@ def markdown(result: dict) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--pairs", required=True, help="the training pairs (make pairs' folder)")
+    ap.add_argument("--pairs", help="the training pairs (make pairs' folder) for the refitted "
+                    "rows; none: the raw and shipped rows alone")  # fmt: skip
+    ap.add_argument("--model", default=str(MODEL), help="the shipped row's map")
     ap.add_argument("--cache", default=str(CACHE), help="where the reserved faces' pairs go")
     ap.add_argument("--seed", type=int, default=7, help="the plan's seed (not the pairs' 0)")
     ap.add_argument("--clips", type=int, default=9, help="10 s clips per real source")
@@ -229,7 +238,7 @@ def main() -> int:
     render(jobs(args.seed, args.clips, args.made_up), cache, args.jobs)
     if args.render_only:
         return 0
-    result = evaluate(cache, Path(args.pairs))
+    result = evaluate(cache, Path(args.pairs) if args.pairs else None, Path(args.model))
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
     section = markdown(result)

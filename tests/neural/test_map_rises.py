@@ -286,3 +286,18 @@ def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_anoth
     assert moved[1] < moved[0]
     with pytest.raises(ValueError, match="judge"):
         map_rises.fit(train, judge="made-up", **kw)
+
+
+def test_a_channel_of_another_group_is_shrunk_harder_than_a_neighbour():
+    # output 0 reads inputs 1 and 2 alike; 1 is in its group, 2 in another
+    rng = np.random.default_rng(1)
+    z = rng.normal(0, 0.1, (800, 3))
+    y = np.c_[z[:, 0] + 0.5 * z[:, 1] + 0.5 * z[:, 2], z[:, 1], z[:, 2]]
+    m = [(z.T @ z, z.T @ y, z.sum(0), y.sum(0), len(z))]
+    plain = map_rises.solve(m, 0.01)
+    grouped = map_rises.solve(m, 0.01, groups=("mouth", "mouth", "brows"))
+    assert plain[0, 1] == pytest.approx(plain[0, 2], rel=0.1)  # one group: alike
+    assert grouped[0, 1] == pytest.approx(plain[0, 1], rel=0.05)  # a neighbour as before
+    assert grouped[0, 2] < 0.8 * grouped[0, 1]  # CROSS_GROUP x the shrinkage
+    assert map_rises._groups(("eyeBlinkLeft", "eyeLookDownLeft", "jawOpen")) == [
+        "eyes", "eyes", "jaw"]  # fmt: skip

@@ -41,13 +41,14 @@ the jaw); real faces shift the lips far more often than the jaw, and there that 
 is a habit of the made-up performers (on the families' folds, the jaw group 1.48x raw on
 real performances, 0.76x on made-up ones; docs/MODEL.md, sixth round).
 
-The choice of ``lam`` is made on folds that leave a look and a source out at once (with
-one family, a source), the held-out pairs never seen by the fit they score, judged on all
-of their performances. ``judge="real"`` judges on the real ones alone (a user's face
-performs as a person does; the made-up performers, who hold every channel near 0.4, many
-where MediaPipe cannot see them, ask for the least shrinkage): on the families' folds it
-took shrinkage 0.3 and the widest band, 4 % better on real performances, 7 % worse on
-made-up ones and 9 ms more lag, so it is not the default (docs/MODEL.md, tenth round).
+A cross weight from another channel group (channels.GROUPS) is shrunk CROSS_GROUP times
+harder than one from the output's own: within a group a co-movement is the tracker mixing
+neighbours, across groups as often a performer's habit (a smile read into the brows).
+
+``lam`` is chosen on folds that leave a look and a source out at once (with one family, a
+source), judged on all of their performances; ``judge="real"``, on the real ones alone,
+took shrinkage 0.3 and the widest band: 4 % better on real performances, 7 % worse on
+made-up ones, 9 ms more lag, so it is not the default (docs/MODEL.md, tenth round).
 """
 
 from __future__ import annotations
@@ -65,6 +66,10 @@ from faceclean.neural.map_groups import SELECT, at_rest, group_of
 from faceclean.neural.map_groups import real as is_real
 
 LAMBDAS = (0.003, 0.01, 0.03, 0.1, 0.3)  # weight^2 per frame
+# On the families' folds (the shipped choices fixed): 1 (as before) real performances
+# 0.519x raw, made-up 0.786, at rest 0.108 off; 3: 0.495, 0.799, 0.093 (docs/MODEL.md,
+# thirteenth round). The eyes are one group: MediaPipe's eyeLookDown rises as a lid closes.
+CROSS_GROUP = 3.0
 # One Euro pre-filters (min_cutoff Hz, beta, d_cutoff Hz), reactive and calmer: on these
 # pairs the MSE barely moves with them, the jitter and the lag do. Calmer ones, (1, 3, 1)
 # and (0.5, 2, 1), halve the jitter again but break the rate clause of the contract (the
@@ -72,15 +77,11 @@ LAMBDAS = (0.003, 0.01, 0.03, 0.1, 0.3)  # weight^2 per frame
 # discretisation at a low cut-off; (1, 10, 1) 0.030, (1, 10, 2) 0.020), so they are not
 # candidates (docs/MODEL.md).
 PREFILTERS = ((2.0, 50.0, 4.0), (1.0, 10.0, 2.0))
-# The share of its own raw frame's detail an output gets back: the timing of its own
-# channel (less lag) at the price of its noise (more jitter). 0.5 bought 3-5 ms of lag
-# for 15-35 % more jitter on every candidate of the families' pairs, never the better
-# price, so one share is tried (``details`` takes others).
+# The share of its own raw frame's detail an output gets back (less lag, more jitter): 0.5
+# bought 3-5 ms for 15-35 % more jitter on the families' pairs, never the better price.
 DETAILS = (0.1,)
-# Groups whose outputs are their own rise, gain 1, whatever the folds say (none by
-# default: since pairs --eyes turn the pairs' eyes turn, and gaze is fitted and judged as
-# every group is; on the pairs made before, whose eyes did not, a fit learned gaze
-# reversed: pass ("gaze",) for those).
+# Groups whose outputs are their own rise, gain 1, whatever the folds say (("gaze",) for
+# pairs made with --eyes still, on which a fit learned gaze reversed).
 OWN_RISE: tuple[str, ...] = ()
 # Groups whose outputs read their own input's rise alone, at a gain fitted (ridge toward
 # 1), never another channel; levelled (gain 1) where the folds find that worse than raw.
@@ -89,17 +90,12 @@ OWN_RISE: tuple[str, ...] = ()
 OWN_GAIN: tuple[str, ...] = ("gaze",)
 JITTER_BUDGET = tracker_map.JITTER_BUDGET  # x the truth's jitter, past which a fit pays
 LAG_BUDGET = 25.0  # ms of lag (issue 34's target at 30 fps), past which a fit pays
-# The runtime's deadband (weight units): a map that sums 51 inputs' rises gathers their
-# noise; a wider band holds a still output at no cost in MSE on these folds (0.01: jitter
-# 3.1x the truth's, 0.05: 1.9x), at a lag of band / speed on slow motions (0.01: 30 ms,
-# 0.05: 61 ms on the families' pairs, docs/MODEL.md), so both are priced.
+# The runtime's deadband (weight units): wider holds a still output at no cost in MSE (0.01:
+# jitter 3.1x the truth's, 0.05: 1.9x) at a lag of band / speed (30 ms, 61 ms): priced.
 DEADBANDS = (0.01, 0.02, 0.03, 0.05)
-# The band widened to c x the stream's own noise (learned/band.py; 0: the fixed band). On
-# the families' pairs, leaving a look and a source out (band 0.01 under it, shrinkage 0.1):
-# c = 8 took the jitter from 3.1x the truth's to 2.3x at 35 ms lag (a fixed band 0.03:
-# 2.4x at 43 ms), c = 16 to 1.8x at 41 ms (0.05: 1.9x at 61 ms), c = 32 to 1.5x at 51
-# ms, the MSE the same or better; the photo faces, whose MediaPipe jitters 16x the truth,
-# widen it most.
+# The band widened to c x the stream's own noise (learned/band.py; 0: the fixed band): on
+# the families' folds c = 8, 16, 32 took the jitter from 3.1x the truth's to 2.3, 1.8, 1.5x
+# at 35, 41, 51 ms lag (a fixed band 0.03: 2.4x at 43 ms), the MSE the same or better.
 NOISE_BANDS = (0.0, 8.0, 16.0, 32.0)
 RATE_TOL = 0.03  # weight: one curve at 30 and 120 fps, the contract's rate clause
 MSE_TOL = 0.01  # candidates within 1 % of the best MSE x raw are as accurate: price decides
@@ -108,19 +104,14 @@ MSE_TOL = 0.01  # candidates within 1 % of the best MSE x raw are as accurate: p
 JUDGE = "all"
 REST_Q = 5  # percentile of a pair's truth taken as its performer's rest
 HARM = 1.0  # a group's MSE over raw in any family's folds past this: it passes through
-# An output's MSE over raw on the folds' real performances past this: it reads its own rise.
-# A channel's ratio is noisy where raw's error is small (jawLeft: raw's squared error 7,
-# summed over the real folds); 1.5 is harm beyond doubt (1.0 levelled 20 outputs, 1.5 seven
-# to nine, on the families' folds; docs/MODEL.md).
+# An output's MSE over raw on the folds' real performances past this: it reads its own rise
+# (a ratio is noisy where raw's error is small; 1.0 levelled 20 outputs, 1.5 seven to nine).
 HARM_REAL = 1.5
 SETTLE_S = 0.5  # s into a neutral hold before it is judged
-# The rest (learned/tracker_map.py): the running minimum of u smoothed over REST[0] s,
-# from REST[1] s after a stream's first frame ((0, 0): the plain running minimum). The
-# smoothed rest finds a face's rest, not its noise's lowest dip nor its first low reading
-# (a face at rest 0.10 / 0.10 / 0.16 off -> 0.07 / 0.06 / 0.11, painted / dressed /
-# photo, held out), but on the lids it reaches a brief rest between long lowered stretches
-# less deep and blinks read short (the lids group above raw: docs/MODEL.md, eighth
-# round), so the lids' inputs (PLAIN_REST) keep the plain minimum (ninth round, shipped).
+# The rest (learned/tracker_map.py): the running minimum of u smoothed over REST[0] s, from
+# REST[1] s after a stream's first frame: a face's rest, not its noise's lowest dip (at rest
+# 0.10 / 0.10 / 0.16 off -> 0.07 / 0.06 / 0.11 held out); the lids' inputs (PLAIN_REST) keep
+# the plain minimum, where blinks read short under it (docs/MODEL.md, 8th and 9th rounds).
 REST = (0.1, 0.1)  # (rest_tau, rest_warm) s
 PLAIN_REST = tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook"))
 Report = Callable[[dict[str, Any]], None]
@@ -215,8 +206,9 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     alone = _harmful_outputs(cv, names, passed, own, harm_real)
     w = map_features.blank(names, 0, pre, rest=True, deadband=band)
     w.config.update(_rest_keys(rest))
-    set_rises(w, solve(moments, lam, only=only), passed, own, detail, alone)
-    w.config.update(fitted="rises", noise_band=c, lam=lam, passed=passed, own_rise=own,
+    set_rises(w, solve(moments, lam, _groups(names), only), passed, own, detail, alone)
+    w.config.update(fitted="rises", noise_band=c, lam=lam, cross_group=CROSS_GROUP,
+                    passed=passed, own_rise=own,
                     alone=alone, own_gain=[names[j] for j in only],
                     val_mse=cv.mse, val_real=cv.real_mse, judge=judge,
                     val_jitter=cv.jitter, val_lag=cv.lag, neutral_off=cv.off,
@@ -268,23 +260,26 @@ def _harmful_outputs(cv: Scored, names, passed, own, harm: float | None) -> list
             if group_of(n) not in (*passed, *own) and s[j] > harm * r[j]]  # fmt: skip
 
 
-def solve(moments: Sequence[tuple], lam: float, cross: float = 1.0,
+def solve(moments: Sequence[tuple], lam: float, groups: Sequence[str] = (),
           only: Sequence[int] = ()) -> np.ndarray:  # fmt: skip
     """W (M, K) from summed per-pair moments (Z'Z, Z'T, sum Z, sum T, frames): per output
-    j, ridge on the centred covariances toward its own input's rise (module docstring),
-    another channel's gain shrunk ``cross`` times harder than its own; the outputs ``only``
-    (indices) their own input's alone: W_jj = 1 + (cov_jj(Z, T) - var_j(Z)) / (var_j(Z) + lam)."""
+    j, ridge on the centred covariances toward its own input's rise (module docstring), a
+    channel of another of ``groups`` (one per channel; none: one group) shrunk CROSS_GROUP
+    times harder; the outputs ``only`` (indices) their own input's alone:
+    W_jj = 1 + (cov_jj(Z, T) - var_j(Z)) / (var_j(Z) + lam)."""
     zz, zt, sz, st, n = (sum(m[i] for m in moments) for i in range(5))
     n = max(n, 1)
     cov_zz = zz / n - np.outer(sz, sz) / n**2
     cov_zt = zt / n - np.outer(sz, st) / n**2
     k = len(zz)
+    g = np.asarray(groups) if len(groups) == k else np.zeros(k)
     w = np.zeros((cov_zt.shape[1], k))
     for j in range(len(w)):
-        reg = np.full(k, lam * cross)
+        reg = np.full(k, lam)
         prior = np.zeros(k)
         if j < k:
-            reg[j], prior[j] = lam, 1.0
+            reg[g != g[j]] *= CROSS_GROUP
+            prior[j] = 1.0
         rhs = cov_zt[:, j] - cov_zz @ prior
         w[j] = prior + np.linalg.solve(cov_zz + np.diag(reg), rhs)
     for j in only:
@@ -315,6 +310,11 @@ def set_rises(w: MapWeights, coef: np.ndarray, passed: Sequence[str] = (),
         w.config["detail_scale"] = detail
 
 
+def _groups(names: Sequence[str]) -> list[str]:
+    """channels.GROUPS' name of each channel (its own name where it is in none)."""
+    return [next((g for g, m in GROUPS.items() if n in m), n) for n in names]
+
+
 def _moments(f) -> tuple:
     """(Z'Z, Z'T, sum Z, sum T, frames) of one pair."""
     z = f.u - f.r
@@ -340,8 +340,8 @@ def _fold_fits(w: MapWeights, pairs, moments, folds, lam, passed=(), own_rise=()
     out = {}
     for key in folds:
         left = {i for i, p in enumerate(pairs) if tracker_map.left_out(p, key)}
-        set_rises(w, solve([m for i, m in enumerate(moments) if i not in left], lam, only=only),
-                  passed, own_rise)  # fmt: skip
+        kept = [m for i, m in enumerate(moments) if i not in left]
+        set_rises(w, solve(kept, lam, _groups(w.inputs), only), passed, own_rise)
         a = w.arrays
         out[key] = (np.concatenate([a["a"], a["b"]], axis=1), a["c"].copy(), a["detail"].copy())
     return out
