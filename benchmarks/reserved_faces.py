@@ -42,12 +42,12 @@ from pathlib import Path
 import numpy as np
 
 from faceclean import settings
+from faceclean.neural.map_groups import MADE_UP
 from faceclean.synthetic import engine
 
 CACHE = Path.home() / ".cache" / "faceclean" / "reserved"
 MODEL = Path("src/faceclean/models/mediapipe.npz")
 REAL = ("alexdjulin", "neurosync")
-MADE_UP = ("synthetic", "independent")
 ROWS = ("raw", "one-euro", "shipped", "held out")
 BEGIN, END = "<!-- reserved faces: begin -->", "<!-- reserved faces: end -->"
 
@@ -139,13 +139,7 @@ def evaluate(cache: Path, training: Path | None, model: Path = MODEL) -> dict:
     pool = paired.load(training, require_meta=True) if training else []
     shipped = lambda n: TrackerMap(model=model, names=n)  # noqa: E731
     per: dict[str, list] = {r: [] for r in ROWS}  # row -> [(output, pair)]
-    folds = [((g,), (g,)) for g in REAL] + [(MADE_UP, MADE_UP)]
-    if not pool:
-        perf = [p for p in tests if p.group != NEUTRAL]
-        for row, build in (("raw", lambda n: None), ("shipped", shipped)):
-            per[row] += list(zip(outputs(build, perf), perf, strict=True))
-        per = {r: v for r, v in per.items() if v}
-        folds = []
+    folds = [((g,), (g,)) for g in REAL] + [(MADE_UP, MADE_UP)] if pool else []
     for left_out, groups in folds:
         test = [p for p in tests if p.group in groups]
         train = paired.with_clips([p for p in pool if p.group not in left_out])
@@ -160,8 +154,10 @@ def evaluate(cache: Path, training: Path | None, model: Path = MODEL) -> dict:
         print(f"fold without {'+'.join(left_out)}: {len(train)} training pairs, "
               f"{len(test)} test", file=sys.stderr, flush=True)  # fmt: skip
     holds = [p for p in tests if p.group == NEUTRAL]
+    rest = holds if pool else tests  # what no fold scored: raw and shipped alone
     for row, build in (("raw", lambda n: None), ("shipped", shipped)):
-        per[row] += list(zip(outputs(build, holds), holds, strict=True))
+        per[row] += list(zip(outputs(build, rest), rest, strict=True))
+    per = {r: v for r, v in per.items() if v}
 
     def by(key) -> dict:
         out: dict = {}
@@ -175,7 +171,7 @@ def evaluate(cache: Path, training: Path | None, model: Path = MODEL) -> dict:
         "kinds": by(lambda p: "made-up" if p.group in MADE_UP else "real"),
         "portraits": by(lambda p: p.meta["scene"]["portrait"]),
         "settings": by(lambda p: p.meta["scene"]["setting"]),
-        "neutral": {r: at_rest(v) for r, v in per.items() if at_rest(v)},
+        "neutral": {r: a for r, v in per.items() if (a := at_rest(v))},
         "pairs": {"test": len(tests), "holds": len(holds), "training": len(pool)},
     }
 
