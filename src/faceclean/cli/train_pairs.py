@@ -109,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"rises, pre-filter {e['pre']}, deadband {e['deadband']:g} (noise x"
                   f"{e['noise_band']:g}), detail "
                   f"{e['detail']:g}, shrinkage {e['lam']:g}: leaving a look and a source out, "
-                  f"MSE {e['val_mse']:.3f}x raw ({e['val_real']:.3f}x on real faces), jitter "
+                  f"MSE {e['val_typical']:.3f}x raw typical, {e['val_mse']:.3f}x pooled "
+                  f"({e['val_real']:.3f}x on real faces), jitter "
                   f"{e['jitter']:.2f}x, lag {e['lag']:.0f} "
                   f"ms, worst group {worst:.2f}x, at rest {e['neutral_off']:.3f} off",
                   file=sys.stderr)  # fmt: skip
