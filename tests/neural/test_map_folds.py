@@ -41,11 +41,43 @@ def _candidate(typical: float, pooled: float, jitter: float = 1.0, lag: float = 
     return (map_folds.Scored(pooled, jitter, lag, {}, {}, 0.0, None, typical), typical)
 
 
-def test_the_choice_is_made_on_the_typical_mse_then_on_the_price():
-    # pooled, the first wins; performance by performance, the second: the second is chosen
+def test_the_choice_is_made_on_the_judged_mse_then_on_the_price():
+    # pooled, the first wins; performance by performance, the second
     loose, stiff = _candidate(0.60, 0.50), _candidate(0.55, 0.60)
-    assert map_rises._choose([loose, stiff])[1] == 0.55
+    assert map_rises._choose([loose, stiff], "all")[1] == 0.60
+    assert map_rises._choose([loose, stiff], "typical")[1] == 0.55
     # within 1 % of the best typical MSE, the lower jitter (priced past its budget) wins
     calm = _candidate(0.554, 0.60, jitter=1.0)
     jumpy = _candidate(0.550, 0.60, jitter=3.0 * map_rises.JITTER_BUDGET)
-    assert map_rises._choose([jumpy, calm])[1] == 0.554
+    assert map_rises._choose([jumpy, calm], "typical")[1] == 0.554
+
+
+def test_each_performance_alike_and_a_harder_shrink_across_groups_keep_a_real_jaw_still():
+    # made-up performers move jawLeft with mouthLeft (another group); real ones never move
+    # the jaw. Pooled, with neighbours shrunk alike, the fit keeps the habit; judged on
+    # each performance alike with another group shrunk 10x harder, the real jaw moves less.
+    from dataclasses import replace
+
+    from faceclean.animation import Animation
+
+    jaw, lips = NAMES.index("jawLeft"), NAMES.index("mouthLeft")
+
+    def performer(p, made_up: bool):
+        y, x = p.truth.values.copy(), p.tracked.values.copy()
+        y[:, jaw] = y[:, lips] if made_up else 0.0
+        x[:, jaw] = 0.0
+        group = ("independent", "synthetic")[int(p.name[-1])] if made_up else p.group
+        return replace(p, tracked=Animation(p.tracked.times, x, NAMES),
+                       truth=Animation(p.truth.times, y, NAMES), group=group)  # fmt: skip
+
+    train = [performer(p, p.group != "src0") for look in (1, 2)
+             for p in pairs(look) if p.group != "neutral"]  # fmt: skip
+    kw = dict(prefilters=PRE, lams=(0.003, 0.03), own_rise=(), knees=(None,),
+              noise_bands=(0.0,), deadbands=(0.01,), harm_real=None)  # fmt: skip
+    loose = map_rises.fit(train, judge="all", cross_group=1.0, **kw)
+    stiff = map_rises.fit(train, judge="typical", cross_group=10.0, **kw)
+    assert stiff.config["cross_group"] == 10.0 and stiff.config["judge"] == "typical"
+    faces = [p for p in train if p.group == "src0"]
+    out = lambda w, p: TrackerMap(weights=w, names=NAMES).clean(p.tracked).values  # noqa: E731
+    moved = [max(float(np.abs(out(w, p)[:, jaw]).mean()) for p in faces) for w in (loose, stiff)]
+    assert moved[1] < moved[0]

@@ -254,17 +254,12 @@ def test_an_output_read_from_a_made_up_habit_reads_its_own_rise_on_real_performa
 
 
 @pytest.mark.slow
-def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_another_choice(
-    monkeypatch,
-):
+def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_another_choice():
     # The made-up performers move five channels the tracker cannot see (it reads 0) with
     # ones it can (jawLeft with mouthLeft, ...), which a loose fit learns; the real ones
     # never move them, where that habit is harm and a stiffer fit is right. Judged on every
     # fold, the loose fit wins; on the real ones, the stiff one, and the real faces' jaw
     # stays nearer put.
-    # Every neighbour shrunk alike: the habits below cross groups, which CROSS_GROUP
-    # already shrinks harder; this test is about the judge.
-    monkeypatch.setattr(map_rises, "CROSS_GROUP", 1.0)
     hidden = {"jawLeft": "mouthLeft", "jawRight": "mouthRight", "jawForward": "mouthFunnel",
               "cheekPuff": "mouthPucker", "mouthClose": "mouthRollLower"}  # fmt: skip
 
