@@ -83,3 +83,22 @@ def neutral_off(w, test) -> float:
     out, p = next((o, p) for o, p in cleaned(w, test) if p.group == "neutral")
     keep = p.tracked.times >= 0.5
     return float(np.abs(out[keep]).mean(axis=0).max())
+
+
+def habits(hidden: dict[str, str], real: str = "src0") -> list[paired.Pair]:
+    """The performances of looks 1 and 2, the tracker reading each of ``hidden`` (a channel
+    it cannot see -> one it can) as 0: made-up performers (every source but ``real``, named
+    as the made-up kinds) move it with the one it can see, the ``real`` source never."""
+    from dataclasses import replace
+
+    out = []
+    for p in (p for look in (1, 2) for p in pairs(look) if p.group != "neutral"):
+        made_up = p.group != real
+        y, x = p.truth.values.copy(), p.tracked.values.copy()
+        for h, seen in hidden.items():
+            y[:, NAMES.index(h)] = y[:, NAMES.index(seen)] if made_up else 0.0
+            x[:, NAMES.index(h)] = 0.0
+        group = ("independent", "synthetic")[int(p.name[-1])] if made_up else p.group
+        out.append(replace(p, tracked=Animation(p.tracked.times, x, NAMES),
+                           truth=Animation(p.truth.times, y, NAMES), group=group))  # fmt: skip
+    return out

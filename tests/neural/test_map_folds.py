@@ -4,7 +4,7 @@ performance counts alike, as the geometric mean of each one's MSE x raw."""
 from __future__ import annotations
 
 import numpy as np
-from looks import NAMES, PRE, pairs
+from looks import NAMES, PRE, habits, pairs
 
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import map_features, map_folds, map_rises
@@ -56,22 +56,8 @@ def test_each_performance_alike_and_a_harder_shrink_across_groups_keep_a_real_ja
     # made-up performers move jawLeft with mouthLeft (another group); real ones never move
     # the jaw. Pooled, with neighbours shrunk alike, the fit keeps the habit; judged on
     # each performance alike with another group shrunk 10x harder, the real jaw moves less.
-    from dataclasses import replace
-
-    from faceclean.animation import Animation
-
-    jaw, lips = NAMES.index("jawLeft"), NAMES.index("mouthLeft")
-
-    def performer(p, made_up: bool):
-        y, x = p.truth.values.copy(), p.tracked.values.copy()
-        y[:, jaw] = y[:, lips] if made_up else 0.0
-        x[:, jaw] = 0.0
-        group = ("independent", "synthetic")[int(p.name[-1])] if made_up else p.group
-        return replace(p, tracked=Animation(p.tracked.times, x, NAMES),
-                       truth=Animation(p.truth.times, y, NAMES), group=group)  # fmt: skip
-
-    train = [performer(p, p.group != "src0") for look in (1, 2)
-             for p in pairs(look) if p.group != "neutral"]  # fmt: skip
+    train = habits({"jawLeft": "mouthLeft"})
+    jaw = NAMES.index("jawLeft")
     kw = dict(prefilters=PRE, lams=(0.003, 0.03), own_rise=(), knees=(None,),
               noise_bands=(0.0,), deadbands=(0.01,), harm_real=None)  # fmt: skip
     loose = map_rises.fit(train, judge="all", cross_group=1.0, **kw)

@@ -8,7 +8,18 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from looks import FPS, GAZE, NAMES, PRE, cleaned, gaze_ratio, neutral_off, pairs, tracker
+from looks import (
+    FPS,
+    GAZE,
+    NAMES,
+    PRE,
+    cleaned,
+    gaze_ratio,
+    habits,
+    neutral_off,
+    pairs,
+    tracker,  # fmt: skip
+)
 
 from faceclean.animation import Animation
 from faceclean.learned.tracker_map import TrackerMap
@@ -263,17 +274,7 @@ def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_anoth
     hidden = {"jawLeft": "mouthLeft", "jawRight": "mouthRight", "jawForward": "mouthFunnel",
               "cheekPuff": "mouthPucker", "mouthClose": "mouthRollLower"}  # fmt: skip
 
-    def performer(p, made_up: bool):
-        y, x = p.truth.values.copy(), p.tracked.values.copy()
-        for h, seen in hidden.items():
-            y[:, NAMES.index(h)] = y[:, NAMES.index(seen)] if made_up else 0.0
-            x[:, NAMES.index(h)] = 0.0
-        group = ("independent", "synthetic")[int(p.name[-1])] if made_up else p.group
-        return replace(p, tracked=Animation(p.tracked.times, x, NAMES),
-                       truth=Animation(p.truth.times, y, NAMES), group=group)  # fmt: skip
-
-    train = [performer(p, p.group != "src0") for look in (1, 2)
-             for p in pairs(look) if p.group != "neutral"]  # fmt: skip
+    train = habits(hidden)
     kw = dict(prefilters=PRE, lams=(0.03, 1.0), own_rise=(), knees=(None,),
               noise_bands=(0.0,), deadbands=(0.01,), harm_real=None)  # fmt: skip
     every, real = (map_rises.fit(train, judge=j, **kw) for j in ("all", "real"))

@@ -224,9 +224,9 @@ def _choose(found: Sequence[tuple], judge: str = JUDGE) -> tuple:
     past JITTER_BUDGET and the lag's past LAG_BUDGET (1 + how far over, as a share); with
     no folds (NaN scores), the first."""
     on_real = judge == "real" and all(np.isfinite(c[0].real_mse) for c in found)
-    acc = {"typical": lambda c: c[0].typical, "real": lambda c: c[0].real_mse}.get(
-        judge if judge == "typical" or on_real else "all", lambda c: c[0].mse
-    )
+    key = judge if judge == "typical" or on_real else "all"
+    acc = {"all": lambda c: c[0].mse, "real": lambda c: c[0].real_mse,
+           "typical": lambda c: c[0].typical}[key]  # fmt: skip
     best = min((acc(c) for c in found if np.isfinite(acc(c))), default=float("nan"))
     if not np.isfinite(best):
         return found[0]
