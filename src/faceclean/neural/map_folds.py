@@ -37,7 +37,6 @@ class Scored(NamedTuple):
     real: np.ndarray | None = None  # (3, M) squared error of the map, its own rise, raw per
     # output, summed over the folds' real performances (None: no real performance)
     typical: float = float("nan")  # geometric mean of each performance's MSE x raw
-    typical_real: float = float("nan")  # the same over the real performances (NaN: none)
 
     @property
     def real_mse(self) -> float:
@@ -69,7 +68,7 @@ def cross_validate(w, feats, folds, fits) -> Scored:
     names = w.inputs
     gi = np.array([list(SELECT).index(group_of(n)) for n in names])
     ratios, sse, jitter, lags = [], {}, [], []
-    logs: dict[bool, list[float]] = {True: [], False: []}  # real? -> log MSE x raw per pair
+    logs: list[float] = []  # log MSE x raw of each performance
     dev, frames = np.zeros(len(names)), 0
     real = np.zeros((3, len(names)))  # map, own rise, raw: per output, real performances
     for key, linear in fits.items():
@@ -89,7 +88,7 @@ def cross_validate(w, feats, folds, fits) -> Scored:
             for acc, e in zip((s, o, r), errors, strict=True):
                 np.add.at(acc, gi, e)
             if errors[2].sum() > 0:
-                logs[is_real(key)].append(np.log(max(errors[0].sum(), 1e-12) / errors[2].sum()))
+                logs.append(np.log(max(errors[0].sum(), 1e-12) / errors[2].sum()))
             if is_real(key):
                 real += errors
             if len(f.t) > 3:
@@ -105,8 +104,8 @@ def cross_validate(w, feats, folds, fits) -> Scored:
     own = {g: {f: v[1] / max(v[2], 1e-12) for f, v in fam.items()} for g, fam in sse.items()}
     off = float((dev / frames).max()) if frames else float("nan")
     mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
-    geo = lambda v: float(np.exp(np.mean(v))) if v else float("nan")  # noqa: E731
+    typical = float(np.exp(np.mean(logs))) if logs else float("nan")
     return Scored(
         mean(ratios), mean(jitter), mean(lags), per_group, own, off,
-        real if real[2].any() else None, geo(logs[True] + logs[False]), geo(logs[True]),
+        real if real[2].any() else None, typical,
     )  # fmt: skip
