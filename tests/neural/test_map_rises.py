@@ -270,12 +270,13 @@ def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_anoth
     # ones it can (jawLeft with mouthLeft, ...), which a loose fit learns; the real ones
     # never move them, where that habit is harm and a stiffer fit is right. Judged on every
     # fold, the loose fit wins; on the real ones, the stiff one, and the real faces' jaw
-    # stays nearer put.
+    # stays nearer put. Every group's neighbours across groups are shrunk alike (x3): the
+    # jaw's own x10 (CROSS_GROUP) would already keep that habit out.
     hidden = {"jawLeft": "mouthLeft", "jawRight": "mouthRight", "jawForward": "mouthFunnel",
               "cheekPuff": "mouthPucker", "mouthClose": "mouthRollLower"}  # fmt: skip
 
     train = habits(hidden)
-    kw = dict(prefilters=PRE, lams=(0.03, 1.0), own_rise=(), knees=(None,),
+    kw = dict(prefilters=PRE, lams=(0.03, 1.0), own_rise=(), knees=(None,), cross_group=3.0,
               noise_bands=(0.0,), deadbands=(0.01,), harm_real=None)  # fmt: skip
     every, real = (map_rises.fit(train, judge=j, **kw) for j in ("all", "real"))
     assert every.config["lam"] == 0.03 and real.config["lam"] == 1.0
@@ -300,5 +301,12 @@ def test_a_channel_of_another_group_is_shrunk_harder_than_a_neighbour():
     assert plain[0, 1] == pytest.approx(plain[0, 2], rel=0.1)  # one group: alike
     assert grouped[0, 1] == pytest.approx(plain[0, 1], rel=0.05)  # a neighbour as before
     assert grouped[0, 2] < 0.8 * grouped[0, 1]  # CROSS_GROUP x the shrinkage
+    # one factor per output group: the mouth's output shrinks the brows' input 30x; a group
+    # it does not name takes "*"
+    by = map_rises.solve(
+        m, 0.01, groups=("mouth", "mouth", "brows"), cross={"*": 1.0, "mouth": 30.0}
+    )
+    assert by[0, 2] < 0.2 * grouped[0, 2]
+    assert map_rises._cross({"*": 1.0, "mouth": 30.0}, "brows") == 1.0
     assert map_rises._groups(("eyeBlinkLeft", "eyeLookDownLeft", "jawOpen")) == [
         "eyes", "eyes", "jaw"]  # fmt: skip
