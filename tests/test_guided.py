@@ -30,10 +30,23 @@ RESOLUTION = 256  # px, the webcam setting's smallest frame: a third of the stud
 COL = {n: i for i, n in enumerate(ARKIT52)}
 
 
-def performed(late: float = 1.2, speed: float = 0.8, rate: float = RATE):
+# A studio's own script (``--script``): four prompts and the rests, 6.6 s.
+SHORT = {"format": "faceclean-guided-script/1", "title": "a short one",
+         "prompts": [{"id": "neutral", "start": 0.0, "duration": 2.0, "text": "Relax"},
+                     {"id": "blink", "start": 2.2, "duration": 0.6, "text": "Blink",
+                      "targets": {"eyeBlinkLeft": 1.0, "eyeBlinkRight": 1.0}},
+                     {"id": "smile", "start": 3.0, "duration": 1.1, "text": "Big smile",
+                      "targets": {"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0}},
+                     {"id": "frown", "start": 4.3, "duration": 1.1, "text": "Frown",
+                      "targets": {"mouthFrownLeft": 1.0, "mouthFrownRight": 1.0}},
+                     {"id": "relax", "start": 5.6, "duration": 1.0,
+                      "text": "Relax again"}]}  # fmt: skip
+
+
+def performed(late: float = 1.2, speed: float = 0.8, rate: float = RATE, script=SCRIPT):
     """(take times, script times): late by ``late`` s, then at ``speed`` of the script's
     pace, uneven (+-0.15 over 7 s)."""
-    tau = np.arange(int((late + SCRIPT.seconds / (speed - 0.15) + 1.0) * rate)) / rate
+    tau = np.arange(int((late + script.seconds / (speed - 0.15) + 1.0) * rate)) / rate
     s = np.cumsum(speed + 0.15 * np.sin(2 * np.pi * tau / 7.0)) / rate
     return tau, np.where(tau < late, 0.0, s - np.interp(late, tau, s))
 

@@ -1,8 +1,10 @@
 """The guided calibration's panel in a real headless Chromium, against the real commands:
-``relay --ui`` fed by ``faceclean replay`` of a face performing the shipped script (an
-ARKit face with its own levels, late and uneven: tests/test_guided.py's performer), a
-Live Link receiver behind it; and ``faceclean ui`` on that take, where the take is the
-performance. Needs Debian's chromium and playwright (tests/headless.py)."""
+``relay --ui --script`` fed by ``faceclean replay`` of a face performing a studio's own
+short script (an ARKit face with its own levels, late and uneven: tests/test_guided.py's
+performer; the live recording lasts the script, so the shipped one's 34 s would be waited
+for in real time), a Live Link receiver behind it; and ``faceclean ui`` on a take of the
+shipped script, where the take is the performance. Needs Debian's chromium and playwright
+(tests/headless.py)."""
 
 from __future__ import annotations
 
@@ -15,13 +17,14 @@ import numpy as np
 import pytest
 from headless import browser_missing
 from helpers import free_port, interrupt, reaped
-from test_guided import SCRIPT, arkit_face, performed
+from test_guided import SCRIPT, SHORT, arkit_face, performed
 from test_ui_page import ENV, Receiver, Tab, start
 
 from faceclean import io
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52
 from faceclean.cli import main
+from faceclean.guided.script import from_dict
 
 pytest.importorskip("websockets")
 pytestmark = pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
@@ -37,6 +40,18 @@ def take(tmp_path_factory):
     path = tmp_path_factory.mktemp("guided") / "performed.csv"
     io.save(Animation(tau, arkit_face(SCRIPT.weights(s)), ARKIT52), path)
     return path
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    """(a studio's short script file, a take of it): 0.5 s late at about 1.15 times its
+    pace, 60 fps; the live recording (6.6 s and 3 s more) holds it whole."""
+    folder = tmp_path_factory.mktemp("short")
+    script = from_dict(SHORT)
+    tau, s = performed(late=0.5, speed=1.15, rate=60.0, script=script)
+    io.save(Animation(tau, arkit_face(script.weights(s)), ARKIT52), folder / "performed.csv")
+    (folder / "short.json").write_text(json.dumps(SHORT))
+    return folder / "short.json", folder / "performed.csv"
 
 
 def replay(take, port: int, loop: bool = False) -> subprocess.Popen:
@@ -56,16 +71,18 @@ def squint(receiver: Receiver, first: int, n: int) -> np.ndarray:
 
 @pytest.mark.slow
 @pytest.mark.realtime
-def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, take, tmp_path):
+def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, short, tmp_path):
+    script, take = short
+    prompts = len(SHORT["prompts"])
     port, receiver = free_port(), Receiver()
     relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}",
                         "--send", f"livelink://127.0.0.1:{receiver.port}", "--method", "one-euro",
-                        "--set", "min_cutoff=30", "--set", "beta=0", "--ui", "--ui-nice", "0"],
-                       stderr=subprocess.DEVNULL)  # fmt: skip
+                        "--set", "min_cutoff=30", "--set", "beta=0", "--ui", "--ui-nice", "0",
+                        "--script", str(script)], stderr=subprocess.DEVNULL)  # fmt: skip
     with reaped(relay):
         tab = Tab(browser, url)
         rows = tab.js("document.querySelectorAll('#fc-guided-prompts tbody tr').length")
-        assert rows == len(SCRIPT.prompts)  # every prompt of the shipped script, listed
+        assert rows == prompts  # every prompt of the studio's script, listed
         tab.page.click("#fc-guided-start")
         tab.until("window.faceclean.guidedPhase === 'recording' || window.faceclean.errors.length")
         first = replay(take, port)  # the person starts once the prompts do
@@ -80,7 +97,7 @@ def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, ta
         assert shown[0].startswith("guided calibration in 3.0 s · first: Relax")
         assert any(s.startswith("Big smile · ") for s in shown)
         assert any(s.startswith("rest · next: Frown") for s in shown)
-        assert done["seen"] == len(SCRIPT.prompts) and done["problem"] is None, done["problem"]
+        assert done["seen"] == prompts and done["problem"] is None, done["problem"]
         assert done["applied"] and done["undo"] and done["tracker"] == "arkit"
         smile = next(p for p in done["prompts"] if p["id"] == "smile")
         assert smile["before"] == pytest.approx(0.5, abs=0.05)  # this face's small smile ...
@@ -88,7 +105,9 @@ def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, ta
         assert done["channels"][0]["name"] in ("mouthSmileLeft", "mouthSmileRight")
         assert "prompts seen" in tab.page.inner_text("#fc-calibration")
         state = tab.js("window.faceclean.state.calibration")
-        assert len(state["guided"]["seen"]) == len(SCRIPT.prompts)
+        assert (
+            len(state["guided"]["seen"]) == prompts and state["guided"]["script"] == "a short one"
+        )
         if os.environ.get("FACECLEAN_SCREENSHOTS"):  # docs/ui-guided.png
             tab.page.screenshot(path=os.environ["FACECLEAN_SCREENSHOTS"] + "/ui-guided.png")
 
@@ -112,7 +131,10 @@ def test_the_live_page_prompts_records_fits_applies_undoes_and_saves(browser, ta
     receiver.close()
     assert uncalibrated.min() > 0.06 and undone.min() > 0.06, (uncalibrated.min(), undone.min())
     assert calibrated.min() < 0.02 and np.median(calibrated) < 0.03, calibrated
-    assert "guided calibration (live take" in out and "25 of 25 prompts seen; applied" in out
+    assert (
+        "guided calibration (live take" in out
+        and f"{prompts} of {prompts} prompts seen; applied" in out
+    )
     saved = json.loads((tmp_path / "guided.json").read_text())
     assert saved["calibration"]["guided"]["not_seen"] == []
     assert main(["clean", str(take), "-o", str(tmp_path / "out.csv"),

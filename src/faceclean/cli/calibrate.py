@@ -57,7 +57,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="a neutral hold, then optionally a range of motion (with --guided: the script)",
     )
     p.add_argument("-o", "--output", metavar="FILE", help="calibration .json")
-    p.add_argument("--print-script", action="store_true", help="print the guided script")
+    p.add_argument(
+        "--print-script",
+        nargs="?",
+        const="text",
+        choices=("text", "json"),
+        help="print the guided script (json: as a file --script reads, to start your own from)",
+    )
     p.add_argument(
         "--guided",
         action="store_true",
@@ -89,6 +95,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "as it goes): lift each moved channel's observed top to 1",
     )
     options.add_tracker_argument(p)
+    from faceclean.cli import ui
+
+    ui.add_script_argument(p, "with --guided or --print-script")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,8 +110,11 @@ def run(args: argparse.Namespace) -> int:
     if args.print_script:
         from faceclean.guided.script import load
 
-        print("\n".join(load().lines()))
+        script = load(args.script)
+        print(script.json() if args.print_script == "json" else "\n".join(script.lines()))
         return 0
+    if args.script and not args.guided:
+        raise FacecleanError("--script is the guided script: give it with --guided")
     if not args.output:
         raise FacecleanError("calibrate: give -o FILE.json (or --print-script)")
     if args.live and not args.guided:

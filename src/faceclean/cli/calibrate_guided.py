@@ -20,7 +20,9 @@ def run_guided(args: argparse.Namespace) -> int:
     from faceclean import io
     from faceclean.errors import FacecleanError
     from faceclean.guided.fit import guided
+    from faceclean.guided.script import load
 
+    script = load(args.script)  # None: the shipped one
     out = Path(args.output)
     if out.suffix.lower() != ".json":
         raise FacecleanError(f"-o {out.name}: a calibration is a .json file")
@@ -30,7 +32,7 @@ def run_guided(args: argparse.Namespace) -> int:
         from faceclean.cli.calibrate_live import record
 
         io.atomic.check_writable(out)
-        anim, label = record(args.live), f"live {args.live}"
+        anim, label = record(args.live, script), f"live {args.live}"
     else:
         if not args.take:
             raise FacecleanError("--guided needs the TAKE (or --live URL)")
@@ -38,7 +40,7 @@ def run_guided(args: argparse.Namespace) -> int:
             raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
         io.atomic.check_writable(out)
         anim, label = io.load(args.take), Path(args.take).name
-    result = guided(anim, args.tracker, take=label)
+    result = guided(anim, args.tracker, script, take=label)
     for line in report(result):
         print(line)
     why = result.alignment.shortfall()

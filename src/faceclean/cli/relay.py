@@ -77,6 +77,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ui", action="store_true", help="serve the tuning page on the relay")
     ui.add_page_arguments(p, "ui-")
     ui.add_nice_argument(p, "the relay")
+    ui.add_script_argument(p)
 
 
 def build_cleaner(choice: Choice) -> tuple[Any, str]:
@@ -129,9 +130,10 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.cli import ui
 
     ui.check_nice(args)
+    script = ui.script(args, args.ui)  # checked before the relay binds
     recorder = Recorder(args.record) if args.record else None
     if args.ui:
-        return _with_page(args, listen, send, recorder)
+        return _with_page(args, listen, send, recorder, script)
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice)
     cleaner, levels = with_levels(args, choice, cleaner)
@@ -202,7 +204,8 @@ def _done(stats: Any, send: Any, recorder: Any) -> int:
     return 0
 
 
-def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) -> int:
+def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any,
+               script: Any = None) -> int:  # fmt: skip
     """The relay with the tuning page on it (faceclean.ui.live)."""
     from faceclean.channels import ARKIT52, POSE
     from faceclean.cli import ui
@@ -214,7 +217,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any) 
     pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
     with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:
         what = f"{relay.address} -> {send}"
-        session = Live(tuning, relay, tap, what, nice=args.ui_nice, say=ui.say)
+        session = Live(tuning, relay, tap, what, nice=args.ui_nice, say=ui.say, script=script)
         session.mesh()  # the face built before the page asks
         session.start()
         server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser)

@@ -75,6 +75,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     ui.add_page_arguments(live, "ui-")
     ui.add_nice_argument(live, "the tracking loop")
+    ui.add_script_argument(live)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
         from faceclean.cli import track_live
 
         return track_live.run(args)
-    if args.send or args.record or args.ui or args.stats is not None:
-        raise FacecleanError("--send, --record, --stats and --ui go with --camera")
+    if args.send or args.record or args.ui or args.stats is not None or args.script:
+        raise FacecleanError("--send, --record, --stats, --ui and --script go with --camera")
     if not args.input:
         raise FacecleanError("give a video file (or --camera N --send URL)")
     if not args.output:

@@ -25,6 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("take", metavar="TAKE", help="the take to tune on (any format clean reads)")
     options.add_arguments(p, "the cleaner to start from")
     add_page_arguments(p)
+    add_script_argument(p)
 
 
 def add_page_arguments(p: argparse.ArgumentParser, prefix: str = "") -> None:
@@ -52,6 +53,29 @@ def add_nice_argument(p: Any, loop: str) -> None:
         f"nice, 1-19 (Linux: its sessions' autogroups, else each of its threads; default {NICE}; "
         "0: leave it)",
     )
+
+
+def add_script_argument(p: Any, what: str = "the page's guided calibration") -> None:
+    """--script FILE (calibrate --guided, ui, relay --ui, track --camera --ui)."""
+    p.add_argument(
+        "--script",
+        metavar="FILE",
+        help=f"{what}: a guided script of your own (shorter, in your performers' language; "
+        "start from `faceclean calibrate --print-script json`) instead of the shipped one",
+    )
+
+
+def script(args: argparse.Namespace, ui: bool = True):
+    """The guided script ``--script`` names (checked: one line if bad), None for the
+    shipped one; refused where no page or guided calibration would use it."""
+    from faceclean.errors import FacecleanError
+    from faceclean.guided.script import load
+
+    if getattr(args, "script", None) is None:
+        return None
+    if not ui:
+        raise FacecleanError("--script is the page's guided script: give it with --ui")
+    return load(args.script)
 
 
 def check_nice(args: argparse.Namespace) -> int:
@@ -108,8 +132,8 @@ def camera_page(args: argparse.Namespace, loop: Any, camera: Any, tap: Any) -> I
         return
     from faceclean.ui.camera import CameraPage
 
-    session = CameraPage(tuning(args).with_choice(), loop, camera, tap,
-                         f"camera {args.camera}", nice=check_nice(args), say=say)  # fmt: skip
+    session = CameraPage(tuning(args).with_choice(), loop, camera, tap, f"camera {args.camera}",
+                         nice=check_nice(args), say=say, script=script(args))  # fmt: skip
     session.mesh()  # the face built before the page asks
     loop.on_image = session.image
     session.start()
@@ -129,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
 
     from faceclean.ui.offline import Offline
 
-    session = Offline(args.take, tuning(args))
+    session = Offline(args.take, tuning(args), script(args))
     session.mesh()  # the face built before the page asks
     server = serve(session, args.host, args.port, args.no_browser)
     try:

@@ -15,11 +15,14 @@ prompt, weights) is linear between its keys. Between prompts the face rests (all
 ``weight`` (default 1) is the prompt's weight in the fit: the speech line's targets are a
 guess at what a person does, so it counts less. ``Script.weights(times)`` renders the
 script as an ARKit-52 take any renderer (or person) can perform.
+
+A studio's own script (shorter, in its performers' language, its own prompts) is a file of
+the same format, given with ``--script FILE`` (``load(path)``): at most ``MAX_PROMPTS``
+prompts over at most ``MAX_SECONDS``, the first a neutral hold.
 """
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +36,9 @@ SCRIPT_FORMAT = "faceclean-guided-script/1"
 COUNTDOWN = 3  # s counted down before a live performance starts (the terminal's, the page's)
 TAIL = 3.0  # s recorded live after the script's end (a late person finishes)
 SHIPPED = Path(__file__).resolve().parent.parent / "scripts" / "guided.json"
+MAX_PROMPTS = 200
+MAX_SECONDS = 600.0  # s a script may last (a live recording holds it whole)
+MAX_BYTES = 1 << 20  # a script file
 _COL = {n: i for i, n in enumerate(ARKIT52)}
 
 
@@ -105,6 +111,21 @@ class Script:
         t = np.arange(int(self.seconds * rate) + 1) / rate
         return t, self.weights(t)
 
+    def json(self) -> str:
+        """The script as a file ``load`` reads (``calibrate --print-script json``)."""
+        import json
+
+        def prompt(p: Prompt) -> dict:
+            d = {"id": p.id, "start": p.start, "duration": p.duration, "text": p.text,
+                 "targets": p.targets, "ramp": p.ramp, "weight": p.weight}  # fmt: skip
+            if p.keys:
+                d["keys"] = [[u, w] for u, w in p.keys]
+            return d
+
+        doc = {"format": SCRIPT_FORMAT, "title": self.title,
+               "prompts": [prompt(p) for p in self.prompts]}  # fmt: skip
+        return json.dumps(doc, indent=1)
+
     def lines(self) -> list[str]:
         """The script as text, one prompt a line (``calibrate --print-script``)."""
         out = [f"{self.title} ({self.seconds:.1f} s, {len(self.prompts)} prompts)"]
@@ -117,12 +138,10 @@ class Script:
 
 def load(path: str | os.PathLike | None = None) -> Script:
     """The script at ``path`` (the shipped one when None), checked: one line if bad."""
+    from faceclean.io.source import read_json
+
     path = Path(path) if path is not None else SHIPPED
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise FacecleanError(f"guided script {path.name}: cannot read it ({e})") from None
-    return from_dict(data, path.name)
+    return from_dict(read_json(path, "guided script", MAX_BYTES), f"guided script {path.name}")
 
 
 def from_dict(data: object, label: str = "guided script") -> Script:
@@ -130,7 +149,10 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         raise FacecleanError(f"{label}: not a guided script (format {SCRIPT_FORMAT!r})")
     ramp = _number(data.get("ramp", 0.25), f"{label}: ramp")
     prompts = []
-    for k, p in enumerate(data.get("prompts") or []):
+    given = data.get("prompts") or []
+    if not isinstance(given, list) or len(given) > MAX_PROMPTS:
+        raise FacecleanError(f"{label}: prompts is a list of at most {MAX_PROMPTS}")
+    for k, p in enumerate(given):
         where = f"{label}: prompt {k + 1}"
         if not isinstance(p, dict) or not isinstance(p.get("id"), str):
             raise FacecleanError(f"{where}: an object with an id")
@@ -151,6 +173,8 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         raise FacecleanError(f"{label}: needs prompts, the first a neutral hold (no targets)")
     if any(b.start < a.end for a, b in zip(prompts, prompts[1:], strict=False)):
         raise FacecleanError(f"{label}: prompts overlap or are out of order")
+    if prompts[-1].end > MAX_SECONDS:
+        raise FacecleanError(f"{label}: lasts {prompts[-1].end:g} s (at most {MAX_SECONDS:g})")
     return Script(tuple(prompts), str(data.get("title", "")))
 
 

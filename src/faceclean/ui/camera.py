@@ -37,8 +37,9 @@ class CameraPage(Live):
     """The page on the camera loop ``loop`` (trackers/live.Live) reading ``camera``."""
 
     def __init__(self, tuning: Tuning, loop: Any, camera: Any, tap: Tap, describe: str,
-                 nice: int = 0, say: Callable[[str], None] | None = None) -> None:  # fmt: skip
-        super().__init__(tuning, loop, tap, describe, nice, say)
+                 nice: int = 0, say: Callable[[str], None] | None = None,
+                 script: Any = None) -> None:  # fmt: skip
+        super().__init__(tuning, loop, tap, describe, nice, say, script)
         self.camera = camera
         self.newest: tuple[np.ndarray, float] | None = None  # (H, W, 3) RGB, capture s
         self.images = 0  # images sent

@@ -110,9 +110,9 @@ class Live(Base):
     MESSAGES = (*Base.MESSAGES, "channels", "calibrate", "record", "gl")
 
     def __init__(self, tuning: Tuning, relay: Any, tap: Tap, describe: str, nice: int = 0,
-                 say: Callable[[str], None] | None = None) -> None:  # fmt: skip
+                 say: Callable[[str], None] | None = None, script: Any = None) -> None:  # fmt: skip
         super().__init__(tuning, say)
-        self.guided = Panel(self, tap=tap)
+        self.guided = Panel(self, tap=tap, script=script)  # script: None, the shipped one
         self.relay, self.tap, self.what = relay, tap, describe
         self.nice = nice  # a software-drawn page's browser yields at this nice (ui/priority.py)
         self._yielded = False

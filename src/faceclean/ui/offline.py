@@ -56,7 +56,7 @@ class Offline(Base):
     mode = "offline"
     MESSAGES = (*Base.MESSAGES, "view", "calibrate", "export")
 
-    def __init__(self, path: str, tuning: Tuning) -> None:
+    def __init__(self, path: str, tuning: Tuning, script: Any = None) -> None:
         from faceclean import io
 
         self.path = Path(path)
@@ -66,7 +66,7 @@ class Offline(Base):
         self.times = np.asarray(self.take.times, np.float64)  # (N,) s
         self.input, self.present = self.take.arkit()  # (N, 52)
         super().__init__(tuning)
-        self.guided = Panel(self, take=lambda: (self.take, self.path.name))
+        self.guided = Panel(self, take=lambda: (self.take, self.path.name), script=script)
         self.cleaned: np.ndarray | None = None  # (N, 52) of the whole take, current tuning
         self.cleaned_seq: int | None = None
         self.good: Tuning | None = None  # the last tuning that cleaned the whole take

@@ -1,0 +1,106 @@
+"""A studio's own guided script (``--script FILE``): printed as the file it reads, performed,
+fitted, and refused in one line when it is not a script or not where a script goes."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+
+import numpy as np
+import pytest
+from test_guided import SHORT, arkit_face, performed
+
+from faceclean import io
+from faceclean.animation import Animation
+from faceclean.channels import ARKIT52
+from faceclean.cli import main
+from faceclean.guided.script import MAX_PROMPTS, from_dict, load
+
+
+def test_the_shipped_script_prints_as_the_file_script_reads(tmp_path, capsys):
+    assert main(["calibrate", "--print-script", "json"]) == 0
+    path = tmp_path / "mine.json"
+    path.write_text(capsys.readouterr().out)
+    assert load(path) == load()  # every prompt, time, aim, ramp and weight
+    assert main(["calibrate", "--print-script", "--script", str(SHORT_FILE(tmp_path))]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "a short one (6.6 s, 5 prompts)" and "Frown" in out[4]
+
+
+def SHORT_FILE(tmp_path, doc=SHORT):  # noqa: N802 (a fixture-like maker)
+    path = tmp_path / "short.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_a_take_of_ones_own_script_calibrates_with_it(tmp_path, capsys):
+    script = from_dict(SHORT)
+    tau, s = performed(late=0.6, speed=0.9, rate=60.0, script=script)
+    take = tmp_path / "take.csv"
+    io.save(Animation(tau, arkit_face(script.weights(s)), ARKIT52), take)
+    out = tmp_path / "calib.json"
+    argv = ["calibrate", "--guided", str(take), "-o", str(out), "--tracker", "arkit"]
+    assert main([*argv, "--script", str(SHORT_FILE(tmp_path))]) == 0
+    printed = capsys.readouterr().out
+    rows = [line.split() for line in printed.splitlines()[1:6]]
+    assert [r[0] for r in rows] == [p["id"] for p in SHORT["prompts"]]
+    assert all("seen" in r for r in rows), printed
+    facts = json.loads(out.read_text())["calibration"]
+    assert facts["guided"]["script"] == "a short one" and not facts["guided"]["not_seen"]
+    gain = facts["channels"]["mouthSmileLeft"]["gain"]
+    assert gain == pytest.approx(1 / 0.5, rel=0.1)  # this face's small smile reaches the aim
+    # without --script the take is held against the shipped one (33.9 s): refused
+    out.unlink()
+    assert main(argv) == 2
+    assert "shorter than the script (33.9 s)" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize("case", ["not json", "no neutral first", "overlap", "too many",
+                                  "too long", "a folder", "a fifo"])  # fmt: skip
+def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case):
+    doc = copy.deepcopy(SHORT)
+    path = tmp_path / "bad.json"
+    if case == "not json":
+        path.write_text("{prompts: [")
+    elif case == "no neutral first":
+        doc["prompts"] = doc["prompts"][1:]
+    elif case == "overlap":
+        doc["prompts"][2]["start"] = 2.5
+    elif case == "too many":
+        doc["prompts"] = [{"id": f"p{k}", "start": 2.0 * k, "duration": 1.0}
+                          for k in range(MAX_PROMPTS + 1)]  # fmt: skip
+    elif case == "too long":
+        doc["prompts"][-1]["duration"] = 900.0
+    elif case == "a folder":
+        path = tmp_path
+    elif case == "a fifo":
+        path = tmp_path / "fifo.json"
+        os.mkfifo(path)
+    if case not in ("not json", "a folder", "a fifo"):
+        path.write_text(json.dumps(doc))
+    take = tmp_path / "take.csv"
+    io.save(Animation(np.arange(60) / 30, np.zeros((60, 52)), ARKIT52), take)
+    out = tmp_path / "calib.json"
+    guided = ["calibrate", "--guided", str(take), "-o", str(out)]
+    for argv in (["calibrate", "--print-script"], guided):
+        assert main([*argv, "--script", str(path)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+        assert not out.exists()
+
+
+def test_script_goes_only_where_a_guided_script_is_used(tmp_path, capsys):
+    path = SHORT_FILE(tmp_path)
+    take = tmp_path / "take.csv"
+    io.save(Animation(np.arange(60) / 30, np.zeros((60, 52)), ARKIT52), take)
+    for argv, words in (
+        (["calibrate", str(take), "-o", str(tmp_path / "c.json")], "give it with --guided"),
+        (["relay", "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9"],
+         "give it with --ui"),
+        (["track", "in.mp4", "-o", str(tmp_path / "o.csv")], "go with --camera"),
+    ):  # fmt: skip
+        assert main([*argv, "--script", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "c.json").exists() and not (tmp_path / "o.csv").exists()
