@@ -42,8 +42,9 @@ is a habit of the made-up performers (on the families' folds, the jaw group 1.48
 real performances, 0.76x on made-up ones; docs/MODEL.md, sixth round).
 
 A cross weight from another channel group (channels.GROUPS) is shrunk CROSS_GROUP times
-harder than one from the output's own: within a group a co-movement is the tracker mixing
-neighbours, across groups as often a performer's habit (a smile read into the brows).
+(by the output's group: the jaw's 10, the rest 3) harder than one from the output's own:
+within a group a co-movement is the tracker mixing neighbours, across groups as often a
+performer's habit (a smile read into the brows, the lips into the jaw).
 
 ``lam`` is chosen on folds that leave a look and a source out at once (with one family, a
 source), judged on all of their performances pooled; ``judge="typical"``, on each one
