@@ -35,7 +35,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "resolve": {"filters", "learned", "adjust"},
     "cleaner": {"filters", "adjust", "resolve"},
     "calibration": {"adjust", "filters", "relay", "adaptation"},
-    "guided": {"adjust", "adaptation", "calibration", "resolve"},  # the shipped cleaner
+    # the shipped cleaner; io: the bounded reader (a studio's own script, --script)
+    "guided": {"adjust", "adaptation", "calibration", "resolve", "io"},
     "batch": {"io"},
     "relay": {"io", "faceclean", "filters"},
     "evaluation": {
