@@ -7,6 +7,7 @@ playwright, MediaPipe's model, the renderer and the shared head mesh."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import re
 import subprocess
@@ -39,14 +40,18 @@ def camera_video(rendered, tmp_path_factory) -> str:
 
 
 @pytest.mark.slow
-def test_track_ui_shows_the_camera_beside_the_faces_and_swaps_the_cleaner(camera_video):
+def test_track_ui_shows_the_camera_beside_the_faces_and_swaps_the_cleaner(camera_video,
+                                                                          tmp_path):  # fmt: skip
     from playwright.sync_api import sync_playwright
+    from test_guided import SHORT
 
     receiver = Receiver()
+    script = tmp_path / "short.json"  # a studio's own guided script (--script)
+    script.write_text(json.dumps(SHORT))
     track, url = start(["track", "--camera", camera_video, "--send",
                         f"livelink://127.0.0.1:{receiver.port}", "--method", "one-euro", "--ui",
-                        "--ui-nice", "0"],  # a loaded machine: the test's browser keeps its weight
-                       stderr=subprocess.DEVNULL)  # fmt: skip
+                        "--ui-nice", "0",  # a loaded machine: the test's browser keeps its weight
+                        "--script", str(script)], stderr=subprocess.DEVNULL)  # fmt: skip
     with reaped(track), sync_playwright() as p:
         # a browser of its own (the page may lower its browser's priority)
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=BROWSER_ARGS)
@@ -89,7 +94,9 @@ def test_track_ui_shows_the_camera_beside_the_faces_and_swaps_the_cleaner(camera
         jaw = np.array([v[JAW] for _, v in receiver.frames[after : after + 30]])
 
         # the guided calibration records from the camera loop too (then stopped here: the
-        # stand-in face does not perform the script)
+        # stand-in face does not perform the script), prompting the studio's own script
+        rows = tab.js("document.querySelectorAll('#fc-guided-prompts tbody tr').length")
+        assert rows == len(SHORT["prompts"])
         tab.page.click("#fc-guided-start")
         summary = "document.querySelector('#fc-guided-summary').textContent"
         tab.until(f"/recording: [1-9]/.test({summary}) || window.faceclean.errors.length")
