@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import select
+import shutil
 import signal
 import socket
 import subprocess
@@ -58,7 +59,7 @@ def test_two_process_training_keeps_ranks_identical(tmp_path):
     script = tmp_path / "ddp_run.py"
     script.write_text(SCRIPT)
     out = tmp_path / "m.npz"
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(takes_dir().parent)}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(_two_sources(tmp_path))}
     cmd = [
         str(TORCHRUN), "--nproc_per_node", "2", "--master_addr", "127.0.0.1",
         "--master_port", str(free_port(socket.SOCK_STREAM)), str(script), str(out),
@@ -76,6 +77,19 @@ def test_two_process_training_keeps_ranks_identical(tmp_path):
     assert "2 process(es)" in proc.stderr
     written = np.load(out)  # rank 0 wrote the model, and it is the trained one
     assert np.array_equal(written["head.w"], r0["head.w"])
+
+
+def _two_sources(tmp_path: Path) -> Path:
+    """A data folder of two shared sources' takes (copies in the test's temporary folder:
+    the take reader follows no link) and the meshes: the held-out source and one to train
+    on, so that the ranks load two takes, not every shared one."""
+    root = tmp_path / "data"
+    for source in ("jmtechart", "sentien"):
+        (root / "arkit_takes" / source).mkdir(parents=True)
+        for take in (takes_dir() / source).glob("*.csv"):
+            shutil.copyfile(take, root / "arkit_takes" / source / take.name)
+    (root / "meshes").symlink_to(takes_dir().parent / "meshes")  # the loss's face mesh
+    return root
 
 
 def _ranks(agent: int) -> list[int]:
@@ -113,7 +127,7 @@ def _until(condition, deadline: float) -> bool:
 def test_ranks_die_when_torchrun_is_killed(tmp_path):
     """SIGKILL to torchrun's agent mid-training: both ranks stop (faceclean.workers
     die_with_parent in distributed.setup), polled up to a deadline, not left training."""
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(takes_dir().parent)}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "FACECLEAN_DATA": str(_two_sources(tmp_path))}
     cmd = [
         str(TORCHRUN), "--nproc_per_node", "2", "--master_addr", "127.0.0.1",
         "--master_port", str(free_port(socket.SOCK_STREAM)), "-m", "faceclean.neural.train",
