@@ -23,12 +23,12 @@ def test_the_shipped_script_prints_as_the_file_script_reads(tmp_path, capsys):
     path = tmp_path / "mine.json"
     path.write_text(capsys.readouterr().out)
     assert load(path) == load()  # every prompt, time, aim, ramp and weight
-    assert main(["calibrate", "--print-script", "--script", str(SHORT_FILE(tmp_path))]) == 0
+    assert main(["calibrate", "--print-script", "--script", str(short_file(tmp_path))]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0] == "a short one (6.6 s, 5 prompts)" and "Frown" in out[4]
 
 
-def SHORT_FILE(tmp_path, doc=SHORT):  # noqa: N802 (a fixture-like maker)
+def short_file(tmp_path, doc=SHORT):
     path = tmp_path / "short.json"
     path.write_text(json.dumps(doc))
     return path
@@ -41,7 +41,7 @@ def test_a_take_of_ones_own_script_calibrates_with_it(tmp_path, capsys):
     io.save(Animation(tau, arkit_face(script.weights(s)), ARKIT52), take)
     out = tmp_path / "calib.json"
     argv = ["calibrate", "--guided", str(take), "-o", str(out), "--tracker", "arkit"]
-    assert main([*argv, "--script", str(SHORT_FILE(tmp_path))]) == 0
+    assert main([*argv, "--script", str(short_file(tmp_path))]) == 0
     printed = capsys.readouterr().out
     rows = [line.split() for line in printed.splitlines()[1:6]]
     assert [r[0] for r in rows] == [p["id"] for p in SHORT["prompts"]]
@@ -91,7 +91,7 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
 
 
 def test_script_goes_only_where_a_guided_script_is_used(tmp_path, capsys):
-    path = SHORT_FILE(tmp_path)
+    path = short_file(tmp_path)
     take = tmp_path / "take.csv"
     io.save(Animation(np.arange(60) / 30, np.zeros((60, 52)), ARKIT52), take)
     for argv, words in (

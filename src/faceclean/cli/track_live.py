@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     if args.stats is not None and not MIN_STATS <= args.stats <= MAX_STATS:
         raise FacecleanError(f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} s")
     send = parse(args.send, "send")
-    ui.script(args, args.ui)  # a bad --script fails before the camera opens
+    script = ui.script(args, args.ui)  # a bad --script fails before the camera opens
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice)  # an offline cleaner is refused
     adjust = (options.calibration(args) or Adjust()).merged(choice.adjust(ARKIT52))
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         FaceTracker(model, lambda line: print(line, flush=True)) as tracker,
         Camera(source) as camera,
         Live(camera, tracker, cleaner, send, pose=pose, recorder=sink) as live,
-        ui.camera_page(args, live, camera, tap),
+        ui.camera_page(args, live, camera, tap, script),
     ):
 
         def stop(signum: int, frame: object) -> None:

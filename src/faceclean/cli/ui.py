@@ -124,16 +124,17 @@ def say(line: str) -> None:
 
 
 @contextlib.contextmanager
-def camera_page(args: argparse.Namespace, loop: Any, camera: Any, tap: Any) -> Iterator[Any]:
+def camera_page(args: argparse.Namespace, loop: Any, camera: Any, tap: Any,
+                script: Any = None) -> Iterator[Any]:  # fmt: skip
     """``track --camera --ui``: the page on the camera loop (faceclean.ui.camera) while the
-    block runs; nothing without a ``tap`` (no --ui)."""
+    block runs; nothing without a ``tap`` (no --ui). ``script``: ``--script``'s, loaded."""
     if tap is None:
         yield None
         return
     from faceclean.ui.camera import CameraPage
 
     session = CameraPage(tuning(args).with_choice(), loop, camera, tap, f"camera {args.camera}",
-                         nice=check_nice(args), say=say, script=script(args))  # fmt: skip
+                         nice=check_nice(args), say=say, script=script)  # fmt: skip
     session.mesh()  # the face built before the page asks
     loop.on_image = session.image
     session.start()
