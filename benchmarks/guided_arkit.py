@@ -50,6 +50,12 @@ WINDOW = 0.06  # s: a cleaned blink's peak is looked for within this of the read
 FULL = 0.95  # a blink at full closure
 
 
+def blink_frames(x: np.ndarray, name: str) -> np.ndarray:
+    """Frames of ``x`` (N, 52)'s blinks on lid ``name``: its peaks of prominence >=
+    ``metrics.BLINK_PROMINENCE``."""
+    return find_peaks(x[:, ARKIT52.index(name)], prominence=BLINK_PROMINENCE)[0]
+
+
 def stand_in(take: Animation, seed: int) -> Animation:
     """The script performed by a face that reads as ``take``'s performer (docstring)."""
     x = np.nan_to_num(take.arkit()[0])
@@ -57,8 +63,7 @@ def stand_in(take: Animation, seed: int) -> Animation:
     rest, reach = np.percentile(x, 5, axis=0), np.percentile(x, 99.5, axis=0)
     reach = np.where(reach - rest < MOVED, 1.0, reach)
     for name in BLINKS:  # a closed eye reads as the take's fullest blink
-        j = ARKIT52.index(name)
-        peaks, _ = find_peaks(x[:, j], prominence=BLINK_PROMINENCE)
+        j, peaks = ARKIT52.index(name), blink_frames(x, name)
         reach[j] = x[peaks, j].max() if len(peaks) else reach[j]
     d = np.diff(x, axis=0)
     sigma = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / np.sqrt(2)
@@ -80,8 +85,7 @@ def blinks(t: np.ndarray, raw: np.ndarray, outs: list[np.ndarray]) -> tuple[int,
     tops = [[] for _ in outs]
     n = 0
     for name in BLINKS:
-        j = ARKIT52.index(name)
-        peaks, _ = find_peaks(raw[:, j], prominence=BLINK_PROMINENCE)
+        j, peaks = ARKIT52.index(name), blink_frames(raw, name)
         n += len(peaks)
         for k, y in enumerate(outs):
             for p in peaks:

@@ -10,12 +10,10 @@ import sys
 import numpy as np
 import pytest
 from helpers import REPO, first_take
-from scipy.signal import find_peaks
 
 from faceclean import io
 from faceclean.adjust import apply_levels
 from faceclean.channels import ARKIT52
-from faceclean.evaluation.metrics import BLINK_PROMINENCE
 from faceclean.guided.fit import guided
 
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -34,8 +32,7 @@ def test_a_stand_in_for_a_takes_performer_calibrates_its_blinks_to_full_closure(
     assert not g.adjust.facts["guided"]["not_seen"]
     after = apply_levels(g.adjust.levels(ARKIT52), x)
     for name in guided_arkit.BLINKS:
-        j = ARKIT52.index(name)
-        peaks, _ = find_peaks(x[:, j], prominence=BLINK_PROMINENCE)
+        j, peaks = ARKIT52.index(name), guided_arkit.blink_frames(x, name)
         assert len(peaks) >= 3
         assert after[peaks, j].max() >= 0.95 > x[peaks, j].max()  # the fullest closes
         assert np.all(after[peaks, j] >= x[peaks, j] - 1e-9)  # none lower than read
