@@ -9,10 +9,16 @@ of those pairs (``--val``, default the largest), which they then do not train on
 judged on the held-out family's pairs of the held-out source (performances only, neutral
 holds apart), as MSE x raw MediaPipe. The residual LSTM trains on (the map's output,
 truth) pairs, so it corrects what the map leaves; at run time it steps after the map. The
-budget is stated by ``--epochs`` (``--epochs-alone``) and the wall time printed.
+budget is stated by ``--epochs`` (``--epochs-alone``, ``--patience``) and the wall time
+printed. A run is resumable: the map fitted is kept in ``--work`` and each LSTM continues
+from its last finished epoch there (``--fresh`` starts over), so an hours-long run can be
+stopped and started again.
 
     .venv/bin/python benchmarks/lstm_families.py ~/.cache/faceclean/families-net \\
         --family photo --source alexdjulin --epochs 20 --json /tmp/lstm-photo-alexdjulin.json
+    # a real budget, in the background (rerun the same line to continue after a stop):
+    .venv/bin/python benchmarks/lstm_families.py ~/.cache/faceclean/families-net \
+        --family photo --source alexdjulin --epochs 300 --patience 40 --lr 3e-4
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import numpy as np
 from faceclean.datasets import paired
 from faceclean.datasets.paired import Pair, performances
 from faceclean.learned.lstm import Learned
+from faceclean.learned.map_weights import MapWeights
 from faceclean.learned.tracker_map import TrackerMap
 from faceclean.neural import map_rises
 from faceclean.neural.pair_lstm import train_lstm
@@ -75,7 +82,14 @@ def main() -> None:
     ap.add_argument("--val", help="the training source the LSTMs stop on (default: largest)")
     ap.add_argument("--epochs", type=int, default=20, help="the residual LSTM's epochs")
     ap.add_argument("--epochs-alone", type=int, help="the LSTM alone's (default: --epochs)")
+    ap.add_argument(
+        "--patience",
+        type=int,
+        help="stop after this many epochs without a better validation loss (default: every epoch)",
+    )
+    ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--fresh", action="store_true", help="start over, not from --work")
     ap.add_argument("--work", default="/tmp/lstm-families")
     ap.add_argument("--json")
     args = ap.parse_args()
@@ -92,7 +106,12 @@ def main() -> None:
           f"LSTMs on {len(fit_on)}, stop on {len(val)} of {res['val']}, test {len(test)}",
           flush=True)  # fmt: skip
     t0 = time.time()
-    w = map_rises.fit(train)
+    kept = work / "map.npz"
+    if kept.exists() and not args.fresh:
+        w = MapWeights.load(kept)
+    else:
+        w = map_rises.fit(train)
+        w.save(kept)
     res["map s"] = time.time() - t0
     res["map"] = mse_ratio([mapped(w, p).tracked for p in test], test)
     res["map config"] = {k: w.config.get(k) for k in ("lam", "deadband", "passed", "own_rise")}
@@ -104,7 +123,9 @@ def main() -> None:
              args.epochs)):  # fmt: skip
         t0 = time.time()
         path = work / f"{label.replace(' ', '-')}.npz"
-        best = train_lstm(tr, va, path, epochs=epochs, threads=args.threads)
+        best = train_lstm(tr, va, path, epochs=epochs, threads=args.threads,
+                          patience=args.patience, lr=args.lr, resume=not args.fresh,
+                          report=lambda e: print(e, flush=True))  # fmt: skip
         outs = []
         for p in test:
             src = mapped(w, p).tracked if "map" in label else p.tracked
@@ -113,6 +134,7 @@ def main() -> None:
         res[f"{label} s"] = time.time() - t0
         res[f"{label} epochs"] = epochs
         res[f"{label} best epoch"] = best.get("epoch")
+        res[f"{label} val"] = best.get("val_mse")
         print(f"{label}: {res[label]:.3f}x raw, {epochs} epochs (best {best.get('epoch')}) "
               f"in {res[f'{label} s']:.0f} s", flush=True)  # fmt: skip
     if args.json:

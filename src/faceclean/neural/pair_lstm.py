@@ -4,7 +4,11 @@ Pairs become chunks of 200 frames with an overlap of 150 (SPEC section 2), the t
 channels mapped onto ARKit-52 (a channel the tracker lacks, tongueOut for MediaPipe, is 0
 in and out, so it costs nothing), lost frames held from the last delivered one and left
 out of the loss. Then the usual closed-loop training (neural/train.py's model and loss):
-Adam, clipped gradients, best epoch by the validation pairs' loss.
+Adam, clipped gradients, best epoch by the validation pairs' loss, stopped after
+``patience`` epochs without a better one. Every epoch also writes ``OUT.last.npz`` (the
+weights, Adam's moments and where the run stands), so a long run killed at any point
+continues from its last finished epoch with ``resume=True``: the batches of epoch e are
+drawn from ``seed, e`` alone, so the epochs after a resume see what they would have.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from faceclean.face.vertex_pairs import load_face
 from faceclean.neural import checkpoint
 from faceclean.neural.losses import Loss, Weights
 from faceclean.neural.model import LSTMCleaner
-from faceclean.neural.train import feature_stats
+from faceclean.neural.train import feature_stats, last_path
 
 T, STRIDE = 200, 50  # frames per chunk; 200 - 150 overlap
 Report = Callable[[dict[str, Any]], None]
@@ -87,9 +91,14 @@ def train_lstm(
     threads: int = 1,
     report: Report | None = None,
     stride: int = STRIDE,
+    patience: int | None = None,
+    lr: float = 1e-3,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Train the paper's LSTM on pairs; the best epoch by validation loss goes to ``out``.
-    ``stride``: frames between chunk starts (T: no overlap, a quarter of the work)."""
+    ``stride``: frames between chunk starts (T: no overlap, a quarter of the work).
+    ``patience``: stop after that many epochs without a better validation loss (None: run
+    every epoch). ``resume``: continue ``OUT.last.npz`` where it exists (else start)."""
     report = report or (lambda _e: None)
     torch.set_num_threads(max(1, threads))
     torch.manual_seed(seed)
@@ -97,12 +106,23 @@ def train_lstm(
     tr.truth[..., ARKIT52.index("tongueOut")] = 0.0
     va = chunks(performances(val), T) if performances(val) else tr  # not on clips
     va.truth[..., ARKIT52.index("tongueOut")] = 0.0
-    model = LSTMCleaner(ARKIT52, 1, hidden, layers, 0.3)
-    feature_stats(model, tr.noisy, tr.truth, tr.times)
+    last = last_path(out)
+    start, best, bad, record, optim_arrays = 0, math.inf, 0, {}, {}
+    if resume and last.exists():
+        model, saved, optim_arrays = checkpoint.load_training(last)
+        state = saved.get("train_state", {})
+        start, bad, record = state["epoch"] + 1, state["bad"], state["record"]
+        best = record.get("val_mse", math.inf)
+        report({"event": "resume", "epoch": start, "best": record})
+    else:
+        model = LSTMCleaner(ARKIT52, 1, hidden, layers, 0.3)
+        feature_stats(model, tr.noisy, tr.truth, tr.times)
     loss_fn = Loss(ARKIT52, load_face(None), Weights())
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-    best, record = math.inf, {}
-    for epoch in range(epochs):
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    checkpoint.load_optimizer(model, opt, optim_arrays)
+    for epoch in range(start, epochs):
+        if patience is not None and bad >= patience:
+            break
         model.train()
         rng = np.random.default_rng([seed, epoch])
         losses = []
@@ -125,8 +145,13 @@ def train_lstm(
              "val_mse": val_mse}  # fmt: skip
         report(e)
         if val_mse < best:
-            best, record = val_mse, e
+            best, record, bad = val_mse, e, 0
             checkpoint.save(model, out, extra={"best": e, "trained_on": "pairs"})
+        else:
+            bad += 1
+        state = {"epoch": epoch, "bad": bad, "record": record}
+        checkpoint.save(model, last, extra={"train_state": state, "trained_on": "pairs"},
+                        optimizer=opt)  # fmt: skip
     return record
 
 
