@@ -368,7 +368,8 @@ def test_rendered_guided_calibration_beats_the_shipped_map_on_another_clip(face)
     assert ad.rest and set(ad.rest) <= set(REST_INPUTS) and ad.rest_outputs == REST_OUTPUTS
     from faceclean.cli.calibrate_guided import report
 
-    assert any(line.startswith(f"rest reading of {len(ad.rest)} mouth") for line in report(fit))
+    said = f"rest reading of {len(ad.rest)} mouth and gaze"
+    assert any(line.startswith(said) for line in report(fit))
     shipped, calibrated = _mse(face, None), _mse(face, fit.adjust)
     assert calibrated < shipped, (calibrated, shipped)  # a little: docs/CALIBRATION.md
 
@@ -425,14 +426,14 @@ def test_live_records_the_script_from_a_vmc_stream_while_prompting():
 
 def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_path, capsys):
     # calibrate neutral.csv --tracker mediapipe: the levels as before, and the face's rest
-    # reading of the mouth as the map sees it after them; a smile held from a take's first
-    # frame then reads as held. An ARKit calibration has no reading.
+    # reading of the mouth and the gaze as the map sees it after them; a smile and a look
+    # down held from a take's first frame then read as held. An ARKit calibration has none.
     from faceclean import io
     from faceclean.calibration import calibrate
     from faceclean.trackers.mediapipe import NAMES
 
     rng = np.random.default_rng(3)
-    smile = NAMES.index("mouthSmileLeft")
+    smile, down = NAMES.index("mouthSmileLeft"), NAMES.index("eyeLookDownLeft")
     x = np.clip(0.05 + rng.normal(0, 0.003, (60, len(NAMES))), 0, 1)  # 2 s at rest
     neutral = Animation(np.arange(60) / 30.0, x, NAMES)
     io.save(neutral, tmp_path / "neutral.csv", fmt="csv")
@@ -443,11 +444,11 @@ def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_pa
     got = Adjust.load(calib)
     assert got.rules == calibrate(neutral, tracker="mediapipe").rules  # the levels as before
     rest = got.adaptation.rest
-    assert set(rest) <= set(REST_INPUTS) and "mouthSmileLeft" in rest
+    assert set(rest) <= set(REST_INPUTS) and {"mouthSmileLeft", "eyeLookDownLeft"} <= set(rest)
     assert rest["mouthSmileLeft"] == pytest.approx(0.0, abs=0.01)  # levelled: neutral is 0
     t = np.arange(90) / 30.0
     y = np.full((90, len(NAMES)), 0.05)
-    y[:, smile] = 0.4  # held from the first frame
+    y[:, smile] = y[:, down] = 0.4  # held from the first frame
     io.save(Animation(t, y, NAMES), tmp_path / "take.csv", fmt="csv")
     outs = {}
     for label, path in (("with", calib), ("without", None)):
@@ -455,8 +456,8 @@ def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_pa
         more = ["--calibration", str(path)] if path else []
         assert main(["clean", str(tmp_path / "take.csv"), "-o", str(dest),
                      "--tracker", "mediapipe", *more]) == 0  # fmt: skip
-        outs[label] = io.load(dest).values[t > 1.0, smile]
-    assert outs["with"].min() > outs["without"].max() + 0.2
+        outs[label] = io.load(dest).values[t > 1.0][:, [smile, down]]
+    assert (outs["with"].min(axis=0) > outs["without"].max(axis=0) + 0.2).all()
     arkit = tmp_path / "a.json"
     assert main(["calibrate", str(tmp_path / "neutral.csv"), "-o", str(arkit)]) == 0
     assert Adjust.load(arkit).adaptation is None

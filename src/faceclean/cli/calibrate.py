@@ -42,7 +42,8 @@ guided (a script of prompts; its take adapts the cleaner to one face):
   faceclean calibrate --guided guided.csv -o calib.json --tracker mediapipe
   faceclean calibrate --guided --live vmc://:39540 -o calib.json --tracker mediapipe
 with --tracker mediapipe (no --rom) the file also holds the face's rest reading of the
-mouth, which the shipped MediaPipe map measures the mouth's and cheeks' rises from;
+mouth and the gaze, which the shipped MediaPipe map measures the mouth's, cheeks' and
+gaze's rises from;
 neutral maps to 0; with --rom (or for a tracker's weak channels) each channel's observed
 top (99.5th percentile) maps to 1, the gain capped; eyelids stay blink-aware (blinks still
 close fully); every channel whose gain exceeds 2 is printed.
@@ -149,8 +150,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if adjust.adaptation is not None:
         n, m = len(adjust.adaptation.rest), len(adjust.adaptation.rest_outputs)
-        print(f"rest reading of {n} mouth channels for the shipped MediaPipe map: {m} mouth "
-              "and cheek channels rise from it")  # fmt: skip
+        print(f"rest reading of {n} mouth and gaze channels for the shipped MediaPipe map: "
+              f"{m} mouth, cheek and gaze channels rise from it")  # fmt: skip
     high = high_gains(adjust)
     if high:
         print(f"gain above {REPORT_GAIN:g} on {len(high)} channel{'s' * (len(high) > 1)}:")

@@ -82,8 +82,8 @@ def report(result) -> list[str]:
             lines.append(f"  {o:<20} {what} {1 + v if o == i else v:+.3f}")
         if ad.rest:
             n, m = len(ad.rest), len(ad.rest_outputs)
-            lines.append(f"rest reading of {n} mouth channels (this face's neutral): "
-                         f"{m} mouth and cheek channels rise from it")  # fmt: skip
+            lines.append(f"rest reading of {n} mouth and gaze channels (this face's "
+                         f"neutral): {m} mouth, cheek and gaze channels rise from it")  # fmt: skip
     else:
         chans = adjust.facts.get("channels", {})
         lifted = adjust.facts.get("lifted", [])

@@ -19,11 +19,13 @@
   neighbour must move clearly to correct a channel). A channel no seen prompt aims at
   is not touched; a channel that did not move (a still face) keeps D near 0. The result
   is ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
-  With it, the face's own resting reading of the mouth's inputs (REST_INPUTS: u, as the
-  cleaner's pre-filter gives it, the median over the same rests): the cleaner then
-  measures the mouth's and the cheeks' rises (REST_OUTPUTS) from the lower of it and the
-  stream's own rest, so a mouth a performer holds slightly set from the first frame reads
-  as set, not as a rest (learned/tracker_map.py ``set_rest_reading``).
+  With it, the face's own resting reading of the mouth's and the gaze's inputs
+  (REST_INPUTS: u, as the cleaner's pre-filter gives it, the median over the same rests):
+  the cleaner then measures the mouth's, the cheeks' and the gaze's rises (REST_OUTPUTS)
+  from the lower of it and the stream's own rest, so a mouth a performer holds slightly
+  set from the first frame reads as set, not as a rest, and eyes that look down at a
+  phone for a whole take read as looking down, not ahead (learned/tracker_map.py
+  ``set_rest_reading``).
 - ``arkit``: per-channel levels before the cleaner (faceclean.adjust, as ``calibrate``
   writes): neutral = median over the neutral holds; a channel that a seen prompt aims at
   (target v) and that rose there maps the HOLD_Q-th percentile of its hold onto v (gain
@@ -67,9 +69,13 @@ HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it r
 # input for every output did best; on the four faces of docs/CALIBRATION.md it took
 # photographed faces' jaw and brows above raw (a photograph's brows and lids read their
 # own rest), where the mouth alone gained on all seven and on three more rendered after
-# the choice (docs/CALIBRATION.md, "The rest reading").
-REST_INPUTS = GROUPS["mouth"]
-REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"]
+# the choice (docs/CALIBRATION.md, "The rest reading"). Gaze too, each look from its own
+# reading (the map reads gaze as its own rise): where a performer looks somewhere for a
+# whole take the stream's rest holds the look, and the neutral ("look straight ahead")
+# does not; better on all ten faces, guided and from a neutral hold alike ("Gaze").
+GAZE = tuple(n for n in GROUPS["eyes"] if n.startswith("eyeLook"))
+REST_INPUTS = GROUPS["mouth"] + GAZE
+REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"] + GAZE
 
 
 @dataclass(frozen=True)
