@@ -336,3 +336,28 @@ def test_a_take_all_lost_says_so(tmp_path, capsys):
     assert main(["calibrate", str(path), "-o", str(tmp_path / "c.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "faceclean: calibration: every frame of the take is a tracking loss"
+
+
+def test_a_live_neutral_puts_no_levels_before_a_cleaner_that_reads_the_rest_itself():
+    # relay --tracker mediapipe --calibrate-seconds: the MediaPipe map measures this stream's
+    # rises from its own rest and was fitted on raw scores, so the measured neutral adds no
+    # levels before it (its output is the map's own); a filter gets the levels as before.
+    from faceclean.calibration import LiveCalibration
+    from faceclean.resolve import resolve, tracker_words
+
+    rng = np.random.default_rng(4)
+    t = np.arange(120) / 30.0
+    x = np.clip(0.2 + rng.normal(0, 0.01, (120, 52)), 0, 1)  # resting high, then a smile
+    x[60:, INDEX["mouthSmileLeft"]] = 0.7
+    build = resolve(tracker_words("mediapipe")).build
+    live, plain = LiveCalibration(build(ARKIT52), 1.0), build(ARKIT52)
+    got = np.array([live.step(x[k], t[k]) for k in range(120)])
+    want = np.array([plain.step(x[k], t[k]) for k in range(120)])
+    assert live.reads_rest and live.adjust is not None
+    assert live.adjust.rules == () and live.adjust.facts["levels"] == "none"
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    ema = LiveCalibration(filters.make("ema"), 1.0)
+    for k in range(60):
+        ema.step(x[k], t[k])
+    assert not ema.reads_rest
+    assert ema.adjust.levels(ARKIT52).offset[INDEX["jawOpen"]] == pytest.approx(0.2, abs=0.01)

@@ -425,9 +425,9 @@ def test_live_records_the_script_from_a_vmc_stream_while_prompting():
 
 
 def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_path, capsys):
-    # calibrate neutral.csv --tracker mediapipe: the levels as before, and the face's rest
-    # reading of the mouth and the gaze as the map sees it after them; a smile and a look
-    # down held from a take's first frame then read as held. An ARKit calibration has none.
+    # calibrate neutral.csv --tracker mediapipe: the face's rest reading of the mouth and the
+    # gaze as the map sees it, and no levels before the map; a smile and a look down held
+    # from a take's first frame then read as held. An ARKit calibration has levels only.
     from faceclean import io
     from faceclean.calibration import calibrate
     from faceclean.trackers.mediapipe import NAMES
@@ -440,12 +440,13 @@ def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_pa
     calib = tmp_path / "c.json"
     assert main(["calibrate", str(tmp_path / "neutral.csv"), "-o", str(calib),
                  "--tracker", "mediapipe"]) == 0  # fmt: skip
-    assert "rest reading of" in capsys.readouterr().out
+    assert "the face's rest reading of" in capsys.readouterr().out
     got = Adjust.load(calib)
-    assert got.rules == calibrate(neutral, tracker="mediapipe").rules  # the levels as before
+    assert got.rules == () and got.facts["levels"] == "none"  # the map reads raw scores
+    assert any("no levels" in line for line in got.describe())
     rest = got.adaptation.rest
     assert set(rest) <= set(REST_INPUTS) and {"mouthSmileLeft", "eyeLookDownLeft"} <= set(rest)
-    assert rest["mouthSmileLeft"] == pytest.approx(0.0, abs=0.01)  # levelled: neutral is 0
+    assert rest["mouthSmileLeft"] == pytest.approx(0.05, abs=0.01)  # the raw neutral
     t = np.arange(90) / 30.0
     y = np.full((90, len(NAMES)), 0.05)
     y[:, smile] = y[:, down] = 0.4  # held from the first frame
@@ -460,4 +461,5 @@ def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_pa
     assert (outs["with"].min(axis=0) > outs["without"].max(axis=0) + 0.2).all()
     arkit = tmp_path / "a.json"
     assert main(["calibrate", str(tmp_path / "neutral.csv"), "-o", str(arkit)]) == 0
-    assert Adjust.load(arkit).adaptation is None
+    got = Adjust.load(arkit)
+    assert got.adaptation is None and got.rules == calibrate(neutral).rules

@@ -236,6 +236,12 @@ class Adjust:
                 f"{facts.get('tracker', '?')}): {len(seen)} of {len(seen) + len(missed)} "
                 "prompts seen" + (f"; not seen: {', '.join(missed)}" if missed else "")
             )
+        elif facts.get("levels") == "none":  # calibrate --tracker mediapipe: the map's rest
+            lines.append(
+                f"calibrated from {facts.get('take', 'a take')}: {facts.get('frames', '?')} "
+                f"frames, neutral {facts.get('neutral_s', '?')} s; no levels (the cleaner "
+                "reads the face's rest)"
+            )
         elif facts:
             src = facts.get("take", "a take")
             lines.append(
@@ -251,6 +257,7 @@ class Adjust:
             lines.append(
                 f"adaptation after the cleaner ({ad.facts.get('cleaner', '?')}): "
                 f"{len(ad.channels)} channels corrected, {cross} cross-channel terms"
+                + (f"; the face's rest reading of {len(ad.rest)} channels" if ad.rest else "")
             )
         return lines or ["identity (no level mapping)"]
 

@@ -190,7 +190,10 @@ class LiveCalibration(Stepper):
     neutral measured over those seconds (the tops of ``base``'s calibration kept when it
     has them, else blink-aware defaults: ``calibrate`` above), then ``overrides`` on top.
     ``reset()`` (a new stream) forgets the measured neutral: each stream calibrates on
-    its own first seconds.
+    its own first seconds. A cleaner that reads the face's rest itself (the MediaPipe map,
+    ``set_rest_reading``) gets no levels: it was fitted on raw scores and already measures
+    this stream's rises from its own rest (levels before it cost on 7 of 10 held-out
+    faces: docs/CALIBRATION.md); the facts then say ``"levels": "none"``.
     ``on_done(adjust)`` is called once per stream when the mapping is measured.
     """
 
@@ -207,6 +210,7 @@ class LiveCalibration(Stepper):
             raise FacecleanError(f"--calibrate-seconds must be > 0 (got {seconds})")
         self.inner, self.seconds, self.names, self.on_done = inner, float(seconds), names, on_done
         self.name = getattr(inner, "name", "cleaner")
+        self.reads_rest = getattr(inner, "set_rest_reading", None) is not None
         self.base, self.overrides = base or Adjust(), overrides or Adjust()
         self._before = self.base.merged(self.overrides).levels(names)
         self._tops = tops_of(self.base)
@@ -247,6 +251,8 @@ class LiveCalibration(Stepper):
                 self._t, self._x = [], []
             return
         live = calibrate(anim, elapsed + 1e-9, tops=self._tops or None, take="live")
+        if self.reads_rest:
+            live = Adjust((), {**live.facts, "levels": "none"})
         self.adjust = self.base.merged(live).merged(self.overrides)
         self._levels = self.adjust.levels(self.names)
         self._t, self._x = [], []

@@ -92,3 +92,20 @@ def test_the_mediapipe_map_offers_its_detail_per_channel():
     assert not np.allclose(a[:, jaw], b[:, jaw]) and np.allclose(
         np.delete(a, jaw, axis=1), np.delete(b, jaw, axis=1), equal_nan=True
     )
+
+
+def test_a_neutral_on_the_page_is_the_calibrate_commands_for_its_cleaner():
+    # the Calibrate button: levels for a filter; for the MediaPipe map (--tracker mediapipe)
+    # the face's rest reading as the map sees it and no levels, as `calibrate --tracker
+    # mediapipe` writes it
+    from faceclean.trackers.mediapipe import NAMES
+
+    rng = np.random.default_rng(5)
+    x = np.clip(0.1 + rng.normal(0, 0.003, (60, len(NAMES))), 0, 1)
+    hold = Animation(np.arange(60) / 30.0, x, NAMES)
+    mp = Tuning(tracker="mediapipe").with_choice().neutral(hold, 1.0, "live")
+    assert mp.rules == () and mp.facts["levels"] == "none"
+    assert mp.adaptation.rest["mouthSmileLeft"] == pytest.approx(0.1, abs=0.01)
+    assert "eyeLookDownLeft" in mp.adaptation.rest_outputs
+    filt = Tuning("one-euro").with_choice().neutral(hold, 1.0, "live")
+    assert filt.adaptation is None and filt.rules

@@ -41,11 +41,11 @@ guided (a script of prompts; its take adapts the cleaner to one face):
   faceclean calibrate --print-script                 the prompts, their times and aims
   faceclean calibrate --guided guided.csv -o calib.json --tracker mediapipe
   faceclean calibrate --guided --live vmc://:39540 -o calib.json --tracker mediapipe
-with --tracker mediapipe (no --rom) the file also holds the face's rest reading of the
-mouth and the gaze, which the shipped MediaPipe map measures the mouth's, cheeks' and
-gaze's rises from;
-neutral maps to 0; with --rom (or for a tracker's weak channels) each channel's observed
-top (99.5th percentile) maps to 1, the gain capped; eyelids stay blink-aware (blinks still
+with --tracker mediapipe (no --rom) the file holds the face's rest reading of the mouth
+and the gaze, which the shipped MediaPipe map measures the mouth's, cheeks' and gaze's
+rises from, and no levels (the map was fitted on MediaPipe's raw scores); otherwise
+neutral maps to 0; with --rom each channel's observed top (99.5th percentile) maps to 1,
+the gain capped; eyelids stay blink-aware (blinks still
 close fully); every channel whose gain exceeds 2 is printed.
 """
 
@@ -137,9 +137,16 @@ def run(args: argparse.Namespace) -> int:
         anim, args.neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker
     )
     if args.tracker == "mediapipe" and not args.rom:  # the face's rest reading, for the map
-        from faceclean.guided.fit import with_rest_reading
+        from faceclean.guided.fit import rest_calibration
 
-        adjust = with_rest_reading(anim, adjust, adjust.facts["neutral_s"])
+        facts = {k: adjust.facts[k] for k in ("take", "frames", "neutral_s", "tracker", "rom")}
+        adjust = rest_calibration(anim, facts["neutral_s"], facts)
+        adjust.save(args.output)
+        n = len(adjust.adaptation.rest) if adjust.adaptation is not None else 0
+        print(f"wrote {args.output}: the face's rest reading of {n} mouth and gaze channels "
+              f"from the first {facts['neutral_s']:.2f} s, for the shipped MediaPipe map; no "
+              "levels before it (the map measures rises itself: docs/CALIBRATION.md)")  # fmt: skip
+        return 0
     adjust.save(args.output)
     facts = adjust.facts
     print(
@@ -148,10 +155,6 @@ def run(args: argparse.Namespace) -> int:
         f"lifted to their top ({'range of motion' if args.rom else f'tracker {args.tracker}'}), "
         f"{len(facts['closed'])} eyelids scaled to close (their blinks)"
     )
-    if adjust.adaptation is not None:
-        n, m = len(adjust.adaptation.rest), len(adjust.adaptation.rest_outputs)
-        print(f"rest reading of {n} mouth and gaze channels for the shipped MediaPipe map: "
-              f"{m} mouth, cheek and gaze channels rise from it")  # fmt: skip
     high = high_gains(adjust)
     if high:
         print(f"gain above {REPORT_GAIN:g} on {len(high)} channel{'s' * (len(high) > 1)}:")

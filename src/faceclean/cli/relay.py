@@ -103,6 +103,10 @@ def with_levels(args: argparse.Namespace, choice: Choice, cleaner: Any) -> tuple
     if args.calibrate_seconds is not None:
 
         def done(adjust: Adjust) -> None:
+            if adjust.facts.get("levels") == "none":
+                print(f"neutral held: {choice.source} reads this stream's rest itself, no "
+                      "levels before it", flush=True)  # fmt: skip
+                return
             n = len(adjust.facts.get("channels", {}))
             print(f"calibrated the neutral of {n} channels", flush=True)
 

@@ -137,20 +137,25 @@ def rest_reading(anim: Animation, cleaner: Any, at_rest: np.ndarray) -> dict[str
     return {n: float(np.median(u[keep, w.inputs.index(n)])) for n in names}
 
 
-def with_rest_reading(anim: Animation, adjust: Adjust, neutral_s: float) -> Adjust:
-    """``adjust`` (a neutral calibration's levels for MediaPipe) with the face's rest
-    reading of its first ``neutral_s`` s, as the shipped map sees it after those levels
-    (unchanged where there is none). On ten held-out faces the levels alone gave 0.97-1.05x
-    the shipped cleaner's MSE, with the reading 0.88-1.02x, better on every face
-    (docs/CALIBRATION.md)."""
-    cleaner, label = shipped_cleaner("mediapipe", anim.names)
-    levelled = Animation(anim.times, adjust.apply(anim.values, anim.names), anim.names)
+def rest_calibration(
+    anim: Animation, neutral_s: float, facts: dict[str, Any], cleaner: Any = None
+) -> Adjust:
+    """A neutral calibration for the shipped MediaPipe map (or ``cleaner``, a tracker map
+    of the page's choice): the face's rest reading over the first ``neutral_s`` s of
+    ``anim``, and no levels (``facts``: the calibration's, marked ``"levels": "none"``).
+    The map was fitted on MediaPipe's raw scores and measures rises itself: levels before
+    it (the neutral subtracted, the range stretched) cost on seven of ten held-out faces
+    (up to 1.20x its MSE), the reading alone gains on all ten (0.77-1.00x;
+    docs/CALIBRATION.md, "A neutral hold for the map")."""
+    if cleaner is None:
+        cleaner, label = shipped_cleaner("mediapipe", anim.names)
+    else:
+        label = getattr(cleaner, "name", "tracker map")
     hold = anim.times - anim.times[0] <= neutral_s
-    reading = rest_reading(levelled, cleaner, hold)
-    if not reading:
-        return adjust
-    rest = Adaptation({}, {}, "mediapipe", {"cleaner": label}, reading, REST_OUTPUTS)
-    return Adjust(adjust.rules, adjust.facts, adjust.scale, rest)
+    reading = rest_reading(anim, cleaner, hold)
+    rest = (Adaptation({}, {}, "mediapipe", {"cleaner": label}, reading, REST_OUTPUTS)
+            if reading else None)  # fmt: skip
+    return Adjust((), {**facts, "levels": "none"}, adaptation=rest)
 
 
 def guided(

@@ -270,7 +270,7 @@ class Live(Base):
 
     def _calibration(self) -> None:
         """The countdown, then the measured neutral swapped in (on the push thread)."""
-        from faceclean.calibration import calibrate, tops_of
+        from faceclean.calibration import tops_of
 
         with self.lock:
             if self.calibrating is None or self.tap.hold is None:
@@ -291,7 +291,7 @@ class Live(Base):
         try:
             old = self.tuning.calibration
             tops = tops_of(old) if old is not None else None
-            live = calibrate(anim, elapsed + 1e-9, tops=tops or None, take="live")
+            live = self.tuning.neutral(anim, elapsed + 1e-9, "live", tops or None)
             live = _with_hold(live, hold[0][0], hold[-1][0])
             self.use(self.tuning.calibrated(live).with_choice(), None, "calibrate")
         except FacecleanError as e:
@@ -300,7 +300,8 @@ class Live(Base):
 
 def _with_hold(adjust: Adjust, t0: float, t1: float) -> Adjust:
     """The calibration with the sender times (s) of its neutral hold in its facts."""
-    return Adjust(adjust.rules, {**adjust.facts, "hold": [t0, t1]})
+    return Adjust(adjust.rules, {**adjust.facts, "hold": [t0, t1]}, adjust.scale,
+                  adjust.adaptation)  # fmt: skip
 
 
 def _rows(a: np.ndarray) -> list[list[float | None]]:

@@ -119,14 +119,12 @@ class Offline(Base):
         self.window = (t0, t1)
 
     def on_calibrate(self, client: Client, m: dict[str, Any]) -> None:
-        from faceclean.calibration import calibrate
-
         seconds = number(m, "seconds", 0.05, MAX_NEUTRAL, 1.0)
         start = number(m, "start", 0.0, 1e9, 0.0)
         t = self.times - np.nanmin(self.times)
         keep = np.flatnonzero(~(t < start))  # from the playhead on (NaN times kept)
         part = Animation(self.times[keep], self.take.values[keep], self.take.names)
-        adjust = calibrate(part, seconds, take=self.path.name)
+        adjust = self.tuning.neutral(part, seconds, self.path.name)
         self.use(self.tuning.calibrated(adjust).with_choice(), seq(m), "calibrate")
 
     def on_export(self, client: Client, m: dict[str, Any]) -> None:

@@ -76,6 +76,24 @@ class Tuning:
     def calibrated(self, adjust: Adjust | None, path: str | None = None) -> Tuning:
         return replace(self, calibration=adjust, calibration_file=path)
 
+    def neutral(
+        self, anim: Animation, seconds: float, take: str, tops: dict[str, float] | None = None
+    ) -> Adjust:
+        """The calibration of a neutral hold (``anim``'s first ``seconds``) for this
+        tuning's cleaner, as ``calibrate`` writes it: levels (``tops`` kept), or, for a
+        cleaner that reads the face's rest itself (the MediaPipe map), that reading and no
+        levels (guided.fit.rest_calibration: levels before the map cost on 7 of 10 faces)."""
+        from faceclean.calibration import calibrate
+
+        live = calibrate(anim, seconds, tops=tops, take=take)
+        cleaner = self.choice.build(anim.names)
+        if getattr(cleaner, "set_rest_reading", None) is None:
+            return live
+        from faceclean.guided.fit import rest_calibration
+
+        facts = {k: live.facts[k] for k in ("take", "frames", "neutral_s")}
+        return rest_calibration(anim, facts["neutral_s"], facts, cleaner)
+
     # -- the cleaner, as the CLI builds it -----------------------------------------------
     def levels(self, names: Sequence[str] = ARKIT52) -> Adjust:
         """The level mapping before the cleaner: calibration, then the level items."""
