@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
-    _check_outputs(args)  # before torch is imported: a refusal is immediate
+    check_outputs(args)  # before torch is imported: a refusal is immediate
     args.threads, note = workers.count(args.threads, None, flag="--threads")
     if note:
         print(note, file=sys.stderr)
@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
+def check_outputs(args: argparse.Namespace) -> None:
     """--out (and the resumable MODEL.last.npz beside it) checked now with the -o policy,
     not after the training (a take of --data is protected as every input is).
     A run may replace the files it writes even when it resumes from one of them

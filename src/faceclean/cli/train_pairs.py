@@ -9,8 +9,11 @@ one) are held out of fitting and used for early stopping and the choice of pre-f
 pairs of one look never use the ``window`` render setting (held out for the tracker
 table), while pairs of several appearance families (``pairs --families``) use every
 setting: the map's choices are made leaving a family and a source out at once
-(neural/map_groups.py). A pair's calibration clip (``pairs --rom``: its NAME.rom.tracked +
-NAME.rom.truth) trains with it, as a pair of its own. The written model runs with
+(neural/map_groups.py). ``lstm`` stops after ``--patience`` epochs without a better
+validation loss and writes ``OUT.last.npz`` every epoch: ``--resume OUT.last.npz``
+continues a run that was stopped (``--epochs`` may be raised). A pair's calibration clip
+(``pairs --rom``: its NAME.rom.tracked + NAME.rom.truth) trains with it, as a pair of its
+own. The written model runs with
 ``--model M.npz``.
 
 Only real pairs train (``paired.usable``): a value that is infinite or beyond 1e6 is read
@@ -36,9 +39,21 @@ def run(args: argparse.Namespace) -> int:
         )
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
+    if args.resume:  # torch-free: a refusal is immediate
+        from pathlib import Path
+
+        last = Path(args.out).with_name(Path(args.out).stem + ".last.npz")  # train.last_path
+        if args.arch != "lstm" or Path(args.resume).resolve() != last.resolve():
+            raise FacecleanError(f"with --pairs, --resume continues an lstm run: give --arch "
+                                 f"lstm --resume {last}")  # fmt: skip
     from faceclean.io.atomic import writable
 
-    writable(args.out)  # refused now, not after the training
+    if args.arch == "lstm":  # OUT and OUT.last.npz, which a resumed run rewrites
+        from faceclean.cli.train import check_outputs
+
+        check_outputs(args)
+    else:
+        writable(args.out)  # refused now, not after the training
     pairs = paired.load(args.pairs)
     arch = args.arch or ("rises" if len({p.family for p in pairs}) > 1 else "map")
     if len({p.family for p in pairs}) < 2:  # one look: the window setting is what is held out
@@ -125,7 +140,8 @@ def run(args: argparse.Namespace) -> int:
         epochs = args.epochs or 8
         try:
             best = train_lstm(train, val, args.out, epochs=epochs, seed=args.seed,
-                              threads=args.threads, report=report)  # fmt: skip
+                              threads=args.threads, report=report, patience=args.patience,
+                              resume=bool(args.resume))  # fmt: skip
         except FacecleanError as e:
             raise FacecleanError(f"{e}{_poisoned(raw)}") from None
         print(f"wrote {args.out}: lstm, validation MSE {best.get('val_mse', float('nan')):.5f}")
