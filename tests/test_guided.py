@@ -463,3 +463,17 @@ def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_pa
     assert main(["calibrate", str(tmp_path / "neutral.csv"), "-o", str(arkit)]) == 0
     got = Adjust.load(arkit)
     assert got.adaptation is None and got.rules == calibrate(neutral).rules
+
+
+def test_a_mediapipe_neutral_without_mouth_or_gaze_channels_is_refused(tmp_path, capsys):
+    # nothing the map reads at rest: one line, exit 2, no file (not an identity calibration)
+    from faceclean import io
+
+    t = np.arange(60) / 30.0
+    io.save(Animation(t, np.full((60, 2), 0.05), ("eyeBlinkLeft", "browInnerUp")),
+            tmp_path / "n.csv", fmt="csv")  # fmt: skip
+    out = tmp_path / "c.json"
+    code = main(["calibrate", str(tmp_path / "n.csv"), "-o", str(out), "--tracker", "mediapipe"])
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists()
+    assert "no mouth or gaze channel" in err and err.count("\n") == 1

@@ -141,8 +141,11 @@ def run(args: argparse.Namespace) -> int:
 
         facts = {k: adjust.facts[k] for k in ("take", "frames", "neutral_s", "tracker", "rom")}
         adjust = rest_calibration(anim, facts["neutral_s"], facts)
+        if adjust.adaptation is None:  # nothing to write: an identity file helps no one
+            raise FacecleanError(f"{Path(args.take).name}: no mouth or gaze channel to read "
+                                 "at rest (a MediaPipe take has them)")  # fmt: skip
         adjust.save(args.output)
-        n = len(adjust.adaptation.rest) if adjust.adaptation is not None else 0
+        n = len(adjust.adaptation.rest)
         print(f"wrote {args.output}: the face's rest reading of {n} mouth and gaze channels "
               f"from the first {facts['neutral_s']:.2f} s, for the shipped MediaPipe map; no "
               "levels before it (the map measures rises itself: docs/CALIBRATION.md)")  # fmt: skip
