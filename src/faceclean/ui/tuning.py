@@ -92,7 +92,10 @@ class Tuning:
         from faceclean.guided.fit import rest_calibration
 
         facts = {k: live.facts[k] for k in ("take", "frames", "neutral_s")}
-        return rest_calibration(anim, facts["neutral_s"], facts, cleaner)
+        adjust = rest_calibration(anim, facts["neutral_s"], facts, cleaner)
+        if adjust.adaptation is None:
+            raise FacecleanError("no mouth or gaze channel to read at rest: nothing calibrated")
+        return adjust
 
     # -- the cleaner, as the CLI builds it -----------------------------------------------
     def levels(self, names: Sequence[str] = ARKIT52) -> Adjust:
