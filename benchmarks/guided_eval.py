@@ -57,6 +57,11 @@ RATE = 24.0  # Hz
 TAKES = "../shared/data/arkit_takes/*/*.csv"
 MODEL = "src/faceclean/models/mediapipe.npz"
 ROWS = ("shipped", "rom", "guided", "oracle")
+# docs/RESULTS.md's sections (--markdown): the table's faces, and the reserved photographs
+SECTIONS = {False: ("<!-- guided calibration: begin -->", "<!-- guided calibration: end -->",
+                    "Guided calibration on faces no fit saw (issue 35)"),
+            True: ("<!-- guided reserved: begin -->", "<!-- guided reserved: end -->",
+                   "Guided calibration on the reserved photographs (reported only)")}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -369,6 +374,8 @@ def main() -> None:
                    help="faces of the reserved photographs (photo:SEED:astronaut, "
                    "photo:SEED:grace_hopper): reported, never a choice")  # fmt: skip
     p.add_argument("--json", help="write the numbers here")
+    p.add_argument("--markdown", metavar="PAGE", help="splice the tables into this page "
+                   "(docs/RESULTS.md), a section of its own")  # fmt: skip
     p.add_argument("--table", metavar="JSON", help="print the markdown tables of a result")
     args = p.parse_args()
     if args.table:
@@ -393,6 +400,23 @@ def main() -> None:
     if args.json:
         text = json.dumps(finite(result), indent=1, allow_nan=False)
         Path(args.json).write_text(text + "\n")
+    if args.markdown:
+        from faceclean.evaluation.tracker_results import insert
+
+        begin, end, title = SECTIONS[args.reserved]
+        section = "\n".join([
+            begin, "", f"## {title}", "",
+            f"`benchmarks/guided_eval.py{' --reserved' if args.reserved else ''} --faces "
+            f"{' '.join(f.spec for f in faces)} --takes {args.takes} --seconds "
+            f"{args.seconds:g}` (docs/CALIBRATION.md says how each row is made; model "
+            f"{result['model']['commit']}). Test: {args.seconds:g} s of each of "
+            f"{', '.join(result['takes'])} on the face; MSE x raw MediaPipe, overall and per "
+            "group; blink closure = output peak / true peak. Then the clips that are not the "
+            "script: what the command says, and the test MSE of a `--partial` calibration "
+            "from them over the shipped cleaner's.", "", *table(finite(result)), "",
+            end])  # fmt: skip
+        page = Path(args.markdown)
+        page.write_text(insert(page.read_text(), section, begin, end))
 
 
 if __name__ == "__main__":
