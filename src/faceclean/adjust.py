@@ -236,21 +236,16 @@ class Adjust:
                 f"{facts.get('tracker', '?')}): {len(seen)} of {len(seen) + len(missed)} "
                 "prompts seen" + (f"; not seen: {', '.join(missed)}" if missed else "")
             )
-        elif facts.get("levels") == "none":  # calibrate --tracker mediapipe: the map's rest
-            lines.append(
-                f"calibrated from {facts.get('take', 'a take')}: {facts.get('frames', '?')} "
-                f"frames, neutral {facts.get('neutral_s', '?')} s; no levels (the cleaner "
-                "reads the face's rest)"
-            )
         elif facts:
-            src = facts.get("take", "a take")
-            lines.append(
-                f"calibrated from {src}: {facts.get('frames', '?')} frames, "
-                f"neutral {facts.get('neutral_s', '?')} s; "
-                f"{len(facts.get('moved', []))} channels moved, "
-                f"{len(facts.get('lifted', []))} lifted to their top, "
-                f"{len(facts.get('closed', []))} eyelids scaled to close (their blinks)"
-            )
+            levels = (  # "none": calibrate --tracker mediapipe, the map reads the rest itself
+                "no levels (the cleaner reads the face's rest)" if facts.get("levels") == "none"
+                else f"{len(facts.get('moved', []))} channels moved, {len(facts.get('lifted', []))}"
+                f" lifted to their top, {len(facts.get('closed', []))} eyelids scaled to close "
+                "(their blinks)"
+            )  # fmt: skip
+            lines.append(f"calibrated from {facts.get('take', 'a take')}: "
+                         f"{facts.get('frames', '?')} frames, neutral "
+                         f"{facts.get('neutral_s', '?')} s; {levels}")  # fmt: skip
         ad = self.adaptation
         if ad is not None:
             cross = sum(1 for o, row in ad.matrix.items() for i in row if i != o)

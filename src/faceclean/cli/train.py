@@ -117,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
     if args.pairs:
         from faceclean.cli import train_pairs
 
+        if args.arch == "lstm" and args.out and args.out.endswith(".npz"):
+            check_outputs(args)  # OUT and OUT.last.npz, which a resumed run rewrites
         return train_pairs.run(args)
     args.arch = args.arch or "adaptive"
     if args.arch in ("map", "rises", "ridge"):

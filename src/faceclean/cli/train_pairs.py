@@ -48,11 +48,7 @@ def run(args: argparse.Namespace) -> int:
                                  f"lstm --resume {last}")  # fmt: skip
     from faceclean.io.atomic import writable
 
-    if args.arch == "lstm":  # OUT and OUT.last.npz, which a resumed run rewrites
-        from faceclean.cli.train import check_outputs
-
-        check_outputs(args)
-    else:
+    if args.arch != "lstm":  # lstm: OUT and OUT.last.npz, checked by cli/train.py's run
         writable(args.out)  # refused now, not after the training
     pairs = paired.load(args.pairs)
     arch = args.arch or ("rises" if len({p.family for p in pairs}) > 1 else "map")
