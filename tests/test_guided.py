@@ -477,3 +477,25 @@ def test_a_mediapipe_neutral_without_mouth_or_gaze_channels_is_refused(tmp_path,
     err = capsys.readouterr().err
     assert code == 2 and not out.exists()
     assert "no mouth or gaze channel" in err and err.count("\n") == 1
+
+
+def test_a_rest_reading_given_to_a_cleaner_that_reads_none_is_said(tmp_path, capsys):
+    # calibrate --tracker mediapipe holds no levels: with another cleaner it changes nothing,
+    # and clean says so in one warning line (the map itself takes it without a word)
+    from faceclean import io
+    from faceclean.trackers.mediapipe import NAMES
+
+    x = np.clip(0.05 + np.random.default_rng(3).normal(0, 0.003, (60, len(NAMES))), 0, 1)
+    io.save(Animation(np.arange(60) / 30.0, x, NAMES), tmp_path / "n.csv", fmt="csv")
+    calib = tmp_path / "c.json"
+    assert main(["calibrate", str(tmp_path / "n.csv"), "-o", str(calib),
+                 "--tracker", "mediapipe"]) == 0  # fmt: skip
+    capsys.readouterr()
+    said = {}
+    for label, more in (("map", []), ("filter", ["--method", "one-euro"])):
+        out = str(tmp_path / f"{label}.csv")
+        assert main(["clean", str(tmp_path / "n.csv"), "-o", out, "--tracker", "mediapipe",
+                     "--calibration", str(calib), *more]) == 0  # fmt: skip
+        said[label] = capsys.readouterr().err
+    assert "changes nothing" not in said["map"]
+    assert "changes nothing" in said["filter"] and "--rom --tracker mediapipe" in said["filter"]

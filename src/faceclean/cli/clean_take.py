@@ -48,6 +48,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
         cleaner, what = build_cleaner(choice, names)
         if names and cleaner.stepwise:
             adjust = build_levels(args, choice, names)
+            _unread(args, adjust, cleaner, what)
             if not adjust.is_identity:
                 cleaner = Adjusted(cleaner, adjust, names)
             guard = None if args.scale is not None else (names, input)
@@ -65,6 +66,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     _signature(args, anim, input)
     cleaner, what = build_cleaner(choice, anim.names)
     adjust = build_levels(args, choice, anim.names)
+    _unread(args, adjust, cleaner, what)
     # no level mapping: the take itself, not a copy (an hour is 92 MB; issue 38)
     mapped = anim if adjust.is_identity else anim.with_values(adjust.apply(anim.values, anim.names))
     attach(cleaner, adjust.adaptation)  # a guided calibration's rest reading, if any
@@ -109,6 +111,18 @@ def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...
     levels = base.merged(choice.adjust(names))
     scale = getattr(args, "scale", None)
     return levels if scale is None else levels.scaled(scale)
+
+
+def _unread(args: argparse.Namespace, adjust, cleaner: Stepper, what: str) -> None:
+    """One warning line when --calibration holds nothing but a rest reading for the
+    MediaPipe map (``calibrate --tracker mediapipe``) and the cleaner chosen reads none:
+    the calibration then changes nothing, which the user should not have to guess."""
+    ad = adjust.adaptation
+    if (ad is not None and ad.rest and not ad.matrix and not ad.offset and not adjust.rules
+            and getattr(cleaner, "set_rest_reading", None) is None):  # fmt: skip
+        print(f"faceclean: warning: --calibration {args.calibration} is a rest reading for the "
+              f"MediaPipe map; {what} does not read one, so it changes nothing ('calibrate "
+              "--rom --tracker mediapipe' writes levels)", file=sys.stderr)  # fmt: skip
 
 
 def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Stepper, str]:
