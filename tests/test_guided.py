@@ -499,3 +499,18 @@ def test_a_rest_reading_given_to_a_cleaner_that_reads_none_is_said(tmp_path, cap
         said[label] = capsys.readouterr().err
     assert "changes nothing" not in said["map"]
     assert "changes nothing" in said["filter"] and "--rom --tracker mediapipe" in said["filter"]
+    from faceclean.adaptation import Adaptation, unread
+    from faceclean.filters import make
+    from faceclean.resolve import resolve, tracker_words
+
+    got = Adjust.load(calib)
+    assert unread(got, make("one-euro")) and not unread(got, resolve(tracker_words(
+        "mediapipe")).build(NAMES))  # fmt: skip
+    corrected = Adjust(
+        (),
+        got.facts,
+        adaptation=Adaptation(
+            {}, {"jawOpen": {"jawOpen": 0.1}}, rest={"jawOpen": 0.0}, rest_outputs=("jawOpen",)
+        ),
+    )
+    assert not unread(corrected, make("one-euro"))  # a correction after any cleaner applies

@@ -155,6 +155,17 @@ def attach(cleaner: Any, adaptation: Adaptation | None) -> None:
         take(adaptation.rest, adaptation.rest_outputs)
 
 
+def unread(adjust: Any, cleaner: Any) -> str:
+    """What a calibration (``adjust``) that holds nothing but a rest reading would change
+    for ``cleaner`` when the cleaner reads none: "" where it changes something, else why
+    it changes nothing (a one-line note for the command to print)."""
+    ad = adjust.adaptation
+    if (ad is None or not ad.rest or ad.matrix or ad.offset or adjust.rules
+            or getattr(cleaner, "set_rest_reading", None) is not None):  # fmt: skip
+        return ""
+    return "is a rest reading for the MediaPipe map and changes nothing here"
+
+
 def _rest(data: Any, where: str) -> tuple[dict[str, float], tuple[str, ...]]:
     """The "rest" section checked: (reading, outputs); none: ({}, ())."""
     if data is None:

@@ -114,15 +114,13 @@ def build_levels(args: argparse.Namespace, choice: Choice, names: tuple[str, ...
 
 
 def _unread(args: argparse.Namespace, adjust, cleaner: Stepper, what: str) -> None:
-    """One warning line when --calibration holds nothing but a rest reading for the
-    MediaPipe map (``calibrate --tracker mediapipe``) and the cleaner chosen reads none:
-    the calibration then changes nothing, which the user should not have to guess."""
-    ad = adjust.adaptation
-    if (ad is not None and ad.rest and not ad.matrix and not ad.offset and not adjust.rules
-            and getattr(cleaner, "set_rest_reading", None) is None):  # fmt: skip
-        print(f"faceclean: warning: --calibration {args.calibration} is a rest reading for the "
-              f"MediaPipe map; {what} does not read one, so it changes nothing ('calibrate "
-              "--rom --tracker mediapipe' writes levels)", file=sys.stderr)  # fmt: skip
+    """One warning line when --calibration changes nothing for this cleaner."""
+    from faceclean.adaptation import unread
+
+    if unread(adjust, cleaner):
+        print(f"faceclean: warning: --calibration {args.calibration} {unread(adjust, cleaner)}"
+              f"; {what} reads none ('calibrate --rom --tracker mediapipe' writes levels)",
+              file=sys.stderr)  # fmt: skip
 
 
 def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Stepper, str]:

@@ -92,6 +92,7 @@ def build_cleaner(choice: Choice) -> tuple[Any, str]:
 
 def with_levels(args: argparse.Namespace, choice: Choice, cleaner: Any) -> tuple[Any, str]:
     """The cleaner behind the level mapping the options ask for, and a note on it."""
+    from faceclean.adaptation import unread
     from faceclean.adjust import Adjust, Adjusted
     from faceclean.calibration import LiveCalibration
     from faceclean.channels import ARKIT52
@@ -99,6 +100,8 @@ def with_levels(args: argparse.Namespace, choice: Choice, cleaner: Any) -> tuple
     base = options.calibration(args) or Adjust()
     overrides = choice.adjust(ARKIT52)
     notes = [f"calibration {args.calibration}"] if args.calibration else []
+    if unread(base, cleaner):  # said, not guessed: the file does nothing for this cleaner
+        notes[-1] += f" ({unread(base, cleaner)}: {choice.source} reads none)"
     notes += [f"{len(overrides.rules)} level overrides"] if overrides.rules else []
     if args.calibrate_seconds is not None:
 
