@@ -145,7 +145,7 @@ def rest_calibration(
     ``anim``, and no levels (``facts``: the calibration's, marked ``"levels": "none"``).
     The map was fitted on MediaPipe's raw scores and measures rises itself: levels before
     it (the neutral subtracted, the range stretched) cost on seven of ten held-out faces
-    (up to 1.20x its MSE), the reading alone gains on all ten (0.77-1.00x;
+    (up to 1.20x its MSE), the reading alone gains on all ten (0.86-1.00x;
     docs/CALIBRATION.md, "A neutral hold for the map")."""
     if cleaner is None:
         cleaner, label = shipped_cleaner("mediapipe", anim.names)
