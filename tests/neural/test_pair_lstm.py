@@ -59,11 +59,9 @@ def test_patience_stops_a_run_that_no_longer_improves(tmp_path):
     assert epochs[-1] - best["epoch"] == 2  # exactly ``patience`` epochs after the best
 
 
-def test_train_pairs_lstm_resumes_from_its_last_file(tmp_path):
-    import subprocess
-    import sys
-
+def test_train_pairs_lstm_resumes_from_its_last_file(tmp_path, capsys):
     from faceclean import io
+    from faceclean.cli import main
 
     folder = tmp_path / "pairs"
     folder.mkdir()
@@ -71,15 +69,13 @@ def test_train_pairs_lstm_resumes_from_its_last_file(tmp_path):
         io.save(p.tracked, folder / f"{p.name}.raw.csv")
         io.save(p.truth, folder / f"{p.name}.clean.csv")
     model = tmp_path / "m.npz"
-    cli = [sys.executable, "-m", "faceclean", "train", "--pairs", str(folder), "--arch", "lstm",
-           "--out", str(model)]  # fmt: skip
-    r = subprocess.run([*cli, "--epochs", "1"], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
-    assert "epoch 0:" in r.stderr and last_path(model).is_file()
-    r = subprocess.run([*cli, "--epochs", "2", "--resume", str(last_path(model))],
-                       capture_output=True, text=True)  # fmt: skip
-    assert r.returncode == 0, r.stderr
-    assert "epoch 1:" in r.stderr and "epoch 0:" not in r.stderr  # continued, not redone
-    r = subprocess.run([*cli, "--resume", str(model)], capture_output=True, text=True)
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert r.stderr.strip().endswith(f"--resume {last_path(model)}")
+    cli = ["train", "--pairs", str(folder), "--arch", "lstm", "--out", str(model)]
+    assert main([*cli, "--epochs", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "epoch 0:" in err and last_path(model).is_file()
+    assert main([*cli, "--epochs", "2", "--resume", str(last_path(model))]) == 0
+    err = capsys.readouterr().err
+    assert "epoch 1:" in err and "epoch 0:" not in err  # continued, not redone
+    assert main([*cli, "--resume", str(model)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.strip().endswith(f"--resume {last_path(model)}")
