@@ -117,8 +117,8 @@ def _unread(args: argparse.Namespace, adjust, cleaner: Stepper, what: str) -> No
     """One warning line when --calibration changes nothing for this cleaner."""
     from faceclean.adaptation import unread
 
-    if unread(adjust, cleaner):
-        print(f"faceclean: warning: --calibration {args.calibration} {unread(adjust, cleaner)}"
+    if why := unread(adjust, cleaner):
+        print(f"faceclean: warning: --calibration {args.calibration} {why}"
               f"; {what} reads none ('calibrate --rom --tracker mediapipe' writes levels)",
               file=sys.stderr)  # fmt: skip
 

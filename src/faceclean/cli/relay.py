@@ -100,8 +100,8 @@ def with_levels(args: argparse.Namespace, choice: Choice, cleaner: Any) -> tuple
     base = options.calibration(args) or Adjust()
     overrides = choice.adjust(ARKIT52)
     notes = [f"calibration {args.calibration}"] if args.calibration else []
-    if unread(base, cleaner):  # said, not guessed: the file does nothing for this cleaner
-        notes[-1] += f" ({unread(base, cleaner)}: {choice.source} reads none)"
+    if why := unread(base, cleaner):  # said, not guessed: the file does nothing here
+        notes[-1] += f" ({why}: {choice.source} reads none)"
     notes += [f"{len(overrides.rules)} level overrides"] if overrides.rules else []
     if args.calibrate_seconds is not None:
 
