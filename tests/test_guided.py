@@ -20,7 +20,7 @@ from faceclean.channels import ARKIT52
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.guided import align as al
-from faceclean.guided.fit import REST_INPUTS, REST_OUTPUTS, guided
+from faceclean.guided.fit import REST_INPUTS, REST_OUTPUTS, fit_adaptation, guided
 from faceclean.guided.script import load
 
 SCRIPT = load()
@@ -104,6 +104,36 @@ def test_arkit_guided_levels_map_this_faces_rest_to_0_and_its_prompts_to_their_a
     blink = fit.adjust.apply(x, ARKIT52)[:, COL["eyeBlinkLeft"]]
     assert blink.max() >= 0.95  # a blink still closes fully
     assert fit.adjust.adaptation is None  # ARKit: levels only, today's file format
+
+
+def test_the_fit_takes_out_a_smile_read_as_brows_and_squint_and_no_more():
+    # a face whose cleaned output lifts the brows and squints with every smile (a photo
+    # face's map, docs/CALIBRATION.md "Across groups"); the script's smile aims at neither
+    tau, s = performed()
+    t = SCRIPT.weights(s)  # (N, 52) the truth: the script performed
+    smile = t[:, [COL["mouthSmileLeft"], COL["mouthSmileRight"]]].mean(axis=1)
+    y = t.copy()
+    for name, leak in (("browInnerUp", 0.3), ("eyeSquintLeft", 0.4), ("eyeSquintRight", 0.4)):
+        y[:, COL[name]] = np.clip(t[:, COL[name]] + leak * smile, 0, 1)
+    y += np.random.default_rng(3).normal(0, 0.01, y.shape)
+    weight = np.where(np.isfinite(s), 1.0, 0.0)
+    ad = fit_adaptation(y, t, weight, np.ones(52, bool))
+    for name in ("browInnerUp", "eyeSquintLeft"):  # the smile's two sides share the fix
+        row = ad.matrix.get(name, {})
+        assert row.get("mouthSmileLeft", 0) + row.get("mouthSmileRight", 0) < -0.05, row
+    assert "mouthSmileLeft" not in ad.matrix.get("jawOpen", {})  # the jaw reads its own group
+    # on another performance (a smile rising, the brows and lids still) the leak shrinks
+    # (by a quarter: the fit is shrunk hard toward the cleaner alone, LAMBDA)
+    speech = np.zeros((40, 52))
+    speech[:, [COL["mouthSmileLeft"], COL["mouthSmileRight"]]] = np.linspace(0, 0.8, 40)[:, None]
+    leaked = speech.copy()
+    leaked[:, COL["browInnerUp"]] = 0.3 * speech[:, COL["mouthSmileLeft"]]
+    leaked[:, [COL["eyeSquintLeft"], COL["eyeSquintRight"]]] = 0.4 * speech[:, [COL[
+        "mouthSmileLeft"]]]  # fmt: skip
+    fixed = ad.apply(leaked, ARKIT52)
+    for name in ("browInnerUp", "eyeSquintLeft"):
+        before = np.abs(leaked[:, COL[name]]).mean()
+        assert np.abs(fixed[:, COL[name]]).mean() < 0.8 * before, name
 
 
 def test_the_command_writes_a_file_clean_reads_and_today_s_files_still_load(tmp_path, capsys):

@@ -13,9 +13,10 @@ equations are in faceclean.calibration.
 Guided (faceclean.guided): ``--print-script`` shows the script (about 34 s of prompts);
 ``--guided TAKE`` finds each prompt in a take of it (robust to a late, slow, uneven
 person) and fits a per-face adaptation of the shipped cleaner: for ``--tracker mediapipe``
-the face's reading at rest of the mouth (the map's mouth and cheeks rise from it) and a
-linear correction after the shipped map, cross-channel within a channel group and shrunk
-toward the map alone; for ``arkit`` per-channel levels. ``--guided --live URL`` prompts in
+the face's reading at rest of the mouth and gaze (the map's mouth, cheeks and gaze rise
+from it) and a linear correction after the shipped map, cross-channel within a channel
+group (the brows also from the mouth, the eyes from every channel) and shrunk toward the
+map alone; for ``arkit`` per-channel levels. ``--guided --live URL`` prompts in
 the terminal and records the stream (cli/calibrate_live.py). Any prompt not seen stops
 it, nothing written, unless ``--partial``.
 """
