@@ -136,6 +136,22 @@ def test_the_fit_takes_out_a_smile_read_as_brows_and_squint_and_no_more():
         assert np.abs(fixed[:, COL[name]]).mean() < 0.8 * before, name
 
 
+def test_a_smile_read_low_only_when_held_does_not_lift_a_talking_mouth():
+    # a map that reads a smile right up to 0.5 and no higher (obama3's, docs/CALIBRATION.md
+    # "The mouth's holds"): the script's full-smile holds read low, speech reads right
+    tau, s = performed()
+    t = SCRIPT.weights(s)
+    y = t.copy()
+    smiles = [COL["mouthSmileLeft"], COL["mouthSmileRight"]]
+    y[:, smiles] = np.minimum(t[:, smiles], 0.5)
+    y += np.random.default_rng(3).normal(0, 0.01, y.shape)
+    ad = fit_adaptation(y, t, np.where(np.isfinite(s), 1.0, 0.0), np.ones(52, bool))
+    speech = np.zeros((40, 52))
+    speech[:, smiles] = np.linspace(0, 0.4, 40)[:, None]  # a talking smile, read right
+    lift = ad.apply(speech, ARKIT52)[:, smiles] - speech[:, smiles]
+    assert np.abs(lift).mean() < 0.015  # fitted on the holds as the rest are: 0.044
+
+
 def test_the_command_writes_a_file_clean_reads_and_today_s_files_still_load(tmp_path, capsys):
     from faceclean import io
 
