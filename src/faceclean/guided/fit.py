@@ -68,6 +68,8 @@ V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a c
 # three faces chosen on (painted 7, dressed 5, photo 47: 0.232 / 0.223 / 0.195 within the
 # groups -> 0.222 / 0.221 / 0.194; the brows from every channel and the gaze from the eyes
 # alone were no better there; docs/CALIBRATION.md, "Across groups").
+CROSS = {"brows": GROUPS["mouth"],
+         "eyes": tuple(n for n in ARKIT52 if n not in GROUPS["eyes"])}  # fmt: skip
 # The mouth's held prompts carry poorly to speech (obama3's map reads a held smile low and
 # a talking mouth right, so a gain fitted on the holds lifts its speech: 1.10x the shipped
 # cleaner): its fit weighs a frame where the script aims above HELD_ABOVE at a third and is
@@ -76,8 +78,6 @@ V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a c
 # the mouth 0.885; docs/CALIBRATION.md "The mouth's holds").
 GROUP_FIT = {"mouth": (30.0, 0.3)}  # group: (its LAMBDA, the weight of a held frame)
 HELD_ABOVE = 0.6  # weight units
-CROSS = {"brows": GROUPS["mouth"],
-         "eyes": tuple(n for n in ARKIT52 if n not in GROUPS["eyes"])}  # fmt: skip
 MAX_OFFSET = 0.3
 MAX_COEF = 2.0
 HOLD = 0.8  # the part of a prompt whose envelope is above this is its hold
