@@ -415,7 +415,10 @@ def test_rendered_guided_calibration_beats_the_shipped_map_on_another_clip(face)
     from faceclean.cli.calibrate_guided import report
 
     said = f"rest reading of {len(ad.rest)} mouth and gaze"
-    assert any(line.startswith(said) for line in report(fit))
+    lines = report(fit)
+    assert any(line.startswith(said) for line in lines)
+    across = lines.index("  across regions, the largest:")  # e.g. the brows read the mouth
+    assert all(" + " in line for line in lines[across + 1 : across + 4])
     shipped, calibrated = _mse(face, None), _mse(face, fit.adjust)
     assert calibrated < shipped, (calibrated, shipped)  # a little: docs/CALIBRATION.md
 
