@@ -20,7 +20,7 @@ from faceclean.channels import ARKIT52
 from faceclean.cli import main
 from faceclean.errors import FacecleanError
 from faceclean.guided import align as al
-from faceclean.guided.fit import REST_INPUTS, REST_OUTPUTS, fit_adaptation, guided
+from faceclean.guided.fit import REST_INPUTS, REST_OUTPUTS, guided
 from faceclean.guided.script import load
 
 SCRIPT = load()
@@ -104,52 +104,6 @@ def test_arkit_guided_levels_map_this_faces_rest_to_0_and_its_prompts_to_their_a
     blink = fit.adjust.apply(x, ARKIT52)[:, COL["eyeBlinkLeft"]]
     assert blink.max() >= 0.95  # a blink still closes fully
     assert fit.adjust.adaptation is None  # ARKit: levels only, today's file format
-
-
-def test_the_fit_takes_out_a_smile_read_as_brows_and_squint_and_no_more():
-    # a face whose cleaned output lifts the brows and squints with every smile (a photo
-    # face's map, docs/CALIBRATION.md "Across groups"); the script's smile aims at neither
-    tau, s = performed()
-    t = SCRIPT.weights(s)  # (N, 52) the truth: the script performed
-    smile = t[:, [COL["mouthSmileLeft"], COL["mouthSmileRight"]]].mean(axis=1)
-    y = t.copy()
-    for name, leak in (("browInnerUp", 0.3), ("eyeSquintLeft", 0.4), ("eyeSquintRight", 0.4)):
-        y[:, COL[name]] = np.clip(t[:, COL[name]] + leak * smile, 0, 1)
-    y += np.random.default_rng(3).normal(0, 0.01, y.shape)
-    weight = np.where(np.isfinite(s), 1.0, 0.0)
-    ad = fit_adaptation(y, t, weight, np.ones(52, bool))
-    for name in ("browInnerUp", "eyeSquintLeft"):  # the smile's two sides share the fix
-        row = ad.matrix.get(name, {})
-        assert row.get("mouthSmileLeft", 0) + row.get("mouthSmileRight", 0) < -0.05, row
-    assert "mouthSmileLeft" not in ad.matrix.get("jawOpen", {})  # the jaw reads its own group
-    # on another performance (a smile rising, the brows and lids still) the leak shrinks
-    # (by a quarter: the fit is shrunk hard toward the cleaner alone, LAMBDA)
-    speech = np.zeros((40, 52))
-    speech[:, [COL["mouthSmileLeft"], COL["mouthSmileRight"]]] = np.linspace(0, 0.8, 40)[:, None]
-    leaked = speech.copy()
-    leaked[:, COL["browInnerUp"]] = 0.3 * speech[:, COL["mouthSmileLeft"]]
-    leaked[:, [COL["eyeSquintLeft"], COL["eyeSquintRight"]]] = 0.4 * speech[:, [COL[
-        "mouthSmileLeft"]]]  # fmt: skip
-    fixed = ad.apply(leaked, ARKIT52)
-    for name in ("browInnerUp", "eyeSquintLeft"):
-        before = np.abs(leaked[:, COL[name]]).mean()
-        assert np.abs(fixed[:, COL[name]]).mean() < 0.8 * before, name
-
-
-def test_a_smile_read_low_only_when_held_does_not_lift_a_talking_mouth():
-    # a map that reads a smile right up to 0.5 and no higher (obama3's, docs/CALIBRATION.md
-    # "The mouth's holds"): the script's full-smile holds read low, speech reads right
-    tau, s = performed()
-    t = SCRIPT.weights(s)
-    y = t.copy()
-    smiles = [COL["mouthSmileLeft"], COL["mouthSmileRight"]]
-    y[:, smiles] = np.minimum(t[:, smiles], 0.5)
-    y += np.random.default_rng(3).normal(0, 0.01, y.shape)
-    ad = fit_adaptation(y, t, np.where(np.isfinite(s), 1.0, 0.0), np.ones(52, bool))
-    speech = np.zeros((40, 52))
-    speech[:, smiles] = np.linspace(0, 0.4, 40)[:, None]  # a talking smile, read right
-    lift = ad.apply(speech, ARKIT52)[:, smiles] - speech[:, smiles]
-    assert np.abs(lift).mean() < 0.015  # fitted on the holds as the rest are: 0.044
 
 
 def test_the_command_writes_a_file_clean_reads_and_today_s_files_still_load(tmp_path, capsys):
@@ -415,10 +369,7 @@ def test_rendered_guided_calibration_beats_the_shipped_map_on_another_clip(face)
     from faceclean.cli.calibrate_guided import report
 
     said = f"rest reading of {len(ad.rest)} mouth and gaze"
-    lines = report(fit)
-    assert any(line.startswith(said) for line in lines)
-    across = lines.index("  across regions, the largest:")  # e.g. the brows read the mouth
-    assert all(" + " in line for line in lines[across + 1 : across + 4])
+    assert any(line.startswith(said) for line in report(fit))
     shipped, calibrated = _mse(face, None), _mse(face, fit.adjust)
     assert calibrated < shipped, (calibrated, shipped)  # a little: docs/CALIBRATION.md
 
@@ -432,6 +383,28 @@ def test_rendered_still_face_changes_little(face):
     fit = guided(Animation(tau, still, face["script"].names), "mediapipe")
     assert not fit.alignment.follows
     assert _mse(face, fit.adjust) <= 1.05 * _mse(face, None)
+
+
+@pytest.mark.slow
+def test_rendered_neutral_face_stays_as_neutral_after_a_guided_calibration(face):
+    # the face held at its opening neutral (the script's first 2 s, looped): the calibrated
+    # cleaner reads it no further from neutral than the uncalibrated one (pivoted on the
+    # script's other rests it read up to 0.23 here: docs/CALIBRATION.md "A still face")
+    from faceclean.guided.fit import shipped_cleaner
+
+    tau = face["tau"]
+    x = face["script"].values[tau < 2.0]
+    still = Animation(tau, np.resize(x, (len(tau), x.shape[1])), face["script"].names)
+    adjust = guided(face["script"], "mediapipe").adjust
+
+    def worst(adj) -> float:  # the channel furthest from neutral, mean over the clip
+        cleaner, _ = shipped_cleaner("mediapipe", still.names)
+        attach(cleaner, None if adj is None else adj.adaptation)
+        y = cleaner.clean(still).values
+        y = y if adj is None else adj.adapt(y, still.names)
+        return float(np.abs(y[np.isfinite(y).all(axis=1)]).mean(axis=0).max())
+
+    assert worst(adjust) <= worst(None) + 0.01
 
 
 def test_live_records_the_script_from_a_vmc_stream_while_prompting():

@@ -5,9 +5,8 @@ corrects the cleaner's output y (ARKit weights) for one face::
 
     y' = clip(y + c + D y, 0, 1)        c (M,) offsets, D (M, M) sparse, W = I + D
 
-D reads within a channel group (``channels.GROUPS``: the tracker mixes channels of one
-region, e.g. MediaPipe's eye squint and blink) and, for the brows and the eyes, across
-groups (a smile read as a squint: guided/fit.py ``CROSS``), fitted shrunk toward 0, that
+D is nonzero only within a channel group (``channels.GROUPS``: the tracker mixes channels
+of one region, e.g. MediaPipe's eye squint and blink), and is fitted shrunk toward 0, that
 is W toward the identity: the shipped cleaner alone (``faceclean.guided.fit``). Columns it
 does not name pass through bit for bit; a missing frame (NaN) stays missing.
 

@@ -15,10 +15,10 @@ Guided (faceclean.guided): ``--print-script`` shows the script (about 34 s of pr
 person) and fits a per-face adaptation of the shipped cleaner: for ``--tracker mediapipe``
 the face's reading at rest of the mouth and gaze (the map's mouth, cheeks and gaze rise
 from it) and a linear correction after the shipped map, cross-channel within a channel
-group (the brows also from the mouth, the eyes from every channel) and shrunk toward the
-map alone; for ``arkit`` per-channel levels. ``--guided --live URL`` prompts in
-the terminal and records the stream (cli/calibrate_live.py). Any prompt not seen stops
-it, nothing written, unless ``--partial``.
+group, pivoted on the opening neutral and shrunk toward the map alone; for ``arkit``
+per-channel levels. ``--guided --live URL`` prompts in the terminal and records the stream
+(cli/calibrate_live.py). Any prompt not seen stops it, nothing written, unless
+``--partial``.
 """
 
 from __future__ import annotations

@@ -14,7 +14,6 @@ import argparse
 from pathlib import Path
 
 TOP_CHANGES = 6  # the adaptation's largest changes printed
-TOP_ACROSS = 3  # ... of those that read another channel group
 
 
 def run_guided(args: argparse.Namespace) -> int:
@@ -74,18 +73,13 @@ def report(result) -> list[str]:
             f"{len(ad.channels)} channels corrected, {len(ad.offset)} offsets, "
             f"{cross} cross-channel terms"
         )
-        from faceclean.channels import GROUPS
-
-        region = {n: g for g, members in GROUPS.items() for n in members}
-        terms = [(abs(v), o, i, v) for o, row in ad.matrix.items() for i, v in row.items()]
-        for _, o, i, v in sorted((t for t in terms if region[t[1]] == region[t[2]]),
-                                 reverse=True)[:TOP_CHANGES]:  # fmt: skip
+        big = sorted(
+            ((abs(v), o, i, v) for o, row in ad.matrix.items() for i, v in row.items()),
+            reverse=True,
+        )[:TOP_CHANGES]
+        for _, o, i, v in big:
             what = "gain" if o == i else f"+ {i} x"
             lines.append(f"  {o:<20} {what} {1 + v if o == i else v:+.3f}")
-        across = sorted((t for t in terms if region[t[1]] != region[t[2]]), reverse=True)
-        if across:  # a channel that followed another region (a smile read as brows)
-            lines.append("  across regions, the largest:")
-            lines += [f"  {o:<20} + {i} x {v:+.3f}" for _, o, i, v in across[:TOP_ACROSS]]
         if ad.rest:
             n, m = len(ad.rest), len(ad.rest_outputs)
             lines.append(f"rest reading of {n} mouth and gaze channels (this face's "

@@ -6,23 +6,22 @@
   The aligned frames of the prompts seen give targets T = the script's weights at each
   frame's script time (the speech line, whose shapes are a guess, has weight 0). Per
   channel group G (``channels.GROUPS``: where the tracker mixes channels), the change is
-  pivoted on the face's rest reading r (the median of y where the script rests), so a
-  face at rest reads as the shipped cleaner says (which is its best guess there: the
-  tracker barely tells a rest from a low level), and only excursions are rescaled::
+  pivoted on the face's rest reading r (the median of y over the script's opening neutral
+  hold, before any prompt has moved the cleaner's own rest), so a neutral face reads as
+  the shipped cleaner says (which is its best guess there: the tracker barely tells a rest
+  from a low level), and only excursions are rescaled. (Pivoted on all the script's rests,
+  which the cleaner reads higher once a prompt has pushed its stream rest down, a face
+  held neutral came out up to 0.23 off: docs/CALIBRATION.md "A still face")::
 
-      y'_G = y_G + D_G (y_I - r_I)            I = G and CROSS[G]'s channels
-      D_G[k] = argmin sum_n v_n (T_nk - y_nk + r_k - D_G[k] (y_nI - r_I))^2
+      y' = y + D_G (y_G - r_G)
+      D_G[k] = argmin sum_n v_n (T_nk - y_nk + r_k - D_G[k] (y_nG - r_G))^2
                       + LAMBDA * n * sum_i (var_i + V_i) D_G[k, i]^2
 
   a ridge toward the identity (D = 0: the shipped model alone) scaled by each input's
   own variance, V_i = V0 for the channel's own input and V_CROSS for a neighbour (a
-  neighbour must move clearly to correct a channel). A group's inputs are its own
-  channels and CROSS's: the brows also read the mouth (a smile lifts the brows of some
-  faces' map), the eyes every other channel (a smile reads as a squint). The mouth's
-  fit (GROUP_FIT) weighs a prompt's hold less and is shrunk harder. A channel no
-  seen prompt aims at is not touched; a channel that did not move (a still face) keeps D
-  near 0. The result is ``faceclean.adaptation.Adaptation`` (after the cleaner), with
-  offsets c = -D r.
+  neighbour must move clearly to correct a channel). A channel no seen prompt aims at
+  is not touched; a channel that did not move (a still face) keeps D near 0. The result
+  is ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
   With it, the face's own resting reading of the mouth's and the gaze's inputs
   (REST_INPUTS: u, as the cleaner's pre-filter gives it, the median over the same rests):
   the cleaner then measures the mouth's, the cheeks' and the gaze's rises (REST_OUTPUTS)
@@ -64,20 +63,6 @@ LAMBDA = 3.0  # ridge on D relative to each input's own variance (+ V0): scale-f
 # worse than the map alone, 1.0 1.01x, 3.0 0.99x), so the fit moves little.
 V0 = 1e-4  # weight units^2: the tracker's noise floor, so a still channel is not trusted
 V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a channel
-# A group's inputs beyond its own channels: where a face's map mixes regions. Chosen on the
-# three faces chosen on (painted 7, dressed 5, photo 47: 0.232 / 0.223 / 0.195 within the
-# groups -> 0.222 / 0.221 / 0.194; the brows from every channel and the gaze from the eyes
-# alone were no better there; docs/CALIBRATION.md, "Across groups").
-CROSS = {"brows": GROUPS["mouth"],
-         "eyes": tuple(n for n in ARKIT52 if n not in GROUPS["eyes"])}  # fmt: skip
-# The mouth's held prompts carry poorly to speech (obama3's map reads a held smile low and
-# a talking mouth right, so a gain fitted on the holds lifts its speech: 1.10x the shipped
-# cleaner): its fit weighs a frame where the script aims above HELD_ABOVE at a third and is
-# shrunk ten times harder. Chosen on four faces (painted 7, dressed 5, photo 47, obama3 53;
-# the mean of guided / shipped 0.904 -> 0.885, the mouth's D dropped 0.886, LAMBDA 100 on
-# the mouth 0.885; docs/CALIBRATION.md "The mouth's holds").
-GROUP_FIT = {"mouth": (30.0, 0.3)}  # group: (its LAMBDA, the weight of a held frame)
-HELD_ABOVE = 0.6  # weight units
 MAX_OFFSET = 0.3
 MAX_COEF = 2.0
 HOLD = 0.8  # the part of a prompt whose envelope is above this is its hold
@@ -248,25 +233,20 @@ def fit_adaptation(
     still = use & (target.max(axis=1) == 0)  # frames at rest: neutral holds, between prompts
     if not still.any():
         return Adaptation(offset, matrix)
-    rest = np.median(y[still], axis=0)  # (52,) the shipped cleaner's reading at rest
-    held = target[use].max(axis=1, keepdims=True) > HELD_ABOVE  # (n, 1) a prompt's hold
-    for group, members in GROUPS.items():
+    rest = np.median(y[_first_run(still)], axis=0)  # (52,) the pivot: the opening neutral
+    for members in GROUPS.values():
         cols = [ARKIT52.index(m) for m in members if present[ARKIT52.index(m)]]
         if not cols:
             continue
-        lam, held_weight = GROUP_FIT.get(group, (LAMBDA, 1.0))
-        vg = v * np.where(held, held_weight, 1.0)  # (n, 1)
-        ng = float(vg.sum())
-        ins = cols + [ARKIT52.index(m) for m in CROSS.get(group, ()) if present[ARKIT52.index(m)]]
-        my = rest[ins]  # the pivot: the face at rest reads as shipped
-        yc = y[use][:, ins] - my  # (n, I): the group's outputs first, then CROSS's
-        ec = (target - y)[use][:, cols] + rest[cols]  # (n, G)
-        var = (vg * yc * yc).sum(0) / ng  # (I,) each input's variance over the fit
-        gram, cov = (vg * yc).T @ yc, (vg * yc).T @ ec  # (I, I), (I in, G out)
-        d = np.zeros((len(cols), len(ins)))  # (G out, I in)
+        yg, eg = y[use][:, cols], (target - y)[use][:, cols]  # (n, G)
+        my, me = rest[cols], -rest[cols]  # the pivot: the face at rest reads as shipped
+        yc, ec = yg - my, eg - me
+        var = (v * yc * yc).sum(0) / n  # (G,) each input's variance over the fit
+        gram, cov = (v * yc).T @ yc, (v * yc).T @ ec  # (G, G), (G in, G out)
+        d = np.zeros((len(cols), len(cols)))  # (G out, G in)
         for k in range(len(cols)):  # its own input trusted at V0, a neighbour at V_CROSS
-            pen = lam * ng * (var + V_CROSS)
-            pen[k] = lam * ng * (var[k] + V0)
+            pen = LAMBDA * n * (var + V_CROSS)
+            pen[k] = LAMBDA * n * (var[k] + V0)
             d[k] = np.linalg.solve(gram + np.diag(pen), cov[:, k])
         d = np.clip(d, -MAX_COEF, MAX_COEF)
         c = np.clip(-d @ my, -MAX_OFFSET, MAX_OFFSET)  # y' = y + D (y - rest)
@@ -276,10 +256,23 @@ def fit_adaptation(
                 continue
             if abs(c[k]) > 1e-4:
                 offset[name] = float(c[k])
-            row = {ARKIT52[ins[i]]: float(d[k, i]) for i in range(len(ins)) if abs(d[k, i]) > 1e-4}
+            row = {
+                ARKIT52[cols[i]]: float(d[k, i]) for i in range(len(cols)) if abs(d[k, i]) > 1e-4
+            }
             if row:
                 matrix[name] = row
     return Adaptation(offset, matrix)
+
+
+def _first_run(rows: np.ndarray) -> np.ndarray:
+    """(N,) bool: the first run of consecutive True in ``rows`` (the script's opening
+    neutral hold among its rests)."""
+    out = np.zeros_like(rows)
+    idx = np.flatnonzero(rows)
+    if len(idx):
+        gaps = np.flatnonzero(np.diff(idx) > 1)
+        out[idx[0] : (idx[gaps[0]] if len(gaps) else idx[-1]) + 1] = True
+    return out
 
 
 def fit_levels(
