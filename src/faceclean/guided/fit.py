@@ -23,7 +23,8 @@
   is not touched; a channel that did not move (a still face) keeps D near 0. The result
   is ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
   With it, the face's own resting reading of the mouth's and the gaze's inputs
-  (REST_INPUTS: u, as the cleaner's pre-filter gives it, the median over the same rests):
+  (REST_INPUTS: u, as the cleaner's pre-filter gives it, the median over all the
+  script's rests: u, unlike y, does not depend on the stream rest a prompt pushed down):
   the cleaner then measures the mouth's, the cheeks' and the gaze's rises (REST_OUTPUTS)
   from the lower of it and the stream's own rest, so a mouth a performer holds slightly
   set from the first frame reads as set, not as a rest, and eyes that look down at a
