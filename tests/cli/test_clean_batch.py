@@ -76,6 +76,26 @@ def test_a_missing_file_is_a_failure_of_its_own_and_leaves_no_folder(tmp_path, c
     assert "no such file" in capsys.readouterr().err
 
 
+def test_a_failing_file_leaves_a_new_folder_to_a_file_still_cleaning_into_it(tmp_path):
+    # CI lost a good file on the cluster: broken.csv failed and removed the new folder sub/
+    # while another worker, which had found sub/ there, was still cleaning sub/b.npz.
+    from faceclean.batch import plan
+    from faceclean.cli import clean_batch, parser
+
+    src, out = tmp_path / "takes", tmp_path / "out"
+    _folder(src)
+    args = parser().parse_args(["clean", str(src), "-o", f"{out}/", *EMA])
+    jobs = {j.src.name: j for j in plan(args.input, args.output)}
+    new = clean_batch._new_folders(jobs.values())
+    assert new == [out / "sub" / "deeper", out / "sub", out]  # deepest first
+    ok, why = clean_batch._clean(args, jobs["broken.csv"])  # makes sub/, fails
+    assert not ok and "line 6" in why
+    assert (out / "sub").is_dir()  # left to b.npz's task, which may be cleaning into it
+    assert clean_batch._clean(args, jobs["b.npz"])[0]
+    clean_batch._tidy(new)  # every task ended: only the folder left empty goes
+    assert (out / "sub" / "b.npz").is_file() and not (out / "sub" / "deeper").exists()
+
+
 @pytest.mark.parametrize(
     ("argv", "words"),
     [

@@ -2,7 +2,9 @@
 
 One progress bar (files) on stderr, one line per file on stdout as it finishes, then a
 summary naming each failed file and why; exit 1 when any file failed. Every output is
-written atomically, so a failed file leaves nothing behind (nor a folder made for it).
+written atomically, so a failed file leaves nothing behind (nor a folder made for it:
+folders the batch made that end empty go once every file has ended, never sooner, as
+another worker may be about to write into one).
 ``--jobs N`` runs N worker processes (``faceclean.workers``: at most one per file and two
 per core, said when capped; they die with this process), each cleaning whole files.
 """
@@ -60,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "cluster", None) is not None:
         return _on_cluster(args, jobs)
     Path(args.output).mkdir(parents=True, exist_ok=True)
+    new = _new_folders(jobs)
     failed: list[Failure] = []
     bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, desc="cleaning", leave=False)
     with bar:
@@ -71,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
                 futures = {pool.submit(_clean, args, job): job for job in jobs}
                 for future in as_completed(futures):
                     done(bar, str(futures[future].src), future.result(), failed, echo=True)
+    _tidy(new)
     print(f"cleaned {len(jobs) - len(failed)} of {len(jobs)} files into {args.output}")
     if skipped:  # batch.plan does not walk the output folder (earlier outputs)
         print(f"({skipped} file{'s' * (skipped > 1)} already in {args.output}, inside the "
@@ -102,6 +106,7 @@ def _on_cluster(args: argparse.Namespace, jobs: list[Job]) -> int:
     try:
         out.mkdir(parents=True, exist_ok=True)
         cluster.require(client, files, out)
+        new = _new_folders(label)
         with cluster.hold(out, {k: getattr(args, k, None) for k in _OPTIONS}) as again:
             todo = [j for j in label if not (again and j.dst.is_file())]
             if len(todo) < len(jobs):
@@ -112,6 +117,7 @@ def _on_cluster(args: argparse.Namespace, jobs: list[Job]) -> int:
             with bar:
                 tasks = [(remote, j) for j in todo]
                 cluster.run(client, _clean, tasks, [label[j] for j in todo], bar, failed, True)
+            _tidy(new)
     finally:
         client.close()
     print(f"cleaned {len(todo) - len(failed)} of {len(todo)} files into {args.output}")
@@ -128,14 +134,8 @@ def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:
 
     from faceclean.cli.clean_take import clean_one
 
-    made = []  # output folders made for this file, removed again if it fails
-    folder = job.dst.parent
-    while not folder.exists():
-        made.append(folder)
-        folder = folder.parent
     try:
-        for d in reversed(made):
-            d.mkdir(exist_ok=True)
+        job.dst.parent.mkdir(parents=True, exist_ok=True)  # another task's too, maybe
         return True, clean_one(args, str(job.src), str(job.dst), progress=False)
     except FacecleanError as e:
         why = str(e)
@@ -145,12 +145,29 @@ def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:
         if os.environ.get("FACECLEAN_DEBUG"):
             raise
         why = f"internal error: {type(e).__name__}: {e}"
-    for d in made:
-        try:
-            d.rmdir()  # only if empty
-        except OSError:
-            break
     return False, why
+
+
+def _new_folders(jobs) -> list[Path]:
+    """The output folders ``jobs`` write into that are not there yet, deepest first."""
+    new: set[Path] = set()
+    for job in jobs:
+        folder = job.dst.parent
+        while folder not in new and not folder.exists():
+            new.add(folder)
+            folder = folder.parent
+    return sorted(new, key=lambda p: len(p.parts), reverse=True)
+
+
+def _tidy(folders: list[Path]) -> None:
+    """Each of ``folders`` (deepest first) that ended empty goes: it was made for files
+    that all failed. Only once every task has ended: a file that fails while another
+    task is cleaning into the same new folder must not take the folder from under it."""
+    import contextlib
+
+    for folder in folders:
+        with contextlib.suppress(OSError):  # not empty, or gone: left as it is
+            folder.rmdir()
 
 
 def _earlier(inputs: list[str], out: str) -> int:
