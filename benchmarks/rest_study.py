@@ -13,7 +13,7 @@ performance, the real ones (the shared takes), the made-up ones and each group, 
 face at rest (the worst channel's mean |output - truth| over the neutral holds after 0.5 s).
 
     .venv/bin/python benchmarks/rest_study.py ~/.cache/faceclean/families-net \\
-        --rests 0:0 0.1:0.1 0.15:0.2 0.25:0.2      # about 15 s a rest on 2 cores
+        --rests 0:0 0.1:0.1 0.15:0.2 0.1:0.1:0.01  # about 15 s a rest on 2 cores
         [--plain lids]       # the lids' inputs keep the plain minimum (one rest per input)
 """
 
@@ -83,21 +83,22 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("pairs", help="a folder of pairs in several families (make pairs)")
     p.add_argument("--rests", nargs="+", default=["0:0", "0.15:0.2"],
-                   help="TAU:WARM s, each a rest to study")  # fmt: skip
+                   help="TAU:WARM[:DRIFT], s, s and weight/s, each a rest to study")  # fmt: skip
     p.add_argument("--plain", nargs="*", default=[], choices=list(TABLE_GROUPS),
                    help="groups whose inputs keep the plain minimum")  # fmt: skip
     args = p.parse_args()
     pairs = paired.load(args.pairs, require_meta=True)
     keys = ("all", "real", "made-up", "gaze", *list(TABLE_GROUPS)[1:], "rest")
-    print("| rest_tau, rest_warm s | family | " + " | ".join(keys) + " |")
+    print("| rest_tau, rest_warm s, rest_drift /s | family | " + " | ".join(keys) + " |")
     print("|---|---|" + "---|" * len(keys))
     for spec in args.rests:
-        tau, warm = (float(v) for v in spec.split(":"))
+        rest = tuple(float(v) for v in spec.split(":"))
         started = time.perf_counter()
-        for fam, s in sorted(study(pairs, (tau, warm), args.plain).items()):
+        for fam, s in sorted(study(pairs, rest, args.plain).items()):
             cells = [f"{s[k]:.3f}" if k in s else "-" for k in keys]
             cells[-1] += f" ({s['channel']})" if "channel" in s else ""
-            print(f"| {tau:g}, {warm:g} | {fam} | " + " | ".join(cells) + " |", flush=True)
+            said = ", ".join(f"{v:g}" for v in rest)
+            print(f"| {said} | {fam} | " + " | ".join(cells) + " |", flush=True)
         print(f"<!-- {spec}: {time.perf_counter() - started:.0f} s -->", flush=True)
 
 

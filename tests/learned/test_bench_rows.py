@@ -78,8 +78,9 @@ def _richer_map():
         sd=rng.uniform(0.5, 2.0, 2 * k),
     )
     tau = [0.0 if j % 3 == 0 else 0.15 for j in range(k)]  # s: a third of the inputs plain
+    drift = [0.05 if j % 2 else 0.0 for j in range(k)]  # weight/s: half the inputs drift
     config = dict(w.config, hidden=h, lift_top=True, noise_band=16.0, rest_tau=tau,
-                  rest_warm=0.2)  # fmt: skip
+                  rest_warm=0.2, rest_drift=drift)  # fmt: skip
     return TrackerMap(weights=MapWeights.build(config, arrays), names=ARKIT52, detail=0.5)
 
 

@@ -39,7 +39,8 @@ def weights(hidden=4, seed=0, prefilter=True, rest=True, deadband=0.0, lift=None
     config = {"format": TRACKER_MAP, "inputs": list(NAMES), "outputs": list(NAMES),
               "hidden": hidden, "prefilter": prefilter, "rest": rest,
               "deadband": deadband, "lift_top": top, "noise_band": noise,
-              "rest_tau": rest_s[0], "rest_warm": rest_s[1]}  # fmt: skip
+              "rest_tau": rest_s[0], "rest_warm": rest_s[1],
+              "rest_drift": rest_s[2] if len(rest_s) > 2 else 0.0}  # fmt: skip
     return MapWeights.build(config, arrays)
 
 
@@ -144,12 +145,22 @@ def test_the_inline_pre_filter_is_one_euro():
     np.testing.assert_allclose(got, np.clip(want, 0, 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("band, lift, detail, top, noise, rest_s", [
-    (0.0, None, None, False, 0.0, (0, 0)), (0.05, None, None, False, 0.0, (0, 0)),
-    (0.05, (2.5, 0.2), 0.6, False, 0.0, (0, 0)), (0.02, (6.0, 0.1), 0.3, True, 0.0, (0, 0)),
-    (0.01, None, 0.3, False, 16.0, (0.15, 0.2)), (0.0, (2.5, 0.2), None, False, 8.0, (0, 0.3)),
-    (0.0, None, None, False, 0.0, (0.3, 0)),
-    (0.01, None, 0.3, False, 16.0, ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1]))])  # fmt: skip
+@pytest.mark.parametrize(
+    "band, lift, detail, top, noise, rest_s",
+    [
+        (0.0, None, None, False, 0.0, (0, 0)),
+        (0.05, None, None, False, 0.0, (0, 0)),
+        (0.05, (2.5, 0.2), 0.6, False, 0.0, (0, 0)),
+        (0.02, (6.0, 0.1), 0.3, True, 0.0, (0, 0)),
+        (0.01, None, 0.3, False, 16.0, (0.15, 0.2)),
+        (0.0, (2.5, 0.2), None, False, 8.0, (0, 0.3)),
+        (0.0, None, None, False, 0.0, (0.3, 0)),
+        (0.01, None, 0.3, False, 16.0, ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1])),
+        (0.01, None, 0.3, False, 16.0, (0.15, 0.2, 0.05)),
+        (0.0, None, None, False, 0.0, (0, 0, 0.3)),
+        (0.01, (2.5, 0.2), 0.3, True, 16.0, ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1], [0.0, 0.1, 0.02])),
+    ],
+)
 @pytest.mark.parametrize("names", [NAMES, ("jawOpen", "headYaw", "eyeBlinkLeft")])
 def test_the_usual_frame_path_gives_the_general_paths_numbers(names, band, lift, detail, top,
                                                                noise, rest_s):  # fmt: skip
@@ -413,16 +424,49 @@ def test_a_smoothed_rest_keeps_a_noisy_still_face_at_rest():
     assert smoothed[205:230].mean() > 0.3  # the movement (0.4) comes through
 
 
+def test_a_drifting_rest_forgets_a_dip_and_keeps_a_held_expression():
+    # a still face read at 0.3 whose reading dips to 0.1 for half a second (a blink's gaze,
+    # a first frame): with the running minimum the face then reads 0.2 up for good; with a
+    # rest that climbs back at 0.02 weight/s it is back at rest 10 s later, at 30 fps and
+    # at 120 fps alike, while an expression held 3 s keeps all but 0.06 of itself
+    def own_rise(rest_s, fps):
+        t = np.arange(int(30 * fps)) / fps
+        x = np.full((len(t), 3), 0.3)
+        x[(t >= 1.0) & (t < 1.5)] = 0.1
+        x[(t >= 20.0) & (t < 23.0)] += 0.5  # held 3 s
+        w = weights(hidden=0, prefilter=False, rest_s=rest_s)
+        w.arrays["a"], w.arrays["b"], w.arrays["c"] = np.zeros((3, 3)), np.eye(3), np.zeros(3)
+        return t, TrackerMap(weights=w).clean(Animation(t, x, NAMES)).values
+
+    t, plain = own_rise((0.0, 0.0), 30.0)
+    later = (t >= 12.0) & (t < 20.0)
+    assert plain[later].min() > 0.19
+    for fps in (30.0, 120.0):
+        t, drift = own_rise((0.0, 0.0, 0.02), fps)
+        assert drift[(t >= 12.0) & (t < 20.0)].max() < 1e-9
+        held = drift[(t >= 20.0) & (t < 23.0)]
+        assert held.min() >= 0.5 - 0.02 * 3.0 - 1e-9 and held[0].min() > 0.499
+
+
 @pytest.mark.parametrize("key, value", [
     ("rest_tau", -0.1), ("rest_warm", 11.0), ("rest_tau", True), ("rest_warm", "0.2"),
-    ("rest_tau", [0.1, 0.2]), ("rest_warm", [0, 0, -1])])  # fmt: skip
+    ("rest_tau", [0.1, 0.2]), ("rest_warm", [0, 0, -1]), ("rest_drift", 1.5),
+    ("rest_drift", [0.0, -0.01, 0.0])])  # fmt: skip
 def test_a_rest_out_of_range_is_refused(key, value):
     w = weights(hidden=0)
     with pytest.raises(FacecleanError, match=key):
         MapWeights.build(dict(w.config, **{key: value}), w.arrays)
 
 
-@pytest.mark.parametrize("rest_s", [(0.15, 0.2), ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1])])
+@pytest.mark.parametrize(
+    "rest_s",
+    [
+        (0.15, 0.2),
+        ([0.15, 0.0, 0.3], [0.2, 0.0, 0.1]),
+        (0.15, 0.2, 0.05),
+        ([0.15, 0.0, 0.3], 0.2, [0, 0.02, 0.1]),
+    ],
+)
 def test_a_smoothed_rest_is_the_same_in_the_step_the_whole_take_and_the_fits_features(rest_s):
     # the fits score map_features.predict on map_features.features (neural/): the runtime's
     # own output, step by step and as a compiled whole take, through a gap (a restart); one

@@ -49,7 +49,7 @@ def _warm_args() -> dict[str, tuple]:
         "deadband": (x, one, x.copy()),
         "kalman": (*(one.copy() for _ in range(5)), x, one, one, one, one, one, x.copy()),
         "map_prefilter": (one.copy(), one.copy(), one.copy(), one.copy(), x, one, one, one,
-                          one, one * np.inf, 0, x.copy(), x.copy()),
+                          one, one * np.inf, one * 0.0, 0, x.copy(), x.copy()),
         "affine": (x, x, x.copy()),
         "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0, 0.1,
                        x.copy()),
@@ -293,35 +293,39 @@ def _inert(y, edx, x, dt, mc, beta, w_d, ea, k, out):
 
 
 def map_prefilter(u, edx, r, v, xi: np.ndarray, h: np.ndarray, tau_d, mc2pi, beta2pi,
-                  rate_r=None, rises: bool = False, out: tuple | None = None):  # fmt: skip
+                  rate_r=None, drift=None, rises: bool = False,
+                  out: tuple | None = None):  # fmt: skip
     """A tracker map's pre-filter over a run of usual frames (learned/tracker_map.py
     ``_usual``, one stream): state u, edx, r, v (K,) updated in place; xi (N, K) the
     inputs, h (N,) s the steps; tau_d, mc2pi, beta2pi (K,); rate_r (K,) 1/s the rest's smoothing,
-    1 / tau (inf: none, v unused). Returns (U, R) (N, K), into ``out`` where given: the filtered
-    inputs and their rest after each frame (``rises``: u - r instead); None when off."""
+    1 / tau (inf: none, v unused); drift (K,) weight/s the rest's climb (None: 0). Returns
+    (U, R) (N, K), into ``out`` where given: the filtered inputs and their rest after each
+    frame (``rises``: u - r instead); None when off."""
     kernel = _kernel("map_prefilter")
     if kernel is None:
         return None
     U, R = out if out is not None else (np.empty_like(xi), np.empty_like(xi))
     rate_r = np.full(len(u), np.inf) if rate_r is None else np.asarray(rate_r, np.float64)
-    kernel(u, edx, r, v, xi, h, tau_d, mc2pi, beta2pi, rate_r, int(rises), U, R)
+    drift = np.zeros(len(u)) if drift is None else np.asarray(drift, np.float64)
+    kernel(u, edx, r, v, xi, h, tau_d, mc2pi, beta2pi, rate_r, drift, int(rises), U, R)
     return U, R
 
 
-def _map_prefilter(u, edx, r, v, xi, h, tau_d, mc2pi, beta2pi, rate_r, rises, U, R):
+def _map_prefilter(u, edx, r, v, xi, h, tau_d, mc2pi, beta2pi, rate_r, drift, rises, U, R):
     """In place: ``_prefilter_frame`` frame after frame, U and R (N, K) getting u and r
     (rises: u - r)."""
     for n in range(xi.shape[0]):
-        _prefilter_frame(u, edx, r, v, xi[n], h[n], tau_d, mc2pi, beta2pi, rate_r)
+        _prefilter_frame(u, edx, r, v, xi[n], h[n], tau_d, mc2pi, beta2pi, rate_r, drift)
         for j in range(xi.shape[1]):
             U[n, j] = u[j]
             R[n, j] = u[j] - r[j] if rises else r[j]
 
 
-def _prefilter_frame(u, edx, r, v, x, h, tau_d, mc2pi, beta2pi, rate_r):
+def _prefilter_frame(u, edx, r, v, x, h, tau_d, mc2pi, beta2pi, rate_r, drift):
     """One frame x (K,) h s later, in place: ``_usual``'s One Euro in its arithmetic
-    order, a = h / (h + tau) and 2 pi f h / (1 + 2 pi f h), then the rest r = min(r, u),
-    or where rate_r is finite v += (1 - exp(-h rate_r)) (u - v) and r = min(r, v)."""
+    order, a = h / (h + tau) and 2 pi f h / (1 + 2 pi f h), then the rest
+    r = min(r + drift h, u), or where rate_r is finite v += (1 - exp(-h rate_r)) (u - v)
+    and r = min(r + drift h, v) (drift 0: r + 0 is r, the same bits as without it)."""
     for j in range(x.shape[0]):
         e = x[j] - u[j]
         edx[j] = edx[j] + (h / (h + tau_d[j])) * (e / h - edx[j])
@@ -329,9 +333,9 @@ def _prefilter_frame(u, edx, r, v, x, h, tau_d, mc2pi, beta2pi, rate_r):
         u[j] = u[j] + (g / (1.0 + g)) * e
         if rate_r[j] < math.inf:
             v[j] = v[j] + (u[j] - v[j]) * -math.expm1(-h * rate_r[j])
-            r[j] = min(r[j], v[j])
+            r[j] = min(r[j] + drift[j] * h, v[j])
         else:
-            r[j] = min(r[j], u[j])
+            r[j] = min(r[j] + drift[j] * h, u[j])
 
 
 def affine(c: np.ndarray, *pairs: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:

@@ -107,6 +107,7 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
     u, edx, r, v = (a[0].copy() for a in (tm._u, tm._edx, tm._r, tm._v))  # (K,)
     consts = [np.array(c, np.float64) for c in (tm._tau_d, tm._mc2pi, tm._beta2pi)]
     consts.append(tm._rest_rate)  # (K,) 1/s, the rest's smoothing (inf: none)
+    consts.append(tm._rest_drift)  # (K,) weight/s, the rest's climb (0: none)
     y = _one_pass(tm, (u, edx, r, v), xi, h, consts)
     if y is None:
         y = _apart(tm, (u, edx, r, v), xi, h, consts)

@@ -12,11 +12,14 @@ gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) o
 user's ``detail`` setting; config ``lift_top`` true or false (absent: false); config
 ``noise_band`` c in [0, MAX_NOISE] (absent: 0), the band's widening (learned/band.py);
 config ``rest_tau`` and ``rest_warm`` in [0, MAX_REST] s, a number or one per input (absent:
-0), the rest's smoothing and warm-up (learned/tracker_map.py).
+0), the rest's smoothing and warm-up (learned/tracker_map.py); config ``rest_drift`` in
+[0, MAX_DRIFT] weight/s, a number or one per input (absent: 0), how fast the rest may climb
+back up toward the face's reading, so that a dip is forgotten.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +37,8 @@ MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blink
 MAX_DETAIL = 4.0  # the detail's gain: more would pass the raw input's noise amplified
 MAX_NOISE = 100.0  # the band over the noise: more would hold a face still through its moves
 MAX_REST = 10.0  # s: a rest smoothed or held off longer would miss a face's own rest
+MAX_DRIFT = 1.0  # weight/s: a rest climbing faster would take a held expression off in 1 s
+REST_KEYS = ("rest_tau", "rest_warm", "rest_drift")
 
 
 @dataclass(frozen=True)
@@ -52,14 +57,14 @@ class MapWeights:
         return tuple(self.config["outputs"])
 
     @property
-    def rest(self) -> tuple[np.ndarray, np.ndarray]:
-        """(rest_tau, rest_warm) (K,) s each, one per input (config: a number or one per
-        input, absent 0: the plain running minimum)."""
+    def rest(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rest_tau s, rest_warm s, rest_drift weight/s) (K,) each, one per input (config:
+        a number or one per input, absent 0: the plain running minimum)."""
         k = len(self.inputs)
-        tau, warm = (
-            np.asarray(self.config.get(key, 0.0), np.float64) for key in ("rest_tau", "rest_warm")
+        return tuple(  # type: ignore[return-value]
+            np.broadcast_to(np.asarray(self.config.get(key, 0.0), np.float64), (k,))
+            for key in REST_KEYS
         )
-        return np.broadcast_to(tau, (k,)), np.broadcast_to(warm, (k,))
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> MapWeights:
@@ -133,13 +138,14 @@ class MapWeights:
         c = config.get("noise_band", 0.0)
         if isinstance(c, bool) or not isinstance(c, (int, float)) or not 0 <= c <= MAX_NOISE:
             raise FacecleanError(f"{label}: noise_band must be a number within [0, {MAX_NOISE}]")
-        for key in ("rest_tau", "rest_warm"):
+        for key, top, unit in zip(REST_KEYS, (MAX_REST, MAX_REST, MAX_DRIFT),
+                                  ("seconds", "seconds", "weight/s"), strict=True):  # fmt: skip
             v = config.get(key, 0.0)
             values = v if isinstance(v, list) and len(v) == k else [v]
             if not all(not isinstance(x, bool) and isinstance(x, (int, float))
-                       and 0 <= x <= MAX_REST for x in values):  # fmt: skip
-                raise FacecleanError(f"{label}: {key} must be a number of seconds within "
-                                     f"[0, {MAX_REST:g}], or one per input")  # fmt: skip
+                       and 0 <= x <= top for x in values):  # fmt: skip
+                raise FacecleanError(f"{label}: {key} must be a number of {unit} within "
+                                     f"[0, {top:g}], or one per input")  # fmt: skip
         scale = config.get("detail_scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 <= scale <= 1:
             raise FacecleanError(f"{label}: detail_scale must be a number within [0, 1]")
@@ -151,3 +157,16 @@ class MapWeights:
         label = Path(path).name
         formats.write(path, self.config, self.arrays,
                       lambda a: MapWeights.build(*formats.split(a, label), label))  # fmt: skip
+
+
+def detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:
+    """The ``detail`` setting checked: a number in [0, 1], or ``width`` of them."""
+    if value is None:
+        return float(default)
+    v = None
+    if isinstance(value, (int, float, list, tuple, np.ndarray)) and not isinstance(value, bool):
+        with contextlib.suppress(TypeError, ValueError):  # (ragged lists, text)
+            v = np.asarray(value, dtype=np.float64)
+    if v is None or v.shape not in ((), (width,)) or not ((v >= 0) & (v <= 1)).all():
+        raise FacecleanError(f"tracker-map: detail must be a number within [0, 1], not {value!r}")
+    return float(v) if v.ndim == 0 else v

@@ -7,13 +7,15 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
 
     u  = OneEuro(x)                     tuned pre-filter (min_cutoff, beta, d_cutoff), so
                                         the map sees the tracker's signal, not its noise
-    r  = min(r, v)                      the stream's resting level so far (since reset):
+    r  = min(r + rho h, v)              the stream's resting level so far (since reset):
                                         v = u, or with ``rest_tau`` u smoothed over that
                                         many s (v += (1 - exp(-h / tau)) (u - v)); with
                                         ``rest_warm``, r = v = u for that many s after
-                                        the stream's first frame (every rise 0), then
-                                        min(r, v); a face's own reading r0 adds
-                                        L max(0, r - r0) to m (``set_rest_reading``)
+                                        the stream's first frame (every rise 0); it
+                                        climbs back toward v at ``rest_drift`` rho
+                                        weight/s at most (0: the running minimum of v);
+                                        a face's own reading r0 adds L max(0, r - r0)
+                                        to m (``set_rest_reading``)
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
     m  = clip(A u + B (u - r) + c + d (x - u)_own + W2 tanh(W1 z + b1) + b2, 0, 1)  (M,)
     m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))  a lift, where g_j > 0 (blinks):
@@ -45,11 +47,10 @@ hidden layer (``hidden`` > 0) adds what is not linear; on the pairs we have it o
 (docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
 function of (u, r, x - u) only; on a still face u converges to x, so the detail goes to 0,
 r is constant, and m converges and y with it; a missing frame holds u and so y.
-Why the rest may be smoothed: the running minimum of a noisy reading finds its noise's
-lowest dips (a still face's rise grows with time); the minimum of a smoothed reading finds
-the face's rest, and the first frames (MediaPipe's first reading is often low) set
-nothing. The shipped map smooths it (0.1 s, after 0.1 s) on every input but the lids'
-(smoothed, they went above raw: docs/MODEL.md, eighth and ninth rounds).
+Why the rest is smoothed and drifts: a running minimum finds the noise's lowest dip, or a
+dip in the first frames or in a performance, and a still face then reads as a rise; the
+minimum of a smoothed reading finds the face's rest, and the drift forgets a dip while a
+held expression keeps all but rho per second of itself (docs/MODEL.md, rounds 8, 9, 18).
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
@@ -61,10 +62,9 @@ for MediaPipe) are not written. The weights and their checkpoint: map_weights.py
 
 from __future__ import annotations
 
-import contextlib
 import os
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -74,7 +74,7 @@ from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import band as noise
 from faceclean.learned.map_weights import MAX_DETAIL as MAX_DETAIL  # neural/map_groups.py's
-from faceclean.learned.map_weights import MapWeights
+from faceclean.learned.map_weights import MapWeights, detail_scale
 
 if TYPE_CHECKING:
     from faceclean.animation import Animation
@@ -92,19 +92,6 @@ def _cols(j: np.ndarray, width: int) -> np.ndarray | slice | None:
     """Columns j of ``width``: None for all of them in order, a slice where they run."""
     run = _span(j)
     return None if run == slice(0, width) else run or j
-
-
-def _detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:
-    """The ``detail`` setting checked: a number in [0, 1], or ``width`` of them."""
-    if value is None:
-        return float(default)
-    v = None
-    if isinstance(value, (int, float, list, tuple, np.ndarray)) and not isinstance(value, bool):
-        with contextlib.suppress(TypeError, ValueError):  # (ragged lists, text)
-            v = np.asarray(value, dtype=np.float64)
-    if v is None or v.shape not in ((), (width,)) or not ((v >= 0) & (v <= 1)).all():
-        raise FacecleanError(f"tracker-map: detail must be a number within [0, 1], not {value!r}")
-    return float(v) if v.ndim == 0 else v
 
 
 class TrackerMap(Stepper):
@@ -136,7 +123,7 @@ class TrackerMap(Stepper):
         self.names = tuple(names) if names is not None else w.inputs
         self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
         self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
-        self.detail = _detail_scale(detail, w.config.get("detail_scale", 1.0), len(self.names))
+        self.detail = detail_scale(detail, w.config.get("detail_scale", 1.0), len(self.names))
         scale = np.full(len(w.outputs), float(w.config.get("detail_scale", 1.0)))  # (M,)
         scale[self._out.have] = np.broadcast_to(self.detail, (len(self.names),))[self._out.cols]
         a = dict(w.arrays, detail=w.arrays["detail"] * scale)
@@ -190,13 +177,15 @@ class TrackerMap(Stepper):
         eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
         self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
         k = len(w.inputs)
-        tau, warm = w.rest  # (K,) s each: the rest's smoothing and warm-up, per input
+        tau, warm, drift = w.rest  # (K,) each: smoothing s, warm-up s, drift weight/s
         self._rest_smooth = tau > 0  # (K,) inputs whose rest is smoothed; the others: v = u
         self._rest_plain = ~self._rest_smooth if not self._rest_smooth.all() else None  # (K,)
         self._rest_rate = np.divide(1.0, tau, out=np.full(k, np.inf), where=tau > 0)  # 1/s
         self._smoothed = bool(self._rest_smooth.any())  # any input's rest smoothed
         self._rest_warm = warm.copy() if (warm > 0).any() else None
         self._rest_warm_max = float(warm.max())
+        self._rest_drift = drift.copy()  # (K,) weight/s
+        self._drift = self._rest_drift if drift.any() else None  # none: r + 0 not computed
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
         self.set_rest_reading(None)  # (K,) r0 and (K, M+L) L: none until a face's is set
         self.reset()
@@ -328,7 +317,7 @@ class TrackerMap(Stepper):
         np.divide(g, q, out=q)
         q *= e
         u += q  # u += g / (1 + g) e
-        if self._smoothed:  # v += (1 - exp(-h / tau)) (u - v), r = min(r, v)
+        if self._smoothed:  # v += (1 - exp(-h / tau)) (u - v)
             if not (isinstance(h, float) and h == self._rest_h):  # (K,) again for a new h
                 self._rest_f = -np.expm1(-h * self._rest_rate)
                 self._rest_h = h if isinstance(h, float) else None  # a float, or none kept
@@ -337,9 +326,9 @@ class TrackerMap(Stepper):
             self._v += q
             if self._rest_plain is not None:  # inputs with no smoothing: v = u (one call)
                 np.copyto(self._v, u, where=self._rest_plain)
-            np.minimum(self._r, self._v, out=self._r)
-        else:
-            np.minimum(self._r, u, out=self._r)  # the rest level (finite once started)
+        if self._drift is not None:  # r = min(r + rho h, v)
+            self._r += self._drift * h
+        np.minimum(self._r, self._v if self._smoothed else u, out=self._r)  # (finite once started)
         y = u @ self._ab  # (S, M+L)
         y += self._r @ self._nb
         if self._lvl is not None:  # a face's own rest reading (``set_rest_reading``)
@@ -396,7 +385,10 @@ class TrackerMap(Stepper):
             v = self._v + -np.expm1(-h * self._rest_rate) * (u - self._v)  # exact at any rate
             v = np.where(start[:, None] | np.isnan(v) | ~self._rest_smooth, u, v)
             self._v = v if moved.all() else np.where(moved[:, None], v, self._v)
-        low = np.fmin(self._r, v)  # NaN-aware: the first frame sets it
+        r = self._r
+        if self._drift is not None:  # climbs rho h on a frame that advances, h s
+            r = r + self._drift * np.where(advance, np.maximum(dt, DT_MIN), 0.0)[:, None]
+        low = np.fmin(r, v)  # NaN-aware: the first frame sets it
         if self._rest_warm is not None:
             self._t0 = np.where(moved & np.isnan(self._t0), tt, self._t0)
             warm = (tt - self._t0)[:, None] <= self._rest_warm  # (S, K)

@@ -2,7 +2,8 @@
 
 Per pair (``features``): the pre-filtered input u (the runtime's own One Euro, stepped as
 the cleaner steps it), its resting level r (``rest``: the running minimum since reset, of
-u smoothed with the config's ``rest_tau``, after its ``rest_warm``), the truth y
+u smoothed with the config's ``rest_tau``, after its ``rest_warm``, climbing back at its
+``rest_drift``), the truth y
 and the detail e = x - u, (F, K) each; ``predict`` is the runtime's output on them
 (learned/tracker_map.py, deadband and blink lift included) and ``score`` its MSE, jitter,
 lag and blink closure. Every fit of neural/ (tracker_map.py, map_rises.py, blink_lift.py)
@@ -95,35 +96,39 @@ def features(w: MapWeights, pairs: Sequence[Pair]) -> list[Feature]:
     return out
 
 
-def rest(t: np.ndarray, u: np.ndarray, tau=0.0, warm=0.0) -> np.ndarray:
+def rest(t: np.ndarray, u: np.ndarray, tau=0.0, warm=0.0, drift=0.0) -> np.ndarray:
     """(F, K) the runtime's rest (learned/tracker_map.py ``_rest``) of one stream whose
-    every frame advances, times t (F,) s: r = min(r, v), v += (1 - exp(-h / tau)) (u - v)
-    (v = u for tau 0), and r = v = u while t - t0 <= warm; tau and warm s, a number or one
-    per input (K,)."""
+    every frame advances, times t (F,) s: r = min(r + drift h, v), v += (1 - exp(-h / tau))
+    (u - v) (v = u for tau 0), and r = v = u while t - t0 <= warm; tau and warm s, drift
+    weight/s, each a number or one per input (K,)."""
     if not len(t):
         return u.copy()
-    taus = np.broadcast_to(np.asarray(tau, np.float64), (u.shape[1],))
-    warms = np.broadcast_to(np.asarray(warm, np.float64), (u.shape[1],))
-    if np.ptp(taus) or np.ptp(warms):  # per input: each distinct setting's columns alone
+    sets = np.stack([np.broadcast_to(np.asarray(a, np.float64), (u.shape[1],))
+                     for a in (tau, warm, drift)], axis=1)  # (K, 3)  # fmt: skip
+    if np.ptp(sets, axis=0).any():  # per input: each distinct setting's columns alone
         r = np.empty_like(u)
-        for tw in {(float(a), float(b)) for a, b in zip(taus, warms, strict=True)}:
-            cols = np.flatnonzero((taus == tw[0]) & (warms == tw[1]))
-            r[:, cols] = rest(t, u[:, cols], *tw)
+        for s in {tuple(map(float, row)) for row in sets}:
+            cols = np.flatnonzero((sets == s).all(axis=1))
+            r[:, cols] = rest(t, u[:, cols], *s)
         return r
-    tau, warm = float(taus[0]), float(warms[0])
+    tau, warm, drift = map(float, sets[0])
     k = int(np.sum(t - t[0] <= warm)) if warm > 0 else 0  # frames of the warm-up: r = v = u
+    from faceclean.filters.one_euro import DT_MIN
+
+    h = np.maximum(np.diff(t), DT_MIN)  # (F - 1,) s
     v = u
     if tau > 0:
-        from faceclean.filters.one_euro import DT_MIN
-
-        h = np.maximum(np.diff(t), DT_MIN)  # (F - 1,) s
         v = u.copy()
         for n in range(max(k, 1), len(t)):  # the runtime's order: v + a (u - v)
             v[n] = v[n - 1] + -np.expm1(-h[n - 1] / tau) * (u[n] - v[n - 1])
     r = u.copy()
-    if k < len(t):  # then min(r, v) on, from the last frame's r
+    if k < len(t):  # then min(r + drift h, v) on, from the last frame's r
+        first = max(k - 1, 0)  # the frame of start's first row
         start = v[k:] if k == 0 else np.concatenate([u[k - 1 : k], v[k:]])
-        r[k:] = np.fmin.accumulate(start, axis=0)[-(len(t) - k) :]
+        # r_n - C_n = min(r_n-1 - C_n-1, v_n - C_n), C the climb so far: an accumulate
+        climb = drift * np.concatenate([[0.0], np.cumsum(h)])[first:, None]  # (F - first, 1)
+        low = np.fmin.accumulate(start - climb, axis=0) + climb
+        r[k:] = low[-(len(t) - k) :]
     return r
 
 

@@ -61,7 +61,8 @@ class MapReference:
         band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), (self.M,))
         self.band = t64(band)
         self.noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py
-        self.rest_tau, self.rest_warm = (t64(v.copy()) for v in w.rest)  # (K,) s, per input
+        # (K,) each, per input: the rest's smoothing s, warm-up s, drift weight/s
+        self.rest_tau, self.rest_warm, self.rest_drift = (t64(v.copy()) for v in w.rest)
         self.state: tuple | None = None
 
     @property
@@ -120,14 +121,14 @@ class MapReference:
             u = u + (1.0 / (1.0 + 1.0 / (2 * np.pi * fc * h))) * (xi - u)
         else:
             u = xi
-        v = u  # the rest: min(r, v), v = u smoothed over rest_tau s; r = u until rest_warm s
+        v = u  # the rest: min(r + rho h, v), v = u smoothed over rest_tau s; u in rest_warm s
         if self.rest_tau.any():  # tau 0: v = u
             rate = torch.where(self.rest_tau > 0, 1.0 / self.rest_tau, torch.inf)
             v = self.v + -torch.expm1(-h * rate) * (u - self.v)
             v = torch.where(self.rest_tau > 0, v, u)
             self.v = v
         self.age = self.age + torch.from_numpy(np.asarray(dt, np.float64)).reshape(-1, 1)  # s
-        r = torch.minimum(r, v)
+        r = torch.minimum(r + self.rest_drift * h, v)
         if self.rest_warm.any():  # r = v = u in the warm-up
             r = torch.where(self.age <= self.rest_warm, u, r)
             self.v = torch.where(self.age <= self.rest_warm, u, self.v)

@@ -65,7 +65,7 @@ import numpy as np
 
 from faceclean.channels import GROUPS
 from faceclean.datasets.paired import Pair
-from faceclean.learned.map_weights import MAX_DETAIL, MapWeights
+from faceclean.learned.map_weights import MAX_DETAIL, REST_KEYS, MapWeights
 from faceclean.neural import blink_lift, map_features, tracker_map
 from faceclean.neural.map_folds import Scored, cross_validate
 from faceclean.neural.map_folds import folds as fold_keys
@@ -122,7 +122,7 @@ HARM_REAL = 1.5
 # REST[1] s after a stream's first frame: a face's rest, not its noise's lowest dip (at rest
 # 0.10 / 0.10 / 0.16 off -> 0.07 / 0.06 / 0.11 held out); the lids' inputs (PLAIN_REST) keep
 # the plain minimum, where blinks read short under it (docs/MODEL.md, 8th and 9th rounds).
-REST = (0.1, 0.1)  # (rest_tau, rest_warm) s
+REST = (0.1, 0.1, 0.0)  # (rest_tau s, rest_warm s, rest_drift weight/s)
 PLAIN_REST = tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook"))
 Report = Callable[[dict[str, Any]], None]
 
@@ -134,7 +134,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
         details: Sequence[float] = DETAILS,
         noise_bands: Sequence[float] = NOISE_BANDS,
         harm_real: float | None = HARM_REAL,
-        rest: tuple[float, float] = REST, plain: Sequence[str] = PLAIN_REST,
+        rest: tuple[float, ...] = REST, plain: Sequence[str] = PLAIN_REST,
         as_read: bool = False, judge: str = JUDGE, cross_group: Cross = CROSS_GROUP,
         own_gain: Sequence[str] = OWN_GAIN) -> MapWeights:  # fmt: skip
     """The map over rises on ``pairs``: the pre-filter, ``lam``, the deadband and its
@@ -144,10 +144,11 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     pair. A group worse than raw in any family passes through levelled (its own rise;
     with ``as_read``, as read where levelled is worse than raw in some family); an output worse than
     ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
-    ``own_rise`` read their own rise, whatever the folds say. ``rest``: (rest_tau,
-    rest_warm) s, the runtime's rest (REST), but the plain minimum on the inputs named in
-    ``plain``; ``as_read`` False: a harmful group passes levelled, never as read (under a
-    smoothed rest as read keeps a photographed face's lids 0.3-0.5 up at rest:
+    ``own_rise`` read their own rise, whatever the folds say. ``rest``: (rest_tau s,
+    rest_warm s[, rest_drift weight/s]), the runtime's rest (REST), but the plain minimum
+    (drifting alike) on the inputs named in ``plain``; ``as_read`` False: a harmful group
+    passes levelled, never as read (under a smoothed rest as read keeps a photographed
+    face's lids 0.3-0.5 up at rest:
     docs/MODEL.md, eighth round). ``judge``: the MSE the choice is made on (JUDGE).
     ``cross_group``: how much harder a neighbour from another group is shrunk (solve).
     The groups in ``own_gain`` read their own input's rise alone, at a fitted gain."""
@@ -205,20 +206,21 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
 
 
 def per_input(
-    names: Sequence[str], rest: tuple[float, float], plain: Sequence[str] = ()
-) -> tuple[list[float], list[float]]:
-    """(tau, warm) s, one per input of ``names``: ``rest``, but (0, 0), the plain minimum,
-    on the inputs named in ``plain``."""
-    return ([0.0 if n in plain else float(rest[0]) for n in names],
-            [0.0 if n in plain else float(rest[1]) for n in names])  # fmt: skip
+    names: Sequence[str], rest: tuple[float, ...], plain: Sequence[str] = ()
+) -> tuple[list[float], list[float], list[float]]:
+    """(tau s, warm s, drift weight/s), one per input of ``names``: ``rest`` (no drift if
+    it names none), but tau = warm = 0, the plain minimum, on the inputs named in ``plain``."""
+    tau, warm, drift = (*rest, 0.0)[:3]
+    return ([0.0 if n in plain else float(tau) for n in names],
+            [0.0 if n in plain else float(warm) for n in names],
+            [float(drift)] * len(names))  # fmt: skip
 
 
 def _rest_keys(rest: tuple) -> dict[str, Any]:
-    """The config keys of a rest, (tau, warm) s one per input (none for the plain minimum
-    everywhere: a map as fitted before)."""
-    keys = ("rest_tau", "rest_warm")
-    out = {k: np.asarray(v, np.float64).tolist() for k, v in zip(keys, rest, strict=True)}
-    return out if any(np.any(np.asarray(v) > 0) for v in out.values()) else {}
+    """The config keys of a rest, (tau, warm, drift) one per input, each only where not
+    all 0 (its default: a map as fitted before has none)."""
+    out = {k: np.asarray(v, np.float64).tolist() for k, v in zip(REST_KEYS, rest, strict=True)}
+    return {k: v for k, v in out.items() if np.any(np.asarray(v) > 0)}
 
 
 def _choose(found: Sequence[tuple], judge: str = JUDGE) -> tuple:
