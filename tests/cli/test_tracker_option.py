@@ -75,3 +75,23 @@ def test_the_shipped_map_forgets_a_dip_so_a_still_face_reads_still():
     early = [tm.clean(Animation(t, x, NAMES)).values[soon].mean(axis=0) for x in (still, dipped)]
     assert np.abs(early[0] - early[1]).max() > 0.02  # the dip is read as a rise at first
     assert np.abs(ys[0] - ys[1]).max() < 0.012  # forgotten: within the map's band, 0.01
+
+
+def test_set_rest_drift_zero_keeps_a_held_expression_whole(tmp_path):
+    # a user who holds expressions for long (a held smile is a rise the climbing rest
+    # would take off at 0.005 weight/s) sets the rest still: the map as it was before
+    t = np.arange(20 * 30) / 30.0
+    x = np.full((len(t), 51), 0.1)
+    x[(t > 2.0), NAMES.index("mouthSmileLeft")] = 0.8  # held from 2 s to the end
+    src = tmp_path / "held.csv"
+    io.save(Animation(t, x, NAMES), src, fmt="mediapipe")
+    outs = {}
+    for words in ((), ("--set", "rest_drift=0")):
+        out = tmp_path / f"out{len(words)}.csv"
+        r = subprocess.run([*CLI, "clean", str(src), "-o", str(out), "--tracker", "mediapipe",
+                            *words], capture_output=True, text=True)  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        outs[words] = io.load(out).values[:, NAMES.index("mouthSmileLeft")]
+    kept, climbed = outs[("--set", "rest_drift=0")], outs[()]
+    assert kept[-1] - climbed[-1] > 0.05  # 18 s held: the climbing rest took some off
+    assert np.ptp(kept[-90:]) < 1e-9  # held still, and whole

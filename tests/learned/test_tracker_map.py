@@ -448,6 +448,30 @@ def test_a_drifting_rest_forgets_a_dip_and_keeps_a_held_expression():
         assert held.min() >= 0.5 - 0.02 * 3.0 - 1e-9 and held[0].min() > 0.499
 
 
+def test_the_users_rest_drift_replaces_the_models_per_channel():
+    # --set rest_drift=0 keeps a held expression whole (the rest never climbs); one
+    # channel's own value changes that channel's input alone; the values are checked
+    t = np.arange(600) / 30.0
+    x = np.full((600, 3), 0.3)
+    x[30:45] = 0.1  # a dip
+    a = Animation(t, x, NAMES)
+    drifting = weights(hidden=0, prefilter=False, rest_s=(0.0, 0.0, 0.02))
+    still = weights(hidden=0, prefilter=False, rest_s=(0.0, 0.0, 0.0))
+    for w in (drifting, still):
+        w.arrays["a"], w.arrays["b"], w.arrays["c"] = np.zeros((3, 3)), np.eye(3), np.zeros(3)
+    off = TrackerMap(weights=drifting, rest_drift=0.0).clean(a).values
+    np.testing.assert_array_equal(off, TrackerMap(weights=still).clean(a).values)
+    assert off[-1].min() > 0.19  # the dip kept as the rest
+    one = TrackerMap(weights=still, rest_drift=[0.02, 0.0, 0.0])
+    assert one.rest_drift.tolist() == [0.02, 0.0, 0.0]
+    y = one.clean(a).values
+    assert y[-1, 0] < 1e-9 and y[-1, 1:].min() > 0.19
+    assert TrackerMap(weights=drifting).rest_drift.tolist() == [0.02] * 3  # the model's
+    for bad in (-0.1, 1.5, True, "x", [0.1, 0.2]):
+        with pytest.raises(FacecleanError, match="rest_drift must be a number within"):
+            TrackerMap(weights=still, rest_drift=bad)
+
+
 @pytest.mark.parametrize("key, value", [
     ("rest_tau", -0.1), ("rest_warm", 11.0), ("rest_tau", True), ("rest_warm", "0.2"),
     ("rest_tau", [0.1, 0.2]), ("rest_warm", [0, 0, -1]), ("rest_drift", 1.5),

@@ -76,11 +76,14 @@ def test_refusals_are_the_resolvers():
 
 
 def test_the_mediapipe_map_offers_its_detail_per_channel():
-    """--tracker mediapipe: the page's one key is the map's detail (the model's scale on
-    every channel); a channel's own value shows on that channel and cleans as the words do."""
+    """--tracker mediapipe: the page's keys are the map's detail (the model's scale on
+    every channel) and its rest's drift; a channel's own value shows on that channel and
+    cleans as the words do."""
     tuning = Tuning(None, ("jawOpen.detail=1",), tracker="mediapipe").with_choice()
     state = tuning.describe()
-    assert state["method"] == "tracker-map" and state["keys"] == ["detail"]
+    assert state["method"] == "tracker-map" and state["keys"] == ["detail", "rest_drift"]
+    drift = tuning.choice.build(ARKIT52).weights.config["rest_drift"]  # one per input
+    assert state["values"]["rest_drift"][ARKIT52.index("jawOpen")] == drift[0] > 0
     values = state["values"]["detail"]
     scale = tuning.choice.build(ARKIT52).weights.config["detail_scale"]
     assert values[ARKIT52.index("jawOpen")] == 1.0

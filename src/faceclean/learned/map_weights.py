@@ -159,14 +159,18 @@ class MapWeights:
                       lambda a: MapWeights.build(*formats.split(a, label), label))  # fmt: skip
 
 
-def detail_scale(value: Any, default: float, width: int) -> float | np.ndarray:
-    """The ``detail`` setting checked: a number in [0, 1], or ``width`` of them."""
+def column_setting(key: str, value: Any, default: Any, width: int, top: float = 1.0
+                   ) -> float | np.ndarray:  # fmt: skip
+    """A per-channel setting of the map (``detail``, ``drift``) checked: a number in [0,
+    top], or ``width`` of them (one per column); None: ``default``."""
     if value is None:
-        return float(default)
+        return default if isinstance(default, np.ndarray) else float(default)
     v = None
     if isinstance(value, (int, float, list, tuple, np.ndarray)) and not isinstance(value, bool):
         with contextlib.suppress(TypeError, ValueError):  # (ragged lists, text)
             v = np.asarray(value, dtype=np.float64)
-    if v is None or v.shape not in ((), (width,)) or not ((v >= 0) & (v <= 1)).all():
-        raise FacecleanError(f"tracker-map: detail must be a number within [0, 1], not {value!r}")
+    if v is None or v.shape not in ((), (width,)) or not ((v >= 0) & (v <= top)).all():
+        raise FacecleanError(
+            f"tracker-map: {key} must be a number within [0, {top:g}], not {value!r}"
+        )
     return float(v) if v.ndim == 0 else v

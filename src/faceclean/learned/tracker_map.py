@@ -74,7 +74,7 @@ from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import band as noise
 from faceclean.learned.map_weights import MAX_DETAIL as MAX_DETAIL  # neural/map_groups.py's
-from faceclean.learned.map_weights import MapWeights, detail_scale
+from faceclean.learned.map_weights import MAX_DRIFT, MapWeights, column_setting
 
 if TYPE_CHECKING:
     from faceclean.animation import Animation
@@ -99,10 +99,11 @@ class TrackerMap(Stepper):
     replace the model's pre-filter settings (scalars, or one per model input); ``detail``
     in [0, 1] replaces its detail scale: how much of the lag the pre-filter adds the map
     takes back (0: none, 1: the fitted detail, all of it), trading jitter for lag; a
-    scalar, or one per column of ``names`` (for the output written there)."""
+    scalar, or one per column of ``names`` (the output written there); ``rest_drift`` how
+    fast the rest of the input read there climbs back (weight/s; 0: held expressions kept)."""
 
     name = "tracker-map"
-    PER_CHANNEL = ("detail",)
+    PER_CHANNEL = ("detail", "rest_drift")
 
     def __init__(
         self,
@@ -113,6 +114,7 @@ class TrackerMap(Stepper):
         beta: float | Sequence[float] | None = None,
         d_cutoff: float | Sequence[float] | None = None,
         detail: float | Sequence[float] | None = None,
+        rest_drift: float | Sequence[float] | None = None,
         names: Sequence[str] | None = None,
     ) -> None:
         if weights is None:
@@ -123,7 +125,8 @@ class TrackerMap(Stepper):
         self.names = tuple(names) if names is not None else w.inputs
         self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
         self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
-        self.detail = detail_scale(detail, w.config.get("detail_scale", 1.0), len(self.names))
+        c = len(self.names)
+        self.detail = column_setting("detail", detail, w.config.get("detail_scale", 1.0), c)
         scale = np.full(len(w.outputs), float(w.config.get("detail_scale", 1.0)))  # (M,)
         scale[self._out.have] = np.broadcast_to(self.detail, (len(self.names),))[self._out.cols]
         a = dict(w.arrays, detail=w.arrays["detail"] * scale)
@@ -178,14 +181,19 @@ class TrackerMap(Stepper):
         self._eps = None if eps is None else (-eps, eps)  # ``_usual``'s; one number clips faster
         k = len(w.inputs)
         tau, warm, drift = w.rest  # (K,) each: smoothing s, warm-up s, drift weight/s
+        shown = np.zeros(c)  # (C,) the model's drift by column (0 where no input reads one)
+        shown[self._in.cols] = drift[self._in.have]
+        self.rest_drift = column_setting("rest_drift", rest_drift, shown, c, MAX_DRIFT)
+        drift = drift.copy()  # (K,) the setting's, on each input read from a column
+        drift[self._in.have] = np.broadcast_to(self.rest_drift, (c,))[self._in.cols]
         self._rest_smooth = tau > 0  # (K,) inputs whose rest is smoothed; the others: v = u
         self._rest_plain = ~self._rest_smooth if not self._rest_smooth.all() else None  # (K,)
         self._rest_rate = np.divide(1.0, tau, out=np.full(k, np.inf), where=tau > 0)  # 1/s
         self._smoothed = bool(self._rest_smooth.any())  # any input's rest smoothed
         self._rest_warm = warm.copy() if (warm > 0).any() else None
         self._rest_warm_max = float(warm.max())
-        self._rest_drift = drift.copy()  # (K,) weight/s
-        self._drift = self._rest_drift if drift.any() else None  # none: r + 0 not computed
+        self._rest_drift = drift  # (K,) weight/s
+        self._drift = drift if drift.any() else None  # none: r + 0 not computed
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
         self.set_rest_reading(None)  # (K,) r0 and (K, M+L) L: none until a face's is set
         self.reset()

@@ -6,6 +6,7 @@ export const RANGES = {
   tau: [0.001, 2, true], gamma: [0.01, 1, false], q: [0.01, 1000, true], r: [1e-4, 1, true],
   sigma: [0.001, 0.5, true], sigma_frames: [0.1, 50, true],
   detail: [0, 1, false], // the tracker map's: the share of its fitted detail (lag taken back)
+  rest_drift: [0, 0.05, false], // the tracker map's: how fast its rest climbs back, weight/s
 };
 export const OTHER = [1e-3, 1e3, true]; // a smoothing key not in RANGES
 // The levels' keys: [lo, hi, log scale?, the value when unset].
