@@ -184,9 +184,11 @@ def test_the_fit_smooths_the_rest_of_every_input_but_the_lids():
     assert lids and rest
     assert not tau[lids].any() and not warm[lids].any()
     assert np.all(tau[rest] == map_rises.REST[0]) and np.all(warm[rest] == map_rises.REST[1])
-    assert np.all(drift == map_rises.REST[2]) and drift.all()  # the lids' rest drifts too
+    assert np.all(drift == map_rises.REST[2])
     plain = map_rises.fit(pairs(1) + pairs(2), rest=(0.0, 0.0), **ONE)
     assert not any(k in plain.config for k in ("rest_tau", "rest_warm", "rest_drift"))
+    drifting = map_rises.fit(pairs(1) + pairs(2), rest=(0.1, 0.1, 0.02), **ONE)
+    assert np.all(drifting.rest[2] == 0.02)  # every input's, the lids' too
 
 
 def test_a_lift_that_breaks_the_frame_rate_contract_is_refused(fitted):

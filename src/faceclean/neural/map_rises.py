@@ -122,9 +122,10 @@ HARM_REAL = 1.5
 # REST[1] s after a stream's first frame: a face's rest, not its noise's lowest dip (at rest
 # 0.10 / 0.10 / 0.16 off -> 0.07 / 0.06 / 0.11 held out); the lids' inputs (PLAIN_REST) keep
 # the plain minimum, where blinks read short under it (docs/MODEL.md, 8th and 9th rounds).
-# Every input's rest climbs back toward the reading at REST[2] weight/s: a dip (a first
-# frame, a blink's gaze, wide eyes) is forgotten, so a still face reads still (18th round).
-REST = (0.1, 0.1, 0.005)  # (rest_tau s, rest_warm s, rest_drift weight/s)
+# REST[2] weight/s: how fast the rest climbs back toward the reading, so that a dip is
+# forgotten; 0: at 0.005 a still face read still, but held out the made-up performers'
+# lids went above raw (docs/MODEL.md, 18th round). A user may set it (--set rest_drift).
+REST = (0.1, 0.1, 0.0)  # (rest_tau s, rest_warm s, rest_drift weight/s)
 PLAIN_REST = tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook"))
 Report = Callable[[dict[str, Any]], None]
 
