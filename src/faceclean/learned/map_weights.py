@@ -161,7 +161,7 @@ class MapWeights:
 
 def column_setting(key: str, value: Any, default: Any, width: int, top: float = 1.0
                    ) -> float | np.ndarray:  # fmt: skip
-    """A per-channel setting of the map (``detail``, ``drift``) checked: a number in [0,
+    """A per-channel setting of the map (``detail``, ``rest_drift``) checked: a number in [0,
     top], or ``width`` of them (one per column); None: ``default``."""
     if value is None:
         return default if isinstance(default, np.ndarray) else float(default)
