@@ -175,8 +175,9 @@ def test_a_group_whose_own_rise_is_worse_too_passes_as_read_only_when_asked():
 
 
 def test_the_fit_smooths_the_rest_of_every_input_but_the_lids():
-    # the lids keep the plain minimum (a smoothed one reads blinks short between long
-    # lowered stretches); every other input its smoothed rest, written per input
+    # the lids keep the plain minimum, no climb (a smoothed one reads blinks short between
+    # long lowered stretches; a climbing one took the lids above raw held out); every other
+    # input its smoothed, climbing rest, written per input
     w = map_rises.fit(pairs(1) + pairs(2), **ONE)
     tau, warm, drift = w.rest
     lids = [k for k, n in enumerate(w.inputs) if n in map_rises.PLAIN_REST]
@@ -184,11 +185,14 @@ def test_the_fit_smooths_the_rest_of_every_input_but_the_lids():
     assert lids and rest
     assert not tau[lids].any() and not warm[lids].any()
     assert np.all(tau[rest] == map_rises.REST[0]) and np.all(warm[rest] == map_rises.REST[1])
-    assert np.all(drift == map_rises.REST[2])
+    assert map_rises.REST[2] > 0 and np.all(drift[rest] == map_rises.REST[2])
+    assert not drift[lids].any()
     plain = map_rises.fit(pairs(1) + pairs(2), rest=(0.0, 0.0), **ONE)
     assert not any(k in plain.config for k in ("rest_tau", "rest_warm", "rest_drift"))
     drifting = map_rises.fit(pairs(1) + pairs(2), rest=(0.1, 0.1, 0.02), **ONE)
-    assert np.all(drifting.rest[2] == 0.02)  # every input's, the lids' too
+    assert np.all(drifting.rest[2][rest] == 0.02) and not drifting.rest[2][lids].any()
+    even = map_rises.fit(pairs(1) + pairs(2), rest=(0.1, 0.1, 0.02), plain=(), **ONE)
+    assert np.all(even.rest[2] == 0.02)  # no plain inputs: every input climbs
 
 
 def test_a_lift_that_breaks_the_frame_rate_contract_is_refused(fitted):
@@ -280,7 +284,8 @@ def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_anoth
 
     train = habits(hidden)
     kw = dict(prefilters=PRE, lams=(0.03, 1.0), own_rise=(), knees=(None,), cross_group=3.0,
-              noise_bands=(0.0,), deadbands=(0.01,), harm_real=None)  # fmt: skip
+              noise_bands=(0.0,), deadbands=(0.01,), harm_real=None,
+              rest=map_rises.REST[:2])  # fmt: skip  (the judge, not the rest's climb, asked)
     every, real = (map_rises.fit(train, judge=j, **kw) for j in ("all", "real"))
     assert every.config["lam"] == 0.03 and real.config["lam"] == 1.0
     assert real.config["val_real"] < every.config["val_real"] * 0.95

@@ -82,7 +82,8 @@ def test_the_mediapipe_map_offers_its_detail_per_channel():
     tuning = Tuning(None, ("jawOpen.detail=1",), tracker="mediapipe").with_choice()
     state = tuning.describe()
     assert state["method"] == "tracker-map" and state["keys"] == ["detail", "rest_drift"]
-    assert set(state["values"]["rest_drift"]) == {0.0}  # the shipped map's rest stays
+    drift = state["values"]["rest_drift"]  # the shipped map's: climbing but on the lids
+    assert drift[ARKIT52.index("eyeBlinkLeft")] == 0.0 and drift[ARKIT52.index("jawOpen")] > 0
     values = state["values"]["detail"]
     scale = tuning.choice.build(ARKIT52).weights.config["detail_scale"]
     assert values[ARKIT52.index("jawOpen")] == 1.0

@@ -123,9 +123,9 @@ HARM_REAL = 1.5
 # 0.10 / 0.10 / 0.16 off -> 0.07 / 0.06 / 0.11 held out); the lids' inputs (PLAIN_REST) keep
 # the plain minimum, where blinks read short under it (docs/MODEL.md, 8th and 9th rounds).
 # REST[2] weight/s: how fast the rest climbs back toward the reading, so that a dip is
-# forgotten; 0: at 0.005 a still face read still, but held out the made-up performers'
-# lids went above raw (docs/MODEL.md, 18th round). A user may set it (--set rest_drift).
-REST = (0.1, 0.1, 0.0)  # (rest_tau s, rest_warm s, rest_drift weight/s)
+# forgotten (a still face reads still); not on the lids' inputs, where it took the made-up
+# performers' lids above raw held out (docs/MODEL.md, 18th and 19th rounds).
+REST = (0.1, 0.1, 0.005)  # (rest_tau s, rest_warm s, rest_drift weight/s)
 PLAIN_REST = tuple(n for n in GROUPS["eyes"] if not n.startswith("eyeLook"))
 Report = Callable[[dict[str, Any]], None]
 
@@ -149,7 +149,7 @@ def fit(pairs: Sequence[Pair], lams: Sequence[float] = LAMBDAS,
     ``harm_real`` x raw on the folds' real performances too (None: never). The groups in
     ``own_rise`` read their own rise, whatever the folds say. ``rest``: (rest_tau s,
     rest_warm s[, rest_drift weight/s]), the runtime's rest (REST), but the plain minimum
-    (drifting alike) on the inputs named in ``plain``; ``as_read`` False: a harmful group
+    (no climb) on the inputs named in ``plain``; ``as_read`` False: a harmful group
     passes levelled, never as read (under a smoothed rest as read keeps a photographed
     face's lids 0.3-0.5 up at rest:
     docs/MODEL.md, eighth round). ``judge``: the MSE the choice is made on (JUDGE).
@@ -212,11 +212,11 @@ def per_input(
     names: Sequence[str], rest: tuple[float, ...], plain: Sequence[str] = ()
 ) -> tuple[list[float], list[float], list[float]]:
     """(tau s, warm s, drift weight/s), one per input of ``names``: ``rest`` (no drift if
-    it names none), but tau = warm = 0, the plain minimum, on the inputs named in ``plain``."""
+    it names none), but the plain minimum (tau = warm = drift = 0) on the inputs named in
+    ``plain``."""
     tau, warm, drift = (*rest, 0.0)[:3]
-    return ([0.0 if n in plain else float(tau) for n in names],
-            [0.0 if n in plain else float(warm) for n in names],
-            [float(drift)] * len(names))  # fmt: skip
+    return tuple([0.0 if n in plain else float(v) for n in names]
+                 for v in (tau, warm, drift))  # fmt: skip
 
 
 def _rest_keys(rest: tuple) -> dict[str, Any]:
