@@ -278,14 +278,15 @@ def test_the_fit_is_judged_on_real_performances_where_made_up_ones_ask_for_anoth
     # never move them, where that habit is harm and a stiffer fit is right. Judged on every
     # fold, the loose fit wins; on the real ones, the stiff one, and the real faces' jaw
     # stays nearer put. Every group's neighbours across groups are shrunk alike (x3): the
-    # jaw's own x10 (CROSS_GROUP) would already keep that habit out.
+    # jaw's own x10 (CROSS_GROUP) would already keep that habit out. The rest does not
+    # climb here: the judge is asked, not the rest.
     hidden = {"jawLeft": "mouthLeft", "jawRight": "mouthRight", "jawForward": "mouthFunnel",
               "cheekPuff": "mouthPucker", "mouthClose": "mouthRollLower"}  # fmt: skip
 
     train = habits(hidden)
     kw = dict(prefilters=PRE, lams=(0.03, 1.0), own_rise=(), knees=(None,), cross_group=3.0,
               noise_bands=(0.0,), deadbands=(0.01,), harm_real=None,
-              rest=map_rises.REST[:2])  # fmt: skip  (the judge, not the rest's climb, asked)
+              rest=map_rises.REST[:2])  # fmt: skip
     every, real = (map_rises.fit(train, judge=j, **kw) for j in ("all", "real"))
     assert every.config["lam"] == 0.03 and real.config["lam"] == 1.0
     assert real.config["val_real"] < every.config["val_real"] * 0.95
