@@ -20,8 +20,9 @@
   a ridge toward the identity (D = 0: the shipped model alone) scaled by each input's
   own variance, V_i = V0 for the channel's own input and V_CROSS for a neighbour (a
   neighbour must move clearly to correct a channel). A channel no seen prompt aims at
-  is not touched; a channel that did not move (a still face) keeps D near 0. The result
-  is ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
+  is not touched, nor are the squint's and the wide eyes' (UNFITTED); a channel that did
+  not move (a still face) keeps D near 0. The result is
+  ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
   With it, the face's own resting reading of the mouth's and the gaze's inputs
   (REST_INPUTS: u, as the cleaner's pre-filter gives it, the median over all the
   script's rests: u, unlike y, does not depend on the stream rest a prompt pushed down):
@@ -63,6 +64,11 @@ LAMBDA = 10.0  # ridge on D relative to each input's own variance (+ V0): scale-
 # neutral, on the four faces chosen on (painted 7, dressed 5, photo 47, obama3 53) the mean
 # guided / uncalibrated MSE is 0.946 / 0.931 / 0.922 / 0.911 / 0.902 / 0.901 at LAMBDA
 # 1 / 2 / 3 / 5 / 10 / 30 (no D: 0.907); 10 for its blinks (docs/CALIBRATION.md).
+# Outputs the fit leaves as the shipped cleaner reads them: the squint and wide-eyed
+# prompts' levels do not carry to a talking face. Their rows of D made the lids worse than
+# uncalibrated on all ten faces measured; without them guided MSE is lower on all ten
+# (biden 0.492 -> 0.476) and blink closure is kept (docs/CALIBRATION.md, "The lids' rows").
+UNFITTED = tuple(n for n in GROUPS["eyes"] if n.startswith(("eyeSquint", "eyeWide")))
 V0 = 1e-4  # weight units^2: the tracker's noise floor, so a still channel is not trusted
 V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a channel
 MAX_OFFSET = 0.3
@@ -254,7 +260,7 @@ def fit_adaptation(
         c = np.clip(-d @ my, -MAX_OFFSET, MAX_OFFSET)  # y' = y + D (y - rest)
         for k, j in enumerate(cols):
             name = ARKIT52[j]
-            if not aimed[j]:  # no evidence of its level: the shipped model's output
+            if not aimed[j] or name in UNFITTED:  # the shipped model's output
                 continue
             if abs(c[k]) > 1e-4:
                 offset[name] = float(c[k])
