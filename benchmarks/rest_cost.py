@@ -1,10 +1,11 @@
-"""The shipped MediaPipe map's step with its smoothed rest (ninth round) against the same
-map on the plain running minimum, side by side in one run, one core.
+"""The shipped MediaPipe map's step with its smoothed, climbing rest (ninth and nineteenth
+rounds) against the same map with no climb and on the plain running minimum, side by side
+in one run, one core.
 
     taskset -c 1 .venv/bin/python benchmarks/rest_cost.py
 
 Median step time per stream-frame, one stream (3000 frames) and 1024 (300 frames), three
-rounds each: the price of the rest's smoothing (docs/BENCHMARKS.md).
+rounds each: the price of the rest's smoothing and of its climb (docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -36,14 +37,18 @@ def median_step(weights: MapWeights, s: int, n: int, rng) -> float:
 
 def main() -> None:
     w = MapWeights.load(MODELS / "mediapipe.npz")
-    keys = ("rest_tau", "rest_warm")
-    plain = replace(w, config={k: v for k, v in w.config.items() if k not in keys})
+
+    def without(*keys: str) -> MapWeights:
+        return replace(w, config={k: v for k, v in w.config.items() if k not in keys})
+
+    still, plain = without("rest_drift"), without("rest_tau", "rest_warm", "rest_drift")
     rng = np.random.default_rng(0)
     for s, n in ((1, 3000), (1024, 300)):
         for rnd in range(3):
-            a, b = median_step(w, s, n, rng), median_step(plain, s, n, rng)
-            print(f"{s} streams, round {rnd}: smoothed {a / s * 1e6:.3f} us a stream-frame, "
-                  f"plain {b / s * 1e6:.3f}, ratio {a / b:.3f}")  # fmt: skip
+            a, b, c = (median_step(m, s, n, rng) / s * 1e6 for m in (w, still, plain))
+            print(f"{s} streams, round {rnd}: shipped {a:.3f} us a stream-frame, "
+                  f"no climb {b:.3f}, plain {c:.3f}; "
+                  f"climb {a / b:.3f}x, smoothing {b / c:.3f}x")  # fmt: skip
 
 
 if __name__ == "__main__":
