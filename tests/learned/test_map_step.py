@@ -130,10 +130,12 @@ def _weights(which: str) -> MapWeights:
     """The shipped map; with a per-output deadband and no lift; or with a lift (some
     knees at 0, its top kept), a scalar deadband and a detail on some outputs only. The
     band is never widened by the noise and the rest is the plain minimum: the frozen step
-    predates both (learned/band.py, the rest's ``rest_tau`` and ``rest_warm``; their paths
-    are checked against each other in tests/learned/test_tracker_map.py)."""
+    predates both (learned/band.py, the rest's ``rest_tau``, ``rest_warm`` and
+    ``rest_drift``; their paths are checked against each other in
+    tests/learned/test_tracker_map.py)."""
     w = MapWeights.load(MODELS / "mediapipe.npz")
-    w = MapWeights.build(dict(w.config, noise_band=0.0, rest_tau=0.0, rest_warm=0.0), w.arrays)
+    w = MapWeights.build(dict(w.config, noise_band=0.0, rest_tau=0.0, rest_warm=0.0,
+                              rest_drift=0.0), w.arrays)  # fmt: skip
     m = len(w.outputs)
     if which == "shipped":
         return w
