@@ -66,8 +66,9 @@ LAMBDA = 10.0  # ridge on D relative to each input's own variance (+ V0): scale-
 # 1 / 2 / 3 / 5 / 10 / 30 (no D: 0.907); 10 for its blinks (docs/CALIBRATION.md).
 # Outputs the fit leaves as the shipped cleaner reads them: the squint and wide-eyed
 # prompts' levels do not carry to a talking face. Their rows of D made the lids worse than
-# uncalibrated on all ten faces measured; without them guided MSE is lower on all ten
-# (biden 0.492 -> 0.476) and blink closure is kept (docs/CALIBRATION.md, "The lids' rows").
+# uncalibrated on all ten faces measured; without them guided MSE is lower on the eight
+# judged (biden 0.492 -> 0.476), and blink closure is kept (docs/CALIBRATION.md, "The
+# lids' rows").
 UNFITTED = tuple(n for n in GROUPS["eyes"] if n.startswith(("eyeSquint", "eyeWide")))
 V0 = 1e-4  # weight units^2: the tracker's noise floor, so a still channel is not trusted
 V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a channel
