@@ -50,7 +50,7 @@ r is constant, and m converges and y with it; a missing frame holds u and so y.
 Why the rest is smoothed and drifts: a running minimum finds the noise's lowest dip, or a
 dip in the first frames or in a performance, and a still face then reads as a rise; the
 minimum of a smoothed reading finds the face's rest, and a drift forgets a dip while a held
-expression keeps all but rho a second (the shipped rho is 0: docs/MODEL.md, rounds 8, 9, 18).
+expression keeps all but rho a second (shipped: 0.005 but on the lids, docs/MODEL.md 8-19).
 
 Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
 One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
