@@ -15,13 +15,14 @@
 
       y' = y + D_G (y_G - r_G)
       D_G[k] = argmin sum_n v_n (T_nk - y_nk + r_k - D_G[k] (y_nG - r_G))^2
-                      + LAMBDA * n * sum_i (var_i + V_i) D_G[k, i]^2
+                      + LAMBDA_G * n * sum_i (var_i + V_i) D_G[k, i]^2
 
   a ridge toward the identity (D = 0: the shipped model alone) scaled by each input's
   own variance, V_i = V0 for the channel's own input and V_CROSS for a neighbour (a
-  neighbour must move clearly to correct a channel). A channel no seen prompt aims at
-  is not touched, nor are the squint's and the wide eyes' (UNFITTED); a channel that did
-  not move (a still face) keeps D near 0. The result is
+  neighbour must move clearly to correct a channel); the groups are FIT_GROUPS (the
+  eyes' gaze apart from their lids), each shrunk by its own LAMBDA_G (LAMBDAS). A
+  channel no seen prompt aims at is not touched, nor are the squint's and the wide eyes'
+  (UNFITTED); a channel that did not move (a still face) keeps D near 0. The result is
   ``faceclean.adaptation.Adaptation`` (after the cleaner), with offsets c = -D r.
   With it, the face's own resting reading of the mouth's and the gaze's inputs
   (REST_INPUTS: u, as the cleaner's pre-filter gives it, the median over all the
@@ -64,12 +65,23 @@ LAMBDA = 10.0  # ridge on D relative to each input's own variance (+ V0): scale-
 # neutral, on the four faces chosen on (painted 7, dressed 5, photo 47, obama3 53) the mean
 # guided / uncalibrated MSE is 0.946 / 0.931 / 0.922 / 0.911 / 0.902 / 0.901 at LAMBDA
 # 1 / 2 / 3 / 5 / 10 / 30 (no D: 0.907); 10 for its blinks (docs/CALIBRATION.md).
+# Per group (FIT_GROUPS), chosen on those four faces (mean guided / shipped-fit MSE, each
+# group's LAMBDA from 0.1-100 with the others at 10; a group moved only where that gains
+# over 0.5 %): the gaze 0.3 (0.972: a look's gain carries to speech), the brows 0.3
+# (0.994); the lids, jaw, mouth and cheeks within 0.3 % of 10 (docs/CALIBRATION.md,
+# "Shrunk by group").
 # Outputs the fit leaves as the shipped cleaner reads them: the squint and wide-eyed
 # prompts' levels do not carry to a talking face. Their rows of D made the lids worse than
 # uncalibrated on all ten faces measured; without them guided MSE is lower on the eight
 # judged (biden 0.492 -> 0.476), and blink closure is kept (docs/CALIBRATION.md, "The
 # lids' rows").
 UNFITTED = tuple(n for n in GROUPS["eyes"] if n.startswith(("eyeSquint", "eyeWide")))
+GAZE = tuple(n for n in GROUPS["eyes"] if n.startswith("eyeLook"))
+# The groups D mixes within: channels.GROUPS, the gaze apart from the lids (a lid's
+# reading is no evidence of where an eye looks, nor the other way round).
+FIT_GROUPS = {"lids": tuple(n for n in GROUPS["eyes"] if n not in GAZE), "gaze": GAZE,
+              **{g: m for g, m in GROUPS.items() if g != "eyes"}}  # fmt: skip
+LAMBDAS = {"gaze": 0.3, "brows": 0.3}  # a group's own LAMBDA (LAMBDA where not named)
 V0 = 1e-4  # weight units^2: the tracker's noise floor, so a still channel is not trusted
 V_CROSS = 0.01  # weight units^2: a neighbour must move about 0.1 to correct a channel
 MAX_OFFSET = 0.3
@@ -85,7 +97,6 @@ HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it r
 # reading (the map reads gaze as its own rise): where a performer looks somewhere for a
 # whole take the stream's rest holds the look, and the neutral ("look straight ahead")
 # does not; better on all ten faces, guided and from a neutral hold alike ("Gaze").
-GAZE = tuple(n for n in GROUPS["eyes"] if n.startswith("eyeLook"))
 REST_INPUTS = GROUPS["mouth"] + GAZE
 REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"] + GAZE
 
@@ -243,7 +254,8 @@ def fit_adaptation(
     if not still.any():
         return Adaptation(offset, matrix)
     rest = np.median(y[_first_run(still)], axis=0)  # (52,) the pivot: the opening neutral
-    for members in GROUPS.values():
+    for group, members in FIT_GROUPS.items():
+        lam = LAMBDAS.get(group, LAMBDA)
         cols = [ARKIT52.index(m) for m in members if present[ARKIT52.index(m)]]
         if not cols:
             continue
@@ -254,8 +266,8 @@ def fit_adaptation(
         gram, cov = (v * yc).T @ yc, (v * yc).T @ ec  # (G, G), (G in, G out)
         d = np.zeros((len(cols), len(cols)))  # (G out, G in)
         for k in range(len(cols)):  # its own input trusted at V0, a neighbour at V_CROSS
-            pen = LAMBDA * n * (var + V_CROSS)
-            pen[k] = LAMBDA * n * (var[k] + V0)
+            pen = lam * n * (var + V_CROSS)
+            pen[k] = lam * n * (var[k] + V0)
             d[k] = np.linalg.solve(gram + np.diag(pen), cov[:, k])
         d = np.clip(d, -MAX_COEF, MAX_COEF)
         c = np.clip(-d @ my, -MAX_OFFSET, MAX_OFFSET)  # y' = y + D (y - rest)
