@@ -79,6 +79,23 @@ def test_every_family_renders_a_face_mediapipe_finds(head, portrait_file):
     assert np.isfinite(skin.coords).all() and np.abs(skin.alpha).max() < 10
 
 
+def test_the_portrait_s_eyes_land_in_the_head_s_eye_openings(head, portrait_file):
+    # The texture coordinates pulled onto the portrait's own landmarks: at the eyes'
+    # corners and lids they are the landmarks within a few px (a 40-mode fit alone left
+    # them 11 px off on this portrait, 23 on biden's: the photograph's eye painted on
+    # the lower lid, read by MediaPipe whatever the rendered lids did).
+    from faceclean.synthetic.portrait import Fitter, load
+    from faceclean.trackers.mediapipe import landmarks
+
+    image = dict(load([str(portrait_file)]))["rendered"]
+    fitter = Fitter(head, tracker_model())
+    skin = fitter.skin("rendered", image, False)
+    lm = landmarks(tracker_model(), image)
+    eyes = [33, 133, 159, 145, 362, 263, 386, 374]  # corners, upper and lower lids
+    off = np.linalg.norm(skin.coords[fitter.anchors()[eyes]] - lm[eyes, :2], axis=1)
+    assert off.mean() < 3.0 and off.max() < 5.0, off
+
+
 def test_a_portrait_without_a_usable_face_is_skipped_in_one_line(head, portrait_file, tmp_path):
     from faceclean.synthetic.portrait import Fitter
 

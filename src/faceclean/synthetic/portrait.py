@@ -16,7 +16,11 @@ The fit, once per portrait and mirror (``Fitter``):
    the anchors; then alpha (the first ``FIT_MODES`` identity modes) by ridge on
    ``M_a alpha = R'(L - t) / s - v0_a``, shrunk by ``FIT_SHRINK`` (cm^2 per unit^2).
 3. Texture coordinates: every vertex of the fitted neutral head projected into the
-   portrait, ``(x, -y)`` of ``s R v + t`` (px). Skin, lips, brows and lid vertices that
+   portrait, ``(x, -y)`` of ``s R v + t`` (px), then pulled onto the portrait's own
+   landmarks (``_pulled``: what the fit leaves off, spread over the head's surface), so
+   the photograph's eyes fall inside the head's eye openings, never on its lids or cheeks
+   (before the pull biden's eyes sat 23 px off: a second, painted eye under each rendered
+   one, read by MediaPipe whatever the lids did). Skin, lips, brows and lid vertices that
    face the camera take the photograph (weight 1, falling to 0 as they turn away); eyes,
    mouth, teeth and hair keep their paint, the irises the portrait's own iris colour.
 
@@ -58,6 +62,7 @@ FIT_MODES = 40
 FIT_SHRINK = 4.0
 FIT_ROUNDS = 6
 Z_WEIGHT = 0.5  # MediaPipe's depth is a guess beside its x and y
+PULL_CM = 0.5  # cm over the head: how far a landmark's residual reaches (an eye is 3 wide)
 
 
 def load(sources: list[str]) -> list[tuple[str, np.ndarray]]:
@@ -171,6 +176,7 @@ class Fitter:
         full[:k] = alpha
         v = hd.identity(full).reshape(-1, 3).astype(np.float64)
         p = (s * v @ r.T + t) * np.array([1.0, -1.0, 1.0])  # px, y down
+        p[:, :2] += _pulled(v, anchor, lm[:468, :2] - p[anchor, :2])
         n = hd.normals(v.astype(np.float32)) @ r.T
         from faceclean.synthetic import head as H
 
@@ -183,6 +189,21 @@ class Fitter:
         iris = _iris_colour(linear, lm[468:478])
         return Skin(name, linear, p[:, :2].astype(np.float32), weight.astype(np.float32),
                     alpha.astype(np.float32), iris)  # fmt: skip
+
+
+def _pulled(v: np.ndarray, anchor: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """(V, 2) px added to each vertex's texture coordinates: the landmarks' ``residual``
+    (468, 2) px (the portrait's landmark less its anchor's projection), averaged with
+    weights exp(-d^2 / (2 PULL_CM^2)), d cm from the vertex to each anchor on the fitted
+    head ``v`` (V, 3); a vertex far from every landmark (the ears, the neck) keeps its
+    projection (the sum of weights against 1e-3)."""
+    out = np.zeros((len(v), 2))
+    at = v[anchor]  # (468, 3) cm
+    for i in range(0, len(v), 4096):  # (4096, 468) weights at a time
+        d2 = ((v[i : i + 4096, None, :] - at[None]) ** 2).sum(-1)
+        w = np.exp(-d2 / (2.0 * PULL_CM**2))
+        out[i : i + 4096] = (w @ residual) / (w.sum(1, keepdims=True) + 1e-3)
+    return out
 
 
 def _similarity(x: np.ndarray, y: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
