@@ -205,7 +205,15 @@ def test_the_map_pass_bands_as_the_band_kernel_and_survives_off_and_on_again(on)
     def both():
         y0, st1 = np.full(m, 0.5), [np.full(m, 0.5), np.full(m, 0.5), np.zeros(m)]
         st2 = [v.copy() for v in st1]
-        got = compiled.map_run(p.copy(), u, x, h, c, (zero, idx, zero, idx),
+        none = (
+            np.zeros(0, np.intp),
+            np.zeros(0, np.intp),
+            np.zeros(0),
+            np.zeros(0),
+            0,
+            np.zeros(0),
+        )  # no lift
+        got = compiled.map_run(p.copy(), u, u, x, h, c, (zero, idx, zero, idx), none,
                                (2, floor, 16.0, band.TAU, band.CAP), y0, st1)  # fmt: skip
         m_ = np.clip(p + c, 0.0, 1.0)
         want = compiled.noise_band(m_, h, y0, *st2, floor, 16.0, band.TAU, band.CAP)

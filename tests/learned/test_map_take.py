@@ -47,25 +47,35 @@ def _stepped(tm: TrackerMap, anim: Animation) -> np.ndarray:
     return out
 
 
-def test_the_shipped_map_goes_in_one_pass_and_a_lifted_one_apart(numba_on, monkeypatch):
+@pytest.mark.parametrize("top", [True, False])
+def test_the_shipped_map_and_a_lifted_one_go_in_one_pass_a_mixed_one_apart(
+    numba_on, monkeypatch, top
+):
+    # The blink lift runs inside the one pass (compiled.map_run), its top kept or not;
+    # an A beyond each output's own input (a map over every input) goes apart.
     shipped = MapWeights.load(MODELS / "mediapipe.npz")
     a = dict(shipped.arrays)
     a["lift_gain"] = np.where(np.arange(len(a["lift_gain"])) < 2, 3.0, 0.0)  # two lifts
     a["lift_knee"] = np.full(len(a["lift_knee"]), 0.2)
-    lifted = MapWeights.build(shipped.config, a)
-    assert map_take._shipped_kind(TrackerMap(weights=shipped, names=ARKIT52)) is not None
-    assert map_take._shipped_kind(TrackerMap(weights=lifted, names=ARKIT52)) is None
+    lifted = MapWeights.build(dict(shipped.config, lift_top=top), a)
+    a = dict(shipped.arrays, a=np.array(shipped.arrays["a"]))
+    a["a"][0, 1] = 0.1  # eyeBlinkLeft reads eyeLookDownLeft's level
+    mixed = MapWeights.build(shipped.config, a)
+    for w, kind in ((shipped, True), (lifted, True), (mixed, False)):
+        assert (map_take._shipped_kind(TrackerMap(weights=w, names=ARKIT52)) is not None) == kind
     runs = []
     one = compiled.map_run
     monkeypatch.setattr(compiled, "map_run", lambda *a: runs.append(len(a[0])) or one(*a))
     anim = _take(BLOCK_AND_SOME, lost_rows=(100, 101, base.BLOCK + 7))
-    for w, passes in ((shipped, True), (lifted, False)):
+    wholes = []
+    for w, passes in ((shipped, True), (lifted, True), (mixed, False)):
         runs.clear()
         tm = TrackerMap(weights=w, names=ARKIT52)
-        whole = tm.clean(anim).values
-        np.testing.assert_allclose(whole, _stepped(tm, anim), rtol=0, atol=1e-12)
-        assert np.isnan(whole[[100, 101, base.BLOCK + 7]]).all()  # lost rows stay lost
+        wholes.append(tm.clean(anim).values)
+        np.testing.assert_allclose(wholes[-1], _stepped(tm, anim), rtol=0, atol=1e-12)
+        assert np.isnan(wholes[-1][[100, 101, base.BLOCK + 7]]).all()  # lost rows stay lost
         assert (sum(runs) > 0.9 * len(anim.times)) == passes, sum(runs)
+    assert np.nanmax(np.abs(wholes[1][:, 1] - wholes[0][:, 1])) > 0.05  # the lift lifted
 
 
 BLOCK_AND_SOME = base.BLOCK + 500

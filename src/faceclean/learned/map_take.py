@@ -7,11 +7,13 @@ MIN_DT and at most max_gap after the last) goes through at once, the state endin
 stepping leaves it. Equal to stepping within 1e-12 (the contract's ``whole_take`` clause,
 tests/test_contract.py): the same arithmetic, its sums in another order.
 
-Where the map is the shipped kind (no hidden layer, no lift, A u only on each output's own
-input) one compiled pass does each frame whole, the pre-filter, the rises' product, the
-detail, the clip and the band, with no (N, K) array between them (``compiled.map_run``):
+Where the map is the shipped kind (no hidden layer, A u only on each output's own input)
+one compiled pass does each frame whole, the pre-filter, the rises' product, the detail,
+the clip, the blink lift and the band, with no (N, K) array between them
+(``compiled.map_run``):
 
     m = clip(c + (u - r) B' + a u[own] + d x[own], 0, 1)     a = A_jj - d_j
+    m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))            the lift, l_j = g_j (u - r)_j - g_j k_j
 
 Otherwise the pre-filter and the products are compiled apart and the rest done in numpy.
 """
@@ -127,10 +129,9 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
 
 
 def _shipped_kind(tm: Map) -> tuple | None:
-    """(W (K, M), c (M,)) and (a, ai, d, di) (M,) for ``compiled.map_run``, or None where
-    the map is not the shipped kind (a lift, or A beyond each output's own input)."""
-    if len(tm._lo):
-        return None
+    """(W (K, M), c (M,)), (a, ai, d, di) (M,) and the lift's (lo, li, g, g k) (L,) for
+    ``compiled.map_run``, or None where the map is not the shipped kind (A beyond each
+    output's own input)."""
     w = tm.weights
     m = len(w.outputs)
     own = (tm._ab + tm._nb)[:, :m]  # (K, M): A' - D, what multiplies u itself
@@ -144,7 +145,9 @@ def _shipped_kind(tm: Map) -> tuple | None:
     d[tm._do] = tm._dd
     di = ai.copy()
     di[tm._do] = tm._di
-    return (np.ascontiguousarray(-tm._nb[:, :m]), tm._c[:m].copy()), (a, ai, d, di)
+    g = w.arrays["lift_gain"][tm._lo].astype(np.float64)
+    lift = (tm._lo.astype(np.intp), tm._li.astype(np.intp), g, g * w.arrays["lift_knee"][tm._lo])
+    return (np.ascontiguousarray(-tm._nb[:, :m]), tm._c[:m].copy()), (a, ai, d, di), lift
 
 
 def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
@@ -155,7 +158,7 @@ def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
         tm._kind = _shipped_kind(tm)
     if tm._kind is None or not compiled.have("map_prefilter", "map_run"):
         return None
-    (w, c), own = tm._kind
+    (w, c), own, (lo, li, g, gk) = tm._kind
     n, k, m = len(xi), xi.shape[1], len(c)
     if getattr(tm, "_room", None) is None or len(tm._room[2]) < n:
         tm._room = [np.empty((CHUNK, k)), np.empty((CHUNK, k)), np.empty((max(n, BLOCK), m))]
@@ -166,6 +169,8 @@ def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
         band = (1, tm._band, 0.0, noise.TAU, noise.CAP)
     st = tm._noise
     state = st.p1[0].copy(), st.p2[0].copy(), st.s[0].copy()  # (M,)
+    top = tm._top[0].copy() if tm._lift_top else np.ones(len(lo))  # (L,) the lift's top
+    lift = (lo, li, g, gk, tm._lift_top, top)
     p, y0 = tm._room[2][:n], tm._m[0]  # the outputs (N, M); the one before
     for a in range(0, n, CHUNK):  # the state carries from chunk to chunk, in place
         x, dt, q = xi[a : a + CHUNK], h[a : a + CHUNK], p[a : a + CHUNK]
@@ -173,9 +178,11 @@ def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
         compiled.map_prefilter(*pre, x, dt, *consts, rises=True, out=(U, Z))
         for b in range(0, len(x), ROWS):  # (u - r) B', in one thread (ROWS)
             np.matmul(Z[b : b + ROWS], w, out=q[b : b + ROWS])
-        compiled.map_run(q, U, x, dt, c, own, band, y0, state)
+        compiled.map_run(q, U, Z, x, dt, c, own, lift, band, y0, state)
         y0 = q[-1]
     st.p1, st.p2, st.s = (v[None] for v in state)
+    if tm._lift_top:
+        tm._top = top[None]
     return p
 
 
