@@ -19,6 +19,7 @@ from helpers import steps
 
 from faceclean import Animation
 from faceclean.channels import ARKIT52
+from faceclean.datasets import performer
 from faceclean.filters import METHODS
 
 M = len(ARKIT52)
@@ -66,15 +67,7 @@ def build(backend, files):
 
 def _curve(t: np.ndarray, seed: int = 0) -> np.ndarray:
     """(N, 52) smooth weights in [0.2, 0.8]: a sum of slow sines, per-channel phases."""
-    rng = np.random.default_rng(seed)
-    phase = rng.uniform(0, 2 * np.pi, (2, M))
-    f = rng.uniform(0.3, 1.1, (2, M))  # Hz
-    tt = t[:, None]
-    return (
-        0.5
-        + 0.15 * np.sin(2 * np.pi * f[0] * tt + phase[0])
-        + 0.15 * np.sin(2 * np.pi * f[1] * tt + phase[1])
-    )
+    return performer.sines(t, seed)
 
 
 def _noisy(n: int, seed: int = 0, fps: float = 60.0) -> tuple[np.ndarray, np.ndarray]:

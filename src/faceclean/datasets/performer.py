@@ -19,6 +19,21 @@ from faceclean.errors import FacecleanError
 from faceclean.errors import seed as check_seed
 
 
+def sines(t: np.ndarray, seed: int = 0) -> np.ndarray:
+    """(N, 52) smooth ARKit-52 weights in [0.2, 0.8] at times t (N,) s: per channel two slow
+    sines (0.3-1.1 Hz, seeded phases). The cleaner contract's curve (tests/test_contract.py)
+    and the map fit's rate check (neural/map_rises.py ``keeps_rate``) draw the same one."""
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0, 2 * np.pi, (2, len(INDEX)))
+    freq = rng.uniform(0.3, 1.1, (2, len(INDEX)))  # Hz
+    tt = np.asarray(t, np.float64)[:, None]
+    return (
+        0.5
+        + 0.15 * np.sin(2 * np.pi * freq[0] * tt + phase[0])
+        + 0.15 * np.sin(2 * np.pi * freq[1] * tt + phase[1])
+    )
+
+
 def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = False,
             net: bool = False) -> Animation:  # fmt: skip
     """A synthetic ARKit-52 performance of ``seconds`` s sampled at ``fps`` Hz.

@@ -371,27 +371,21 @@ def _choose_lift(w, pairs, feats, moments, folds, lam, passed, own_rise, knees, 
 def keeps_rate(w: MapWeights, seeds: Sequence[int] = tuple(range(8))) -> bool:
     """Whether ``w`` gives one curve at 30 and 120 fps within RATE_TOL (the cleaner
     contract's rate clause: it works at any frame rate): smooth made-up curves (slow
-    sines in [0.2, 0.8], drawn per ARKit channel as tests/test_contract.py draws its
-    curve, so seed 0 is the contract's own) cleaned at both rates, compared every 1/30 s
+    sines in [0.2, 0.8] per ARKit channel: ``performer.sines``, at seed 0 the contract's own
+    curve) cleaned at both rates, compared every 1/30 s
     after 0.5 s. The lift multiplies the pre-filter's small discretisation differences by
     its gain (drawn over the map's inputs alone, seeds 0-7 passed a lift the contract's
     curve refused: eyeBlinkRight 0.034 apart)."""
     from faceclean.animation import Animation
+    from faceclean.datasets.performer import sines
     from faceclean.learned.tracker_map import TrackerMap
 
     cols = [ARKIT52.index(n) for n in w.inputs]
     for seed in seeds:
-        rng = np.random.default_rng(seed)
-        phase = rng.uniform(0, 2 * np.pi, (2, len(ARKIT52)))[:, cols]
-        freq = rng.uniform(0.3, 1.1, (2, len(ARKIT52)))[:, cols]  # Hz
         outs = []
         for fps in (30, 120):
             t = np.arange(4 * fps) / fps
-            x = (
-                0.5
-                + 0.15 * np.sin(2 * np.pi * freq[0] * t[:, None] + phase[0])
-                + 0.15 * np.sin(2 * np.pi * freq[1] * t[:, None] + phase[1])
-            )
+            x = sines(t, seed)[:, cols]
             y = TrackerMap(weights=w, names=w.inputs).clean(Animation(t, x, w.inputs)).values
             outs.append(y[:: fps // 30][15:-15])
         if np.abs(outs[0] - outs[1]).max() >= RATE_TOL:
