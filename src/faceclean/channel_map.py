@@ -46,3 +46,17 @@ class ChannelMap:
         out = np.array(x, dtype=np.float64)
         out[:, self.cols] = y_model[:, self.have]
         return out
+
+
+def span(src: np.ndarray) -> slice | None:
+    """Indices ``src`` as a slice where they run (a view for numpy, no copy), else None."""
+    n = len(src)
+    if n and src[0] >= 0 and np.array_equal(src, np.arange(src[0], src[0] + n)):
+        return slice(int(src[0]), int(src[0]) + n)
+    return None
+
+
+def columns(j: np.ndarray, width: int) -> np.ndarray | slice | None:
+    """Columns j of ``width``: None for all of them in order, a slice where they run."""
+    run = span(j)
+    return None if run == slice(0, width) else run or j

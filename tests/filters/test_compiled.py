@@ -212,6 +212,8 @@ def test_the_map_pass_bands_as_the_band_kernel_and_survives_off_and_on_again(on)
             np.zeros(0),
             0,
             np.zeros(0),
+            np.zeros(0),
+            0.04,
         )  # no lift
         got = compiled.map_run(p.copy(), u, u, x, h, c, (zero, idx, zero, idx), none,
                                (2, floor, 16.0, band.TAU, band.CAP), y0, st1)  # fmt: skip

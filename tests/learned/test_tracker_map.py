@@ -270,19 +270,33 @@ def test_the_noise_band_widens_on_a_noisy_face_and_stays_the_floor_on_a_clean_on
             MapWeights.build({**floor.config, "noise_band": bad}, floor.arrays)
 
 
+def low_pass(x: np.ndarray, t: np.ndarray, hz: float) -> np.ndarray:
+    """The lift's low-pass of x (F, L), written out: p += h / (h + tau) (x - p)."""
+    p, tau = x.copy(), 1 / (2 * np.pi * hz)
+    for n in range(1, len(x)):
+        h = t[n] - t[n - 1]
+        p[n] = p[n - 1] + h / (h + tau) * (x[n] - p[n - 1])
+    return p
+
+
 def test_the_lift_closes_a_blink_and_leaves_a_face_at_rest():
-    """m_j = max(m_j, clip(g (u_j - r_j - k), 0, 1)) on the blinks: an under-read blink
-    reaches its gain's height; below the knee (a face at rest, a half-closed eye) the
-    map's output is untouched; jawOpen is not lifted."""
-    t = np.arange(120) / 30.0
-    x = np.tile([0.1, 0.1, 0.3], (120, 1))
-    x[60:66, :2] = np.array([0.1, 0.25, 0.4, 0.4, 0.25, 0.1])[:, None]  # an under-read blink
+    """m_j = max(m_j, clip(g (p_j - r_j - k), 0, 1)) on the blinks, p the raw input
+    low-passed: an under-read closure reaches its gain's height, a blip of two frames less;
+    below the knee (a face at rest, a half-closed eye) the map's output is untouched;
+    jawOpen is not lifted."""
+    t = np.arange(150) / 30.0
+    x = np.tile([0.1, 0.1, 0.3], (150, 1))
+    x[60:62, :2], x[62:92, :2], x[92:94, :2] = 0.25, 0.4, 0.25  # an under-read closure
+    x[120:122, :2] = 0.4  # a blip: the low-pass takes it to 0.4 - 0.3 (1 - a)^2 (a = 0.45)
     x[90:96, 2] = 0.9
     plain = weights(hidden=0, prefilter=False, rest=True)
     lifted = weights(hidden=0, prefilter=False, rest=True, lift=(4.0, 0.1))
     m = TrackerMap(weights=plain).clean(Animation(t, x, NAMES)).values
     y = TrackerMap(weights=lifted).clean(Animation(t, x, NAMES)).values
-    np.testing.assert_allclose(y[:, :2].max(axis=0), 0.8)  # 4 (0.4 - 0.1 - 0.1)
+    np.testing.assert_allclose(y[:, :2].max(axis=0), 0.8, atol=1e-6)  # 4 (0.4 - 0.1 - 0.1)
+    want = 4 * (low_pass(x[:, :2], t, 4.0) - 0.2)  # the default low-pass, 4 Hz
+    np.testing.assert_allclose(y[115:, :2], np.maximum(m[115:, :2], want[115:]), atol=1e-12)
+    assert 0.5 < y[115:, 0].max() < 0.65
     np.testing.assert_allclose(m[:, :2].max(), 0.53)  # the map alone: 1.3 0.4 + 0.2 0.3 - 0.05
     np.testing.assert_array_equal(y[:60], m[:60])  # at rest: nothing lifted
     np.testing.assert_array_equal(y[:, 2], m[:, 2])  # jawOpen: no lift
@@ -376,21 +390,22 @@ def test_the_lifts_top_follows_the_streams_largest_lift():
     jawOpen are untouched; reset() forgets the top."""
     t = np.arange(150) / 30.0
     x = np.tile([0.1, 0.1, 0.3], (150, 1))
-    x[40:46, :2] = np.array([0.1, 0.2, 0.3, 0.3, 0.2, 0.1])[:, None]  # l = 4 (0.2 - 0.1) = 0.4
-    x[70:76, :2] = np.array([0.1, 0.3, 0.7, 0.7, 0.3, 0.1])[:, None]  # l = 4 (0.6 - 0.1) = 2.0
-    x[100:106, :2] = np.array([0.1, 0.3, 0.5, 0.5, 0.3, 0.1])[:, None]  # l = 1.2
+    closure = lambda v: np.array([0.1, (0.1 + v) / 2, *[v] * 6, (0.1 + v) / 2, 0.1])[:, None]  # noqa: E731
+    x[40:50, :2] = closure(0.3)  # l ~ 4 (0.2 - 0.1) = 0.4 (p, the low-pass, ~ x held)
+    x[70:80, :2] = closure(0.7)  # l ~ 4 (0.6 - 0.1) = 2.0
+    x[100:110, :2] = closure(0.5)  # l ~ 1.2
     a = Animation(t, x, NAMES)
     fixed = TrackerMap(weights=weights(hidden=0, prefilter=False, lift=(4.0, 0.1))).clean(a)
     topped = TrackerMap(weights=weights(hidden=0, prefilter=False, lift=(4.0, 0.1), top=True))
     y, f = topped.clean(a).values, fixed.values
     np.testing.assert_array_equal(y[:70], f[:70])  # no lift past 1 yet: the same
-    np.testing.assert_allclose(y[70:76, 0].max(), 1.0)  # the fullest blink: closed, no more
+    np.testing.assert_allclose(y[70:80, 0].max(), 1.0)  # the fullest blink: closed, no more
     # a smaller one scaled with it: max(the map, l / 2), the map alone m, r the rest level
     m = TrackerMap(weights=weights(hidden=0, prefilter=False)).clean(a).values
-    lift = 4.0 * (x[:, :2] - np.minimum.accumulate(x[:, :2]) - 0.1)
+    lift = 4.0 * (low_pass(x[:, :2], t, 4.0) - np.minimum.accumulate(x[:, :2]) - 0.1)
     want = np.maximum(m[:, :2], np.clip(lift / np.maximum(np.maximum.accumulate(lift), 1), 0, 1))
     np.testing.assert_allclose(y[:, :2], want, atol=1e-12)
-    assert y[100:106, 0].max() < 0.7 and f[100:106, 0].max() == 1.0  # the fixed gain: clipped
+    assert y[100:110, 0].max() < 0.7 and f[100:110, 0].max() == 1.0  # the fixed gain: clipped
     np.testing.assert_array_equal(y <= f + 1e-15, True)  # the gain only falls
     np.testing.assert_array_equal(y[:, 2], f[:, 2])  # jawOpen: no lift
     topped.reset()

@@ -214,6 +214,22 @@ def test_a_lift_that_breaks_the_frame_rate_contract_is_refused(fitted):
     assert not map_rises.keeps_rate(lifted(5.0))
 
 
+def test_the_lift_reads_a_low_pass_that_keeps_the_rate_clause_at_the_gains_blinks_need():
+    # The lift once read u, One Euro's output, whose slope (x - u_prev) / h differs between
+    # frame rates; a gain of 4 past 0.1 on the shipped map parted the contract's curves at
+    # 30 and 120 fps by 0.046 (the rate clause allows 0.03), so the folds' lift (closure
+    # 0.90) was refused. It reads its raw input through a plain low-pass now: 0.022.
+    from faceclean.learned.map_weights import MapWeights
+    from faceclean.settings import MODELS
+
+    w = MapWeights.load(MODELS / "mediapipe.npz")
+    n = len(w.outputs)
+    a = dict(w.arrays, lift_gain=np.zeros(n), lift_knee=np.zeros(n))
+    blink = [i for i, name in enumerate(w.outputs) if name.startswith("eyeBlink")]
+    a["lift_gain"][blink], a["lift_knee"][blink] = 4.0, 0.1
+    assert map_rises.keeps_rate(replace(w, arrays=a, config=dict(w.config, lift_top=False)))
+
+
 def test_the_band_widened_by_the_noise_calms_a_noisy_look_and_leaves_a_clean_one(fitted):
     """The fitted map with its band widened by the noise (learned/band.py, c = 16, the
     shipped choice) on a new look, a face moving smoothly (slow sines), read by a tracker

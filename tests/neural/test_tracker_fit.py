@@ -222,17 +222,21 @@ def test_the_blink_lift_is_chosen_leaving_each_source_out():
     none = fit.fit(pool[:4], pool[4:], prefilters=pres, lams=lams, knees=(None,))
     assert none.config["lift_knee"] is None and not none.arrays["lift_gain"].any()
     # the gains: truth / (rise - knee) where an eye closes; a tracker at a quarter reads 4
+    # through a low-pass that barely lags (100 Hz), more through the default 4 Hz one
     quarter = [paired.Pair("q", Animation(p.truth.times, 0.25 * p.truth.values, NAMES), p.truth,
                            "src0", "studio") for p in pool[:2]]  # fmt: skip
-    gains = fit._lift_gains(none, fit.features(none, quarter), 0.0)
+    feats = fit.features(none, quarter)
+    slow = fit._lift_gains(none, feats, 0.0)
+    none.config["lift_cutoff"] = 100.0
+    gains = fit._lift_gains(none, feats, 0.0)
     np.testing.assert_allclose(gains[:2], 4.0, rtol=0.05)
-    assert (gains[2:] == 0).all()
+    assert (gains[2:] == 0).all() and (slow[:2] > gains[:2] + 0.1).all()
     plain = TrackerMap(weights=none, names=NAMES)  # the same linear part, no lift
     fit._set_lift(none, gains, 0.0)
     test = pairs(1, 90, lambda y: 0.25 * y)[0]  # a face whose blinks read at a quarter
     out = TrackerMap(weights=none, names=NAMES).clean(test.tracked).values
     t, u, r, _, e = fit.features(none, [test])[0]
-    np.testing.assert_allclose(fit.predict(none, u, r, e), out, atol=1e-12)
+    np.testing.assert_allclose(fit.predict(none, u, r, e, t), out, atol=1e-12)
     before = plain.clean(test.tracked).values
     assert (out[:, :2] >= before[:, :2] - 1e-12).all()
     assert out[:, :2].max() > before[:, :2].max() + 0.1  # a lifted blink

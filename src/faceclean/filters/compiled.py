@@ -54,7 +54,8 @@ def _warm_args() -> dict[str, tuple]:
         "noise_band": (x, one, one, one.copy(), one.copy(), one.copy(), one, 0.0, 1.0, 0.1,
                        x.copy()),
         "map_run": (x.copy(), x, x, x, one, one, one, i, one, i, i, i, one, one, 1,
-                    one.copy(), 2, one, 0.0, 1.0, 0.1, one, one.copy(), one.copy(), one.copy()),
+                    one.copy(), one.copy(), 0.04, 2, one, 0.0, 1.0, 0.1, one, one.copy(),
+                    one.copy(), one.copy()),
     }  # fmt: skip
 
 
@@ -399,8 +400,9 @@ def map_run(p, u, z, xi, h, c, own, lift, band, y0, bstate) -> np.ndarray | None
     """The end of a tracker map's run of usual frames (learned/map_take.py), in place
     into p (N, M), the map's products (u - r) B' per frame: + c_j + a_j u[ai_j] + d_j
     x[di_j] (c (M,), ``own`` (a, ai, d, di) (M,)), clipped to [0, 1]; the blink lift
-    (``lift`` (lo, li, g, gk) (L,), top on or off, top (L,) in place): m_lo = max(m_lo,
-    clip(l / max(1, T), 0, 1)), l = g z[li] - gk, T the largest l so far (1 when off);
+    (``lift`` (lo, li, g, gk) (L,), top on or off, top, p (L,) in place, tau s): m_lo =
+    max(m_lo, clip(l / max(1, T), 0, 1)), l = g (p - r) - gk, r = u - z at li, p += h /
+    (h + tau) (x[li] - p), T the largest l so far (1 when off);
     then the band from y0 (M,) on: ``band`` (mode, floor (M,), c, tau s, cap), mode 0
     none, 1 the deadband, 2 widened by the noise, its state ``bstate`` (p1, p2, s) (M,)
     updated in place. u, z, xi (N, K) the filtered inputs, their rises u - r and the raw
@@ -409,21 +411,23 @@ def map_run(p, u, z, xi, h, c, own, lift, band, y0, bstate) -> np.ndarray | None
     if kernel is None:
         return None
     mode, floor, nc, tau, cap = band
-    lo, li, g, gk, on, top = lift
-    kernel(p, u, z, xi, h, c, *own, lo, li, g, gk, int(on), top, int(mode), floor,
-           float(nc), float(tau), float(cap), y0, *bstate)  # fmt: skip
+    lo, li, g, gk, on, top, lp, ltau = lift
+    kernel(p, u, z, xi, h, c, *own, lo, li, g, gk, int(on), top, lp, float(ltau), int(mode),
+           floor, float(nc), float(tau), float(cap), y0, *bstate)  # fmt: skip
     return p
 
 
-def _map_run(p, u, z, xi, h, c, a, ai, d, di, lo, li, g, gk, on, top, mode, floor, nc, tau,
-             cap, y0, p1, p2, s):  # fmt: skip
+def _map_run(p, u, z, xi, h, c, a, ai, d, di, lo, li, g, gk, on, top, lp, ltau, mode, floor,
+             nc, tau, cap, y0, p1, p2, s):  # fmt: skip
     """In place: p (N, M) the outputs, frame after frame."""
     for n in range(p.shape[0]):
         m, un, x = p[n], u[n], xi[n]
         for j in range(m.shape[0]):
             m[j] = min(max(m[j] + c[j] + a[j] * un[ai[j]] + d[j] * x[di[j]], 0.0), 1.0)
         for q in range(lo.shape[0]):  # the lift, before the band
-            v = g[q] * z[n, li[q]] - gk[q]
+            k = li[q]
+            lp[q] = lp[q] + h[n] / (h[n] + ltau) * (x[k] - lp[q])
+            v = g[q] * (lp[q] - (un[k] - z[n, k])) - gk[q]
             if on:
                 top[q] = max(top[q], v)
                 v = v / max(top[q], 1.0)

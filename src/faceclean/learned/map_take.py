@@ -13,7 +13,7 @@ the clip, the blink lift and the band, with no (N, K) array between them
 (``compiled.map_run``):
 
     m = clip(c + (u - r) B' + a u[own] + d x[own], 0, 1)     a = A_jj - d_j
-    m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))            the lift, l_j = g_j (u - r)_j - g_j k_j
+    m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))            the lift, l_j = g_j (p - r)_j - g_j k_j
 
 Otherwise the pre-filter and the products are compiled apart and the rest done in numpy.
 """
@@ -107,12 +107,13 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
     h[1:] = np.diff(ts)
     np.maximum(h, DT_MIN, out=h)
     u, edx, r, v = (a[0].copy() for a in (tm._u, tm._edx, tm._r, tm._v))  # (K,)
+    lp = tm._lp[0].copy()  # (L,) the lift's low-pass
     consts = [np.array(c, np.float64) for c in (tm._tau_d, tm._mc2pi, tm._beta2pi)]
     consts.append(tm._rest_rate)  # (K,) 1/s, the rest's smoothing (inf: none)
     consts.append(tm._rest_drift)  # (K,) weight/s, the rest's climb (0: none)
-    y = _one_pass(tm, (u, edx, r, v), xi, h, consts)
+    y = _one_pass(tm, (u, edx, r, v), lp, xi, h, consts)
     if y is None:
-        y = _apart(tm, (u, edx, r, v), xi, h, consts)
+        y = _apart(tm, (u, edx, r, v), lp, xi, h, consts)
     outv = np.empty_like(xs) if dest is None else dest
     if tm._direct:
         outv[:] = y
@@ -123,7 +124,7 @@ def run(tm: Map, xs: np.ndarray, ts: np.ndarray, dt: float,
     else:
         outv[:] = xs
         outv[:, tm._out.cols] = y[:, tm._out.have]
-    tm._u, tm._edx, tm._r, tm._v = u[None], edx[None], r[None], v[None]
+    tm._u, tm._edx, tm._r, tm._v, tm._lp = u[None], edx[None], r[None], v[None], lp[None]
     tm._m, tm._t, tm._y = y[-1:].copy(), ts[-1:].copy(), outv[-1:].copy()
     return outv
 
@@ -150,7 +151,8 @@ def _shipped_kind(tm: Map) -> tuple | None:
     return (np.ascontiguousarray(-tm._nb[:, :m]), tm._c[:m].copy()), (a, ai, d, di), lift
 
 
-def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
+def _one_pass(tm: Map, pre: tuple, lp: np.ndarray, xi: np.ndarray, h: np.ndarray,
+              consts: list):  # fmt: skip
     """The shipped kind: the pre-filter compiled, the rises' product by BLAS, the rest
     (the own terms, the clip, the band) one compiled pass: (N, M), or None (another kind,
     or off). Its arrays are kept from run to run (no fresh pages per block)."""
@@ -170,7 +172,7 @@ def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
     st = tm._noise
     state = st.p1[0].copy(), st.p2[0].copy(), st.s[0].copy()  # (M,)
     top = tm._top[0].copy() if tm._lift_top else np.ones(len(lo))  # (L,) the lift's top
-    lift = (lo, li, g, gk, tm._lift_top, top)
+    lift = (lo, li, g, gk, tm._lift_top, top, lp, tm._lift_tau)  # lp (L,) in place
     p, y0 = tm._room[2][:n], tm._m[0]  # the outputs (N, M); the one before
     for a in range(0, n, CHUNK):  # the state carries from chunk to chunk, in place
         x, dt, q = xi[a : a + CHUNK], h[a : a + CHUNK], p[a : a + CHUNK]
@@ -186,7 +188,8 @@ def _one_pass(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
     return p
 
 
-def _apart(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
+def _apart(tm: Map, pre: tuple, lp: np.ndarray, xi: np.ndarray, h: np.ndarray,
+           consts: list):  # fmt: skip
     """The pre-filter and the products compiled apart, the rest in numpy: (N, M)."""
     U, R = compiled.map_prefilter(*pre, xi, h, *consts)
     # y = u (A + B)' - r B' + d x + c, (N, M+L), as ``_usual``; the detail's -d u in _ab
@@ -194,6 +197,11 @@ def _apart(tm: Map, pre: tuple, xi: np.ndarray, h: np.ndarray, consts: list):
     if len(tm._do):  # + d x: the one term of each output's own input
         y[:, tm._do] += xi[:, tm._di] * tm._dd
     m = tm._m_cols
+    if len(tm._lo):  # + g p, p += h / (h + tau) (x - p) the lift's low-pass, in place
+        a, x = h / (h + tm._lift_tau), xi[:, tm._li]
+        for n in range(len(y)):
+            lp += a[n] * (x[n] - lp)
+            y[n, m:] += lp * tm._lg
     if tm._lift_top:  # l / max(1, the largest l so far)
         lift = y[:, m:]
         top = np.maximum.accumulate(np.concatenate([tm._top, lift]), axis=0)[1:]

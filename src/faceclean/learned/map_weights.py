@@ -10,6 +10,8 @@ input of the output's name); optional ``detail`` (M,) within [-MAX_DETAIL, MAX_D
 (absent: 0; nonzero needs an input of the output's name, as the lift does), the fitted
 gains, which run scaled by the config's ``detail_scale`` in [0, 1] (absent: 1) or by the
 user's ``detail`` setting; config ``lift_top`` true or false (absent: false); config
+``lift_cutoff`` in (0, MAX_CUTOFF] Hz (absent: LIFT_CUTOFF), the low-pass the lift reads
+its raw input through (learned/tracker_map.py); config
 ``noise_band`` c in [0, MAX_NOISE] (absent: 0), the band's widening (learned/band.py);
 config ``rest_tau`` and ``rest_warm`` in [0, MAX_REST] s, a number or one per input (absent:
 0), the rest's smoothing and warm-up (learned/tracker_map.py); config ``rest_drift`` in
@@ -35,6 +37,8 @@ MAX_WIDTH = 4096
 MAX_DEADBAND = 0.1  # weight units: a larger band would hold real movement
 MAX_LIFT = 20.0  # a lift's gain: more would turn the tracker's noise into blinks
 MAX_DETAIL = 4.0  # the detail's gain: more would pass the raw input's noise amplified
+MAX_CUTOFF = 100.0  # Hz: a lift's low-pass; more passes a 60 fps stream's noise as it is
+LIFT_CUTOFF = 4.0  # Hz, the lift's low-pass where a file names none (docs/MODEL.md 22nd)
 MAX_NOISE = 100.0  # the band over the noise: more would hold a face still through its moves
 MAX_REST = 10.0  # s: a rest smoothed or held off longer would miss a face's own rest
 MAX_DRIFT = 1.0  # weight/s: a rest climbing faster would take a held expression off in 1 s
@@ -55,6 +59,11 @@ class MapWeights:
     @property
     def outputs(self) -> tuple[str, ...]:
         return tuple(self.config["outputs"])
+
+    @property
+    def lift_tau(self) -> float:
+        """s: the time constant 1 / (2 pi f) of the lift's low-pass (``lift_cutoff`` f Hz)."""
+        return 1.0 / (2.0 * np.pi * float(self.config.get("lift_cutoff", LIFT_CUTOFF)))
 
     @property
     def rest(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -135,6 +144,10 @@ class MapWeights:
             raise FacecleanError(f"{label}: deadband must be within [0, {MAX_DEADBAND}]")
         if not isinstance(config.get("lift_top", False), bool):
             raise FacecleanError(f"{label}: lift_top must be true or false")
+        fc = config.get("lift_cutoff", LIFT_CUTOFF)
+        if isinstance(fc, bool) or not isinstance(fc, (int, float)) or not 0 < fc <= MAX_CUTOFF:
+            raise FacecleanError(f"{label}: lift_cutoff must be a number of Hz within "
+                                 f"(0, {MAX_CUTOFF:g}]")  # fmt: skip
         c = config.get("noise_band", 0.0)
         if isinstance(c, bool) or not isinstance(c, (int, float)) or not 0 <= c <= MAX_NOISE:
             raise FacecleanError(f"{label}: noise_band must be a number within [0, {MAX_NOISE}]")

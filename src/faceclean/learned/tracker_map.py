@@ -19,8 +19,9 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
     z  = [(u - mu_u) / sd_u, (u - r) / sd_r]                                     (2K,)
     m  = clip(A u + B (u - r) + c + d (x - u)_own + W2 tanh(W1 z + b1) + b2, 0, 1)  (M,)
     m_j = max(m_j, clip(l_j / max(1, T_j), 0, 1))  a lift, where g_j > 0 (blinks):
-                                        l_j = g_j (u_j - r_j - k_j), T_j its largest value
-                                        so far (with ``lift_top``; else T_j = 1)
+                                        l_j = g_j (p_j - r_j - k_j), T_j its largest value
+                                        so far (with ``lift_top``; else T_j = 1), p_j the
+                                        raw x_j low-passed: p += h / (h + tau) (x - p)
     y  = m - clip(m - y_prev, -eps, eps)     a deadband (backlash) of eps per output, with
                                         ``noise_band`` c > 0 widened to c x the stream's
                                         own noise where that is more (learned/band.py)
@@ -39,10 +40,12 @@ passes with a lag of eps / speed (1 ms at a blink's 10 /s) and a bias of at most
 The lift restores what a least-squares map cannot: a peak. The tracker under-reads a
 closing eyelid, and a map fitted to every frame pulls each peak toward the mean; where the
 same channel's own rise above rest passes a knee k, its output is at least that rise times
-a gain g (output j reads the input of its own name). At rest the rise u - r is below k, so
-the lift is 0. With ``lift_top`` the lift's top follows the stream: once a face's own rise
-has lifted past 1 (an eye that reads higher than the training faces'), every lift is scaled
-so that the largest so far reaches 1, not more; the gain only ever falls. The optional
+a gain g (output j reads the input of its own name). At rest the rise is below k, so the
+lift is 0. It reads the raw input through a plain low-pass (``lift_cutoff``, 4 Hz), not u:
+One Euro's slope makes u differ between frame rates, which the gain would multiply. With
+``lift_top`` the lift's top follows the stream: once a face's own rise has lifted past 1
+(an eye that reads higher than the training faces'), every lift is scaled so that the
+largest so far reaches 1, not more; the gain only ever falls. The optional
 hidden layer (``hidden`` > 0) adds what is not linear; on the pairs we have it overfits
 (docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
 function of (u, r, x - u) only; on a still face u converges to x, so the detail goes to 0,
@@ -68,7 +71,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from faceclean.channel_map import ChannelMap
+from faceclean.channel_map import ChannelMap, columns, span
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
@@ -78,20 +81,6 @@ from faceclean.learned.map_weights import MAX_DRIFT, MapWeights, column_setting
 
 if TYPE_CHECKING:
     from faceclean.animation import Animation
-
-
-def _span(src: np.ndarray) -> slice | None:
-    """Indices ``src`` as a slice where they run (a view for numpy, no copy), else None."""
-    n = len(src)
-    if n and src[0] >= 0 and np.array_equal(src, np.arange(src[0], src[0] + n)):
-        return slice(int(src[0]), int(src[0]) + n)
-    return None
-
-
-def _cols(j: np.ndarray, width: int) -> np.ndarray | slice | None:
-    """Columns j of ``width``: None for all of them in order, a slice where they run."""
-    run = _span(j)
-    return None if run == slice(0, width) else run or j
 
 
 class TrackerMap(Stepper):
@@ -142,12 +131,13 @@ class TrackerMap(Stepper):
         # The usual frame's constants (``_usual``): y = u (A + B)' - r B' + c, the One
         # Euro cut-offs as time constants tau = 1 / (2 pi f) s.
         b = a["b"] if self.rest else np.zeros_like(a["b"])
-        # The lift as L more columns of the same products: g (u_j - r_j) - g k.
+        # The lift as L more columns of the same products: -g r_j - g k, + g p_j apart.
         self._lo = np.flatnonzero(a["lift_gain"] > 0)  # (L,) lifted outputs
         self._li = np.array([w.inputs.index(w.outputs[j]) for j in self._lo], dtype=np.intp)
-        g, m = a["lift_gain"][self._lo], len(w.outputs)
+        self._lg, m = a["lift_gain"][self._lo], len(w.outputs)
+        self._lift_tau = w.lift_tau  # s, the low-pass of the lift's raw input
         lift = np.zeros((len(w.inputs), len(self._lo)))
-        lift[self._li, np.arange(len(self._lo))] = g
+        lift[self._li, np.arange(len(self._lo))] = self._lg
         # The detail d_j (x_j - u_j): -d_j u_j in the matrix on u, D (K, M), d_j at the input
         # of output j's name; + d_j x_j elementwise, outputs ``_do`` from inputs ``_di``.
         self._d = a["detail"]  # (M,) the gains as scaled
@@ -158,12 +148,12 @@ class TrackerMap(Stepper):
         # (x D was a product of a diagonal: its other terms add 0, the same bits.) Where
         # the columns run, a slice; None where they are all of them (MediaPipe's).
         self._dd = self._d[self._do]  # (N,)
-        self._dos = _cols(self._do, m + len(self._lo))
-        self._dis = _cols(self._di, len(w.inputs))
+        self._dos = columns(self._do, m + len(self._lo))
+        self._dis = columns(self._di, len(w.inputs))
         ab = (a["a"] + b).T - detail
-        self._ab = np.ascontiguousarray(np.concatenate([ab, lift], axis=1))  # (K, M+L)
+        self._ab = np.ascontiguousarray(np.concatenate([ab, 0 * lift], axis=1))  # (K, M+L)
         self._nb = np.ascontiguousarray(np.concatenate([-b.T, -lift], axis=1))  # (K, M+L)
-        self._c = np.concatenate([a["c"], -g * a["lift_knee"][self._lo]])  # (M+L,)
+        self._c = np.concatenate([a["c"], -self._lg * a["lift_knee"][self._lo]])  # (M+L,)
         self._m_cols = m
         self._tau_d = 1.0 / (2.0 * np.pi * np.broadcast_to(self.pre.d_cutoff, (len(w.inputs),)))
         self._mc2pi = 2.0 * np.pi * np.broadcast_to(self.pre.min_cutoff, (len(w.inputs),))
@@ -171,8 +161,8 @@ class TrackerMap(Stepper):
         self._direct = self._in.identity and self._out.identity  # columns = inputs = outputs
         # an ARKit take's columns: the inputs and the outputs a run of columns, read and
         # written as a view (no gather, no scatter); None: by index
-        self._xs = _span(self._in.src)
-        self._ys = _span(self._out.src)
+        self._xs = span(self._in.src)
+        self._ys = span(self._out.src)
         band = np.asarray(w.config.get("deadband", 0.0), np.float64)
         self._noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py's c
         on = band.any() or self._noise_c > 0
@@ -241,6 +231,7 @@ class TrackerMap(Stepper):
             self._warm_over = False  # every stream past its rest's warm-up
             self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
             self._top = np.full((s, len(self._lo)), -np.inf)  # (S, L) largest lift so far
+            self._lp = np.full((s, len(self._lo)), np.nan)  # (S, L) the lift's low-pass
             self._noise = noise.Noise(s, len(self.weights.outputs))  # the band's noise
         bad = ~(np.abs(x) <= MAX_ABS)  # rule 2 for every column, passthrough ones too
         missing = bad.all(axis=1) | ~np.isfinite(tt)  # rule 1
@@ -265,6 +256,11 @@ class TrackerMap(Stepper):
             u = np.where(start[:, None], xi, u)
             self._edx = np.where(start[:, None], 0.0, self._edx)
         self._u = u
+        if len(self._lo):  # the lift's low-pass p of its raw input, restarting with u
+            h = np.maximum(np.where(advance, dt, 1.0), DT_MIN)[:, None]  # s
+            p = self._lp + h / (h + self._lift_tau) * (xi[:, self._li] - self._lp)
+            p = np.where(start[:, None], xi[:, self._li], p)
+            self._lp = p if moved.all() else np.where(moved[:, None], p, self._lp)
         self._rest(u, dt, start, advance, tt)
         if bad.any() and len(self._do):  # a held value has no detail
             xi = np.where(self._in_matrix(bad.astype(np.float64)) > 0, u, xi)
@@ -325,6 +321,8 @@ class TrackerMap(Stepper):
         np.divide(g, q, out=q)
         q *= e
         u += q  # u += g / (1 + g) e
+        if len(self._lo):  # the lift's low-pass: p += h / (h + tau) (x - p)
+            self._lp += h / (h + self._lift_tau) * (xi[:, self._li] - self._lp)
         if self._smoothed:  # v += (1 - exp(-h / tau)) (u - v)
             if not (isinstance(h, float) and h == self._rest_h):  # (K,) again for a new h
                 self._rest_f = -np.expm1(-h * self._rest_rate)
@@ -350,6 +348,8 @@ class TrackerMap(Stepper):
             else:
                 y[:, self._dos] += q
         y += self._c
+        if len(self._lo):
+            y[:, self._m_cols :] += self._lp * self._lg
         if self._lift_top:  # the lift's top: l / max(1, the largest l so far)
             lift = y[:, self._m_cols :]
             np.maximum(self._top, lift, out=self._top)
@@ -429,7 +429,7 @@ class TrackerMap(Stepper):
         m = np.clip(lin, 0.0, 1.0)
         if len(self._lo):  # the lift
             j, lo = self._li, self._lo
-            rise = a["lift_gain"][lo] * (u[:, j] - self._r[:, j] - a["lift_knee"][lo])
+            rise = a["lift_gain"][lo] * (self._lp - self._r[:, j] - a["lift_knee"][lo])
             if self._lift_top:  # the top kept through a restart: the same face came back
                 top = np.fmax(self._top, rise)
                 self._top = top if moved.all() else np.where(moved[:, None], top, self._top)

@@ -2,8 +2,9 @@
 
 A least-squares map cannot give back a peak the tracker under-reads: a closing eye that
 MediaPipe reads at a quarter. The lift can. Each blink output j becomes
-``max(m_j, clip(l_j / max(1, top), 0, 1))``, ``l_j = g_j (u_j - r_j - k)``: its own input's
-rise above the stream's rest past a knee k, times a gain g. ``gains`` fits g for a knee
+``max(m_j, clip(l_j / max(1, top), 0, 1))``, ``l_j = g_j (p_j - r_j - k)``: its own input's
+rise above the stream's rest past a knee k (p_j the raw input low-passed, as the runtime
+reads it), times a gain g. ``gains`` fits g for a knee
 (the median of truth / rise where an eye closes); ``choose`` takes the knee (None: no lift)
 and whether the top follows the stream's largest lift so far (``lift_top``) that score best
 leaving one source out, with a price on blink closure outside ``CLOSURE_BAND``.
@@ -46,15 +47,17 @@ class Fold(NamedTuple):
 def gains(w: MapWeights, feats: Sequence[Any], knee: float) -> np.ndarray:
     """(M,) lift gains for ``knee`` (0 where no lift): per blink output, the median over
     ``feats``' frames whose truth is over LIFT_FROM of truth / (rise - knee), the rise
-    the input of the same name's u - r (frames where it has not passed the knee skipped)."""
+    the input of the same name's p - r (frames where it has not passed the knee skipped)."""
     from faceclean.evaluation.metrics import BLINK_CHANNELS
+    from faceclean.neural.map_features import low_pass
 
     out = np.zeros(len(w.outputs))
     for i, name in enumerate(w.outputs):
         if name not in BLINK_CHANNELS or name not in w.inputs:
             continue
         j = w.inputs.index(name)
-        over = np.concatenate([f.u[:, j] - f.r[:, j] - knee for f in feats])
+        p = [low_pass(f.u[:, [j]] + f.e[:, [j]], f.t, w.lift_tau)[:, 0] for f in feats]
+        over = np.concatenate([q - f.r[:, j] - knee for q, f in zip(p, feats, strict=True)])
         y = np.concatenate([f.y[:, i] for f in feats])
         sel = (y > LIFT_FROM) & (over > 0.02)
         if sel.sum() >= 10:

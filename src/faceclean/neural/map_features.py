@@ -132,6 +132,27 @@ def rest(t: np.ndarray, u: np.ndarray, tau=0.0, warm=0.0, drift=0.0) -> np.ndarr
     return r
 
 
+def low_pass(x: np.ndarray, t: np.ndarray, tau: float) -> np.ndarray:
+    """(F, L) the runtime's low-pass of the lift's raw inputs x (F, L) at times t (F,) s:
+    p_0 = x_0, p_n = p_n-1 + a (x_n - p_n-1), a = h / (h + tau) (learned/tracker_map.py)."""
+    from scipy.signal import lfilter
+
+    from faceclean.filters.one_euro import DT_MIN
+
+    if len(x) < 2:
+        return x.copy()
+    a = np.maximum(np.diff(t), DT_MIN)
+    a = a / (a + tau)  # (F - 1,)
+    if np.ptp(a) < 1e-12:  # a steady rate: one linear filter, from p_0 = x_0
+        a0 = float(a[0])
+        rest = lfilter([a0], [1.0, a0 - 1.0], x[1:], axis=0, zi=(1 - a0) * x[:1])[0]
+        return np.concatenate([x[:1], rest])
+    p = x.copy()
+    for n in range(1, len(x)):
+        p[n] = p[n - 1] + a[n - 1] * (x[n] - p[n - 1])
+    return p
+
+
 def own_inputs(w: MapWeights) -> np.ndarray:
     """(M,) each output's input of the same name, -1 for none."""
     return np.array([w.inputs.index(o) if o in w.inputs else -1 for o in w.outputs])
@@ -182,9 +203,12 @@ def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = 
         lin = lin + np.tanh(z @ a["w1"].T + a["b1"]) @ a["w2"].T + a["b2"]
     m = np.clip(lin, 0.0, 1.0)
     lo = np.flatnonzero(a.get("lift_gain", np.zeros(0)) > 0)
-    if len(lo):  # the lift: m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (u_j - r_j - k)
+    if len(lo):  # the lift: m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (p_j - r_j - k)
         j = own_inputs(w)[lo]  # each lifted output's own input
-        rise = a["lift_gain"][lo] * (u[:, j] - r[:, j] - a["lift_knee"][lo])
+        if e is None or t is None:
+            raise ValueError("a blink lift needs the raw inputs' detail e and the times")
+        p = low_pass((u + e)[:, j], t, w.lift_tau)
+        rise = a["lift_gain"][lo] * (p - r[:, j] - a["lift_knee"][lo])
         if w.config.get("lift_top"):  # the largest lift so far, from the pair's first frame
             rise = rise / np.maximum(np.maximum.accumulate(rise, axis=0), 1.0)
         m[:, lo] = np.maximum(m[:, lo], np.clip(rise, 0.0, 1.0))

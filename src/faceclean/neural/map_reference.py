@@ -55,9 +55,11 @@ class MapReference:
         self.gain_d = t64(d)[self.do]
         lo = np.flatnonzero(w.arrays["lift_gain"] > 0)  # (L,) lifted outputs
         self.lo = torch.from_numpy(lo)
-        self.li = torch.tensor([w.inputs.index(w.outputs[j]) for j in lo.tolist()])
+        li = [w.inputs.index(w.outputs[j]) for j in lo.tolist()]
+        self.li = torch.tensor(li, dtype=torch.long)
         self.gain, self.knee = a["lift_gain"][self.lo], a["lift_knee"][self.lo]
         self.topped = bool(w.config.get("lift_top", False)) and len(lo) > 0
+        self.lift_tau = w.lift_tau  # s, the lift's low-pass of its raw input
         band = np.broadcast_to(np.asarray(w.config.get("deadband", 0.0), np.float64), (self.M,))
         self.band = t64(band)
         self.noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py
@@ -68,10 +70,11 @@ class MapReference:
     @property
     def state_bytes(self) -> int:
         """Per stream: u, its slope, the rest level (K each), the map's output (M), the
-        lift's top (L), with a noise band its last map value, step and noise (M each),
-        float64."""
+        lift's top and low-pass (L each), with a noise band its last map value, step and
+        noise (M each), float64."""
         rest = (self.K if self.rest_tau.any() else 0) + (1 if self.rest_warm.any() else 0)
-        return 8 * (3 * self.K + self.M + len(self.lo) + (3 * self.M if self.noise_c else 0) + rest)
+        lifts = 2 * len(self.lo)
+        return 8 * (3 * self.K + self.M + lifts + (3 * self.M if self.noise_c else 0) + rest)
 
     def _inputs(self, x: torch.Tensor) -> torch.Tensor:
         """(S, C) frame -> (S, K) model inputs (0 where the frame lacks one)."""
@@ -79,8 +82,9 @@ class MapReference:
         xi[:, self.in_have] = x[:, self.in_cols]
         return xi
 
-    def _map(self, u, r, xi, top):
-        """(S, K) u, r, xi -> ((S, M) the map's output before the deadband, the top)."""
+    def _map(self, u, r, xi, top, p):
+        """(S, K) u, r, xi, (S, L) the lift's low-pass p -> ((S, M) the map's output before
+        the deadband, the top)."""
         out = u @ self.A.T + (u - r) @ self.B.T + self.c
         if len(self.do):  # d (x - u) on each output's own input
             out[:, self.do] += self.gain_d * (xi[:, self.di] - u[:, self.di])
@@ -88,8 +92,8 @@ class MapReference:
             z = (torch.cat([u, u - r], 1) - self.mu) / self.sd
             out = out + torch.tanh(z @ self.w1.T + self.b1) @ self.w2.T + self.b2
         out = out.clamp(0.0, 1.0)
-        if len(self.lo):  # m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (u - r - k)
-            lift = self.gain * (u[:, self.li] - r[:, self.li] - self.knee)
+        if len(self.lo):  # m_j = max(m_j, clip(l / max(1, top), 0, 1)), l = g (p - r - k)
+            lift = self.gain * (p - r[:, self.li] - self.knee)
             if self.topped:
                 top = torch.maximum(top, lift)
                 lift = lift / top.clamp(min=1.0)
@@ -102,15 +106,16 @@ class MapReference:
         xt = torch.from_numpy(np.asarray(x, np.float64))
         u = self._inputs(xt)
         top = torch.full((len(xt), len(self.lo)), -np.inf, dtype=torch.float64)
-        m, top = self._map(u, u.clone(), u, top)
-        self.state = (u, torch.zeros_like(u), u.clone(), m, top)
+        p = u[:, self.li].clone()  # the lift's low-pass starts from the frame
+        m, top = self._map(u, u.clone(), u, top, p)
+        self.state = (u, torch.zeros_like(u), u.clone(), m, top, p)
         self.noise = (m.clone(), m.clone(), torch.zeros_like(m))  # m_{n-1}, m_{n-2}, s
         self.v, self.age = u.clone(), torch.zeros(len(xt), 1, dtype=torch.float64)  # the rest's
 
     @torch.no_grad()
     def step(self, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
         """Advance by dt (S,) s with frames x (S, C)."""
-        u, edx, r, prev, top = self.state
+        u, edx, r, prev, top, p = self.state
         xt = torch.from_numpy(np.asarray(x, np.float64))
         h = torch.from_numpy(np.asarray(dt, np.float64)).reshape(-1, 1).clamp(min=DT_MIN)
         xi = self._inputs(xt)
@@ -132,7 +137,8 @@ class MapReference:
         if self.rest_warm.any():  # r = v = u in the warm-up
             r = torch.where(self.age <= self.rest_warm, u, r)
             self.v = torch.where(self.age <= self.rest_warm, u, self.v)
-        m, top = self._map(u, r, xi, top)
+        p = p + h / (h + self.lift_tau) * (xi[:, self.li] - p)  # the lift's low-pass
+        m, top = self._map(u, r, xi, top, p)
         band = self.band
         if self.noise_c > 0:  # widened by the noise: c s, s the mean reversal
             p1, p2, s = self.noise
@@ -142,7 +148,7 @@ class MapReference:
             self.noise = (m.clone(), p1, s)
             band = torch.maximum(band, self.noise_c * s).clamp(max=BAND_CAP)
         m = m - (m - prev).clamp(-band, band)  # the deadband
-        self.state = (u, edx, r, m, top)
+        self.state = (u, edx, r, m, top, p)
         y = xt.clone()
         y[:, self.out_cols] = m[:, self.out_have]
         return y.numpy()
