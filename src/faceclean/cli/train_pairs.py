@@ -110,8 +110,8 @@ def run(args: argparse.Namespace) -> int:
             knee = "no blink lift" if e["knee"] is None else f"blink lift from {e['knee']:g}"
             knee += ", its top following the stream" if e.get("top") else ""
             print(f"{knee}: leaving each of {e['cv']} sources out, MSE {e['val_mse']:.3f}x "
-                  f"raw, jitter {e['jitter']:.2f}x, blink closure {e['closure']:.2f}",
-                  file=sys.stderr)  # fmt: skip
+                  f"raw, jitter {e['jitter']:.2f}x, blink closure {e['closure']:.2f}, "
+                  f"blinks {e['blinks']:.2f}x raw", file=sys.stderr)  # fmt: skip
         elif e.get("event") == "lift refused":
             print(f"blink lift from {e['knee']:g} refused: the same curve at 30 and 120 fps "
                   "differs past the contract's rate clause", file=sys.stderr)  # fmt: skip

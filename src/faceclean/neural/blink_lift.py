@@ -7,7 +7,10 @@ rise above the stream's rest past a knee k (p_j the raw input low-passed, as the
 reads it), times a gain g. ``gains`` fits g for a knee
 (the median of truth / rise where an eye closes); ``choose`` takes the knee (None: no lift)
 and whether the top follows the stream's largest lift so far (``lift_top``) that score best
-leaving one source out, with a price on blink closure outside ``CLOSURE_BAND``.
+leaving one source out, with a price on blink closure outside ``CLOSURE_BAND`` and one on
+the blinks' own MSE over raw's: a gain that closes every blink also lifts an eye that only
+narrows (a look down, a squint), and the blink channels must not end worse than the raw
+tracker's (docs/MODEL.md, twenty-second round).
 
 The folds are the fit's (neural/tracker_map.py: the linear part without each source, its
 held-out features), as are its score and linear setter: passed in, since that module
@@ -80,10 +83,11 @@ def clear(w: MapWeights) -> None:
 class Choice(NamedTuple):
     """One (knee, top) scored over the folds."""
 
-    score: float  # mean MSE x raw, x the jitter's price, x the closure's
+    score: float  # mean MSE x raw, x the jitter's price, x the closure's, x the blinks'
     knee: float | None
     top: bool
     closure: float  # mean output peak / true peak over every held-out blink
+    blinks: float  # the blink outputs' MSE x raw, over every held-out frame
 
 
 def choose(
@@ -101,9 +105,10 @@ def choose(
     """Sets ``w``'s blink lift: the knee and top that score best over ``folds`` (each
     fold's linear part and its gains fitted without it, scored on its held-out
     performances by MSE x raw x the jitter's price (1 + jitter over ``budget`` x the
-    truth's, when over) x (1 + the mean closure's distance outside CLOSURE_BAND)); the gains then
-    fitted on ``performed``, every performance. ``score(w, feats, closure=True)`` gives
-    (MSE, jitter, closure) and ``set_linear(w, a, c, d)`` sets the linear part
+    truth's, when over) x (1 + the mean closure's distance outside CLOSURE_BAND) x (1 + the
+    blink outputs' MSE over raw's, where over)); the gains then fitted on ``performed``,
+    every performance. ``score(w, feats, closure=True)`` gives (MSE, jitter, closure, the
+    blinks' MSE x raw) and ``set_linear(w, a, c, d)`` sets the linear part
     (tracker_map.py's); ``w``'s linear part is left as it was. With ``admissible``, the
     best lift the map keeps admissible with its gains set (no lift when none is)."""
     linear = {k: w.arrays[k].copy() for k in ("a", "b", "c", "detail")}
@@ -112,25 +117,28 @@ def choose(
     found: list[Choice] = []
     for knee, top in [(k, t) for k in knees for t in tops if k is not None or not t]:
         trial = MapWeights(dict(w.config, lift_top=top), w.arrays)  # w's arrays, this top
-        ratios, jits, closures = [], [], []
+        ratios, jits, closures, eyes = [], [], [], []
         for key, fold in folds.items():
             if at_rest(key):
                 continue
             set_linear(trial, *fold.linear)
             g = none if knee is None else gains(trial, fold.train, knee)
             set_gains(trial, g, knee or 0.0)
-            mse, jit, close = score(trial, fold.held, closure=True)
+            mse, jit, close, blinks = score(trial, fold.held, closure=True)
             ratios.append(mse / max(fold.raw_mse, 1e-12))
             jits.append(jit)
             closures.append(close)
+            eyes.append(blinks)
         ratio = float(np.mean(ratios))
         jit = float(np.nanmean(jits)) if np.isfinite(jits).any() else 0.0
         close = float(np.nanmean(closures)) if np.isfinite(closures).any() else 1.0
+        blinks = float(np.nanmean(eyes)) if np.isfinite(eyes).any() else 1.0
         price = max(0.0, lo - close) + max(0.0, close - hi)
         total = ratio * (1.0 + max(0.0, jit / budget - 1.0)) * (1.0 + price)
+        total *= 1.0 + max(0.0, blinks - 1.0)
         report({"event": "lift", "knee": knee, "top": top, "val_mse": ratio, "jitter": jit,
-                "closure": close, "cv": len(folds)})  # fmt: skip
-        found.append(Choice(total, knee, top, close))
+                "closure": close, "blinks": blinks, "cv": len(folds)})  # fmt: skip
+        found.append(Choice(total, knee, top, close, blinks))
     w.arrays.update(linear)
     for best in sorted(found, key=lambda c: c.score):
         set_gains(

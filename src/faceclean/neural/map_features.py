@@ -167,11 +167,20 @@ def set_linear(w: MapWeights, coef: np.ndarray, c: np.ndarray, d: np.ndarray | N
 
 
 def score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tuple[float, ...]:
-    """(MSE, jitter ratio vs the truth[, lag ms][, blink closure]) of the map over per-pair
-    features, from one prediction per pair; closure is the mean over every true blink."""
-    from faceclean.evaluation.metrics import blink_peaks, jitter_ratio, lag_ms  # numpy only
+    """(MSE, jitter ratio vs the truth[, lag ms][, blink closure, blinks' MSE x raw]) of the
+    map over per-pair features, from one prediction per pair; closure is the mean over
+    every true blink, the blinks' MSE x raw that of the blink outputs against their raw
+    inputs (x = u + e) over every frame."""
+    from faceclean.evaluation.metrics import (  # numpy only
+        BLINK_CHANNELS,
+        blink_peaks,
+        jitter_ratio,
+        lag_ms,
+    )
 
-    sq, n, jit, lags, peaks = 0.0, 0, [], [], []
+    own = own_inputs(w)
+    eyes = [j for j, o in enumerate(w.outputs) if o in BLINK_CHANNELS and own[j] >= 0]
+    sq, n, jit, lags, peaks, blinks = 0.0, 0, [], [], [], np.zeros(2)
     for t, u, r, y, e in feats:
         pred = predict(w, u, r, e, t)
         sq, n = sq + float(((pred - y) ** 2).sum()), n + y.size
@@ -181,9 +190,14 @@ def score(w: MapWeights, feats, lag: bool = False, closure: bool = False) -> tup
                 lags.append(lag_ms(t, pred, y))
         if closure:
             peaks.append(blink_peaks(t, pred, y, w.outputs))
+            raw = (u + e)[:, own[eyes]]
+            blinks += (((pred[:, eyes] - y[:, eyes]) ** 2).sum(), ((raw - y[:, eyes]) ** 2).sum())
     mean = lambda v: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")  # noqa: E731
     out = (sq / max(n, 1), mean(jit)) + ((mean(lags),) if lag else ())
-    return out + ((mean(np.concatenate(peaks)) if peaks else float("nan"),) if closure else ())
+    if not closure:
+        return out
+    close = mean(np.concatenate(peaks)) if peaks else float("nan")
+    return out + (close, blinks[0] / blinks[1] if blinks[1] > 0 else float("nan"))
 
 
 def predict(w: MapWeights, u: np.ndarray, r: np.ndarray, e: np.ndarray | None = None,
