@@ -173,6 +173,26 @@ def test_the_detail_gives_back_the_timing_the_pre_filter_took():
     np.testing.assert_allclose(fit.predict(w, f.u, f.r, f.e), out, atol=1e-12)
 
 
+def test_the_fit_scores_the_blinks_against_the_raw_tracker():
+    """score(closure=True) ends with the blink outputs' MSE over their raw inputs': a map
+    whose output is the raw frame (A = I, detail 1) scores 1 there; on a tracker that
+    reads blinks exactly, a lift of 3 from 0 overshoots every blink (closure past 1) and
+    its blinks end worse than raw, while the other outputs are untouched."""
+    rng = np.random.default_rng(5)
+    test = pairs(2, 30, lambda y: np.clip(y + rng.normal(0, 0.01, y.shape), 0, 1))
+    w = fit.blank(NAMES, 0, (1.0, 0.0, 1.0), False)
+    w.arrays["detail"] = np.ones(len(NAMES))
+    feats = fit.features(w, test)
+    mse, _, closure, blinks = fit.score(w, feats, closure=True)
+    np.testing.assert_allclose(blinks, 1.0, rtol=1e-9)  # the raw frame itself
+    np.testing.assert_allclose(closure, 1.0, atol=0.03)
+    lifted = fit.blank(NAMES, 0, (1.0, 0.0, 1.0), False)
+    lifted.arrays["detail"] = np.ones(len(NAMES))
+    fit._set_lift(lifted, np.array([3.0, 3.0, 0.0, 0.0]), 0.0)
+    mse2, _, closure2, blinks2 = fit.score(lifted, feats, closure=True)
+    assert closure2 > 1.05 and blinks2 > 1.5 and mse2 > mse
+
+
 def test_training_scores_the_deadband_the_runtime_runs():
     """fit's frame-by-frame prediction (deadband included) is the cleaner's output."""
     rng = np.random.default_rng(4)
@@ -212,9 +232,10 @@ def test_the_blink_lift_is_chosen_leaving_each_source_out():
     assert [(e["knee"], e["top"]) for e in lifts] == want and all(e["cv"] == 3 for e in lifts)
     lo, hi = fit.CLOSURE_BAND
 
-    def score(e):
+    def score(e):  # the blinks' MSE over raw's priced too: a lift must not take them past raw
         price = max(0.0, lo - e["closure"]) + max(0.0, e["closure"] - hi)
-        return e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1)) * (1 + price)
+        blinks = 1 + max(0.0, e["blinks"] - 1)
+        return e["val_mse"] * (1 + max(0, e["jitter"] / 1.5 - 1)) * (1 + price) * blinks
 
     best = min(lifts, key=score)
     assert (w.config["lift_knee"], w.config["lift_top"]) == (best["knee"], best["top"])
