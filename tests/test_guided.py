@@ -580,3 +580,50 @@ def test_a_rest_reading_given_to_a_cleaner_that_reads_none_is_said(tmp_path, cap
         ),
     )
     assert not unread(corrected, make("one-euro"))  # a correction after any cleaner applies
+
+
+def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not_at_all():
+    # A MediaPipe face whose closed eyes read at 0.7 of shut: after the fit its blinks
+    # are lifted from half way between their rest and that top (fit.CLOSE_KNEE), so its
+    # own closure reads 1 and a narrowing under the knee as it was; a face whose closed
+    # eyes read at 0.15 would need a slope over CLOSE_GAIN, and is left alone.
+    from faceclean.guided import fit as gf
+    from faceclean.trackers.mediapipe import NAMES
+
+    tau, s = performed()
+    blinks = [COL[n] for n in gf.BLINKS]
+    found = {}
+    for read in (0.7, 0.15):
+        w = arkit_face(SCRIPT.weights(s))
+        w[:, blinks] *= read
+        fit = guided(Animation(tau, w[:, [COL[n] for n in NAMES]], NAMES), "mediapipe")
+        found[read] = fit.adjust.adaptation
+    ad = found[0.7]
+    assert set(ad.closure) == set(gf.BLINKS) and not found[0.15].closure
+    back = Adaptation.from_dict(ad.to_dict())
+    for name, pair in ad.closure.items():
+        assert back.closure[name] == pytest.approx(pair, abs=1e-6)
+    for name, (knee, top) in ad.closure.items():
+        assert 0.0 <= knee < top < gf.CLOSED and 1 / (top - knee) <= gf.CLOSE_GAIN
+        rows = np.array([[0.0], [0.8 * knee], [top], [0.9 * top]])
+        plain = Adaptation(ad.offset, ad.matrix).apply(np.repeat(rows, 52, 1), ARKIT52)
+        got = ad.apply(np.repeat(rows, 52, 1), ARKIT52)
+        i = COL[name]
+        np.testing.assert_array_equal(got[:2, i], plain[:2, i])  # under the knee: as it was
+        want = min(1.0, max(plain[2, i], (plain[2, i] - knee) / (top - knee)))
+        assert got[2, i] == pytest.approx(want)
+        assert got[3, i] > plain[3, i] + 0.15  # near its top: near shut
+
+
+@pytest.mark.parametrize("closure, says", [
+    ({"eyeBlinkLeft": {"knee": 0.5, "top": 0.4}}, "needs 0 <= knee < top"),
+    ({"eyeBlinkLeft": {"knee": 0.3}}, "closure eyeBlinkLeft top: expected a finite number"),
+    ({"blink": {"knee": 0.1, "top": 0.5}}, "not an ARKit channel name"),
+    ([0.1], "closure must be")])  # fmt: skip
+def test_a_bad_closure_is_refused_in_one_line(tmp_path, closure, says):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
+                               "adaptation": {"format": "faceclean-adaptation/1",
+                                              "closure": closure}}))  # fmt: skip
+    with pytest.raises(FacecleanError, match=says):
+        Adjust.load(bad)

@@ -24,6 +24,13 @@ outputs that measure their rise from it (learned/tracker_map.py ``set_rest_readi
 cleaner takes it: ``attach``)::
 
     "rest": {"reading": {"mouthSmileLeft": 0.03, ...}, "outputs": ["mouthSmileLeft", ...]}
+
+and may close the face's blinks: where the script's closed eyes read ``top`` after the
+correction (short of shut), a channel is lifted from ``knee`` (between its rest and top)
+so that its own top reads 1, after D::
+
+    "closure": {"eyeBlinkLeft": {"knee": 0.31, "top": 0.62}, ...}
+    z' = max(z, clip((z - knee) / (top - knee), 0, 1))
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ from faceclean.errors import FacecleanError
 FORMAT = "faceclean-adaptation/1"
 MAX_OFFSET = 0.5  # weight units
 MAX_COEF = 3.0  # |D| entries
+MIN_SPAN = 0.02  # weight units: a closure's top over its knee (a smaller span is a step)
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,7 @@ class Adaptation:
     facts: dict[str, Any] = field(default_factory=dict)  # other keys, kept as they are
     rest: dict[str, float] = field(default_factory=dict)  # input -> the face's reading at rest
     rest_outputs: tuple[str, ...] = ()  # the outputs that measure a rise from ``rest``
+    closure: dict[str, tuple[float, float]] = field(default_factory=dict)  # name -> knee, top
 
     @classmethod
     def from_dict(cls, data: Any, label: str = "adaptation") -> Adaptation:
@@ -77,12 +86,13 @@ class Adaptation:
         tracker = data.get("tracker")
         if tracker is not None and not isinstance(tracker, str):
             raise FacecleanError(f"{where}: tracker must be a name")
-        keys = ("format", "offset", "matrix", "tracker", "rest")
+        keys = ("format", "offset", "matrix", "tracker", "rest", "closure")
         others = {k: v for k, v in data.items() if k not in keys}
         offset = {n: float(v) for n, v in offset.items()}
         matrix = {o: {i: float(v) for i, v in row.items()} for o, row in matrix.items()}
         reading, outputs = _rest(data.get("rest"), where)
-        return cls(offset, matrix, tracker, others, reading, outputs)
+        closure = _closure(data.get("closure", {}), where)
+        return cls(offset, matrix, tracker, others, reading, outputs, closure)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"format": FORMAT, "tracker": self.tracker, **self.facts}
@@ -93,14 +103,19 @@ class Adaptation:
         if self.rest:
             reading = {n: round(v, 6) for n, v in self.rest.items()}
             out["rest"] = {"reading": reading, "outputs": list(self.rest_outputs)}
+        if self.closure:
+            out["closure"] = {n: {"knee": round(k, 6), "top": round(t, 6)}
+                              for n, (k, t) in self.closure.items()}  # fmt: skip
         return out
 
     @property
     def channels(self) -> tuple[str, ...]:
         """The output channels it changes, in ARKit order."""
-        touched = {n for n, v in self.offset.items() if v} | {
-            o for o, row in self.matrix.items() if any(row.values())
-        }
+        touched = (
+            {n for n, v in self.offset.items() if v}
+            | set(self.closure)
+            | {o for o, row in self.matrix.items() if any(row.values())}
+        )
         return tuple(n for n in ARKIT52 if n in touched)
 
     def operator(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -125,6 +140,11 @@ class Applier:
 
     def __init__(self, adaptation: Adaptation, names: Sequence[str]) -> None:
         self.cols, self.c, self.d = adaptation.operator(tuple(names))
+        shut = [(k, *adaptation.closure[names[j]]) for k, j in enumerate(self.cols)
+                if names[j] in adaptation.closure]  # fmt: skip
+        self.shut = np.array([k for k, _, _ in shut], dtype=np.intp)  # (L,) of the K columns
+        self.knee = np.array([kn for _, kn, _ in shut])  # (L,)
+        self.span = np.array([top - kn for _, kn, top in shut])  # (L,) > 0
 
     def __call__(self, values: np.ndarray) -> np.ndarray:
         y = np.array(values, dtype=np.float64)
@@ -132,6 +152,9 @@ class Applier:
             return y
         with np.errstate(invalid="ignore"):
             z = y[..., self.cols] + self.c + np.nan_to_num(y) @ self.d.T  # (..., K)
+            if len(self.shut):  # the closure: max(z, (z - knee) / (top - knee))
+                q = z[..., self.shut]
+                z[..., self.shut] = np.maximum(q, (q - self.knee) / self.span)
             z = np.where(np.isnan(y[..., self.cols]), np.nan, np.clip(z, 0.0, 1.0))
         y[..., self.cols] = z
         return y
@@ -183,6 +206,24 @@ def _rest(data: Any, where: str) -> tuple[dict[str, float], tuple[str, ...]]:
         if v < 0:
             raise FacecleanError(f"{where} rest reading {n}: must be within [0, 1]")
     return {n: float(v) for n, v in reading.items()}, tuple(outputs)
+
+
+def _closure(data: Any, where: str) -> dict[str, tuple[float, float]]:
+    """The "closure" section checked: {channel: (knee, top)}, 0 <= knee < top <= 1."""
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise FacecleanError(f"{where}: closure must be {{channel: {{\"knee\": number, "
+                             "\"top\": number}}}")  # fmt: skip
+    out = {}
+    for n, v in data.items():
+        if canonical(n) != n:
+            raise FacecleanError(f"{where}: closure: {n!r} is not an ARKit channel name")
+        knee, top = v.get("knee"), v.get("top")
+        _bounded(knee, 1.0, f"{where} closure {n} knee")
+        _bounded(top, 1.0, f"{where} closure {n} top")
+        if not 0 <= knee < top - MIN_SPAN:
+            raise FacecleanError(f"{where} closure {n}: needs 0 <= knee < top - {MIN_SPAN:g}")
+        out[n] = (float(knee), float(top))
+    return out
 
 
 def _bounded(v: Any, limit: float, where: str) -> None:

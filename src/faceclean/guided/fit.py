@@ -44,7 +44,7 @@ Nothing here prints; the command (cli/calibrate.py) reports per prompt.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -99,6 +99,22 @@ HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it r
 # whole take the stream's rest holds the look, and the neutral ("look straight ahead")
 # does not; better on all ten faces, guided and from a neutral hold alike ("Gaze").
 REST_INPUTS = GROUPS["mouth"] + GAZE
+# The face's own closure (``Adaptation.closure``): where its closed eyes, the script's
+# blinks and eyes closed alone, read ``top`` after D, short of CLOSED, each blink output is
+# lifted from CLOSE_KNEE of the way from its rest to that top, so the face's own closure
+# reads 1 and its narrowings (below the knee) as they were (docs/CALIBRATION.md,
+# "The face's own closure"). The shipped map cannot: MediaPipe reads a closing eye and a
+# narrowing one on one scale, which differs by face (docs/MODEL.md, 22nd round).
+# Chosen on the four faces of LAMBDA's choice: from half way (0.5) their blinks close
+# 0.81 / 0.62 / 0.55 / 0.68 -> 0.85 / 0.84 / 0.55 / 0.87 with every lids group under raw;
+# from 0.3 dressed 5's lids go over raw (1.02x), from 0.7 they close less; obama's closed
+# eyes read 0.3 (a slope of 6-7), and lifted its blinks overshot (closure 1.47, lids
+# 0.48 -> 0.74x raw), so a slope over CLOSE_GAIN lifts none.
+BLINKS = ("eyeBlinkLeft", "eyeBlinkRight")
+CLOSE_KNEE = 0.5
+CLOSED = 0.95
+CLOSE_MIN = 0.1  # weight units: an eye whose closure rose less was not seen closing
+CLOSE_GAIN = 4.0  # the lift's slope 1 / (top - knee) at most, else none
 REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"] + GAZE
 
 
@@ -217,6 +233,9 @@ def guided(
         reading = rest_reading(anim, cleaner, still)
         adaptation = Adaptation(adaptation.offset, adaptation.matrix, tracker, {"cleaner": label},
                                 reading, REST_OUTPUTS if reading else ())  # fmt: skip
+        shut = fit_closure(adaptation.apply(np.nan_to_num(y), ARKIT52), target, alignment, t,
+                           _first_run(still))  # fmt: skip
+        adaptation = replace(adaptation, closure=shut)
         adjust = Adjust((), facts, adaptation=adaptation)
         y_after = adaptation.apply(np.nan_to_num(y), ARKIT52)
     else:
@@ -284,6 +303,32 @@ def fit_adaptation(
             if row:
                 matrix[name] = row
     return Adaptation(offset, matrix)
+
+
+def fit_closure(y: np.ndarray, target: np.ndarray, alignment: al.Alignment, t: np.ndarray,
+                rest: np.ndarray) -> dict[str, tuple[float, float]]:  # fmt: skip
+    """{blink: (knee, top)} (module docstring, CLOSE_KNEE): top the median over the seen
+    prompts that close the eye of its HOLD_Q-th percentile over their holds, in y (N, 52)
+    as corrected; the rest its median over ``rest`` (N,) bool. None where the eye was never
+    seen closing, closes to CLOSED already, did not rise by CLOSE_MIN, or would need a
+    slope over CLOSE_GAIN."""
+    out: dict[str, tuple[float, float]] = {}
+    if not rest.any():
+        return out
+    for name in BLINKS:
+        i = ARKIT52.index(name)
+        reached = [float(np.percentile(y[rows, i], HOLD_Q)) for g in alignment.segments
+                   if g.seen and g.prompt.targets.get(name, 0) >= CLOSED
+                   for rows in [(t >= g.t0) & (t <= g.t1) & (target[:, i] >= HOLD)]
+                   if rows.any()]  # fmt: skip
+        low = float(np.median(y[rest, i]))
+        top = float(np.median(reached)) if reached else None
+        if top is None or top >= CLOSED or top - low < CLOSE_MIN:
+            continue
+        knee = low + CLOSE_KNEE * (top - low)
+        if 1.0 / (top - knee) <= CLOSE_GAIN:  # a steeper lift takes a narrowing for a blink
+            out[name] = (knee, top)
+    return out
 
 
 def _first_run(rows: np.ndarray) -> np.ndarray:
