@@ -258,16 +258,20 @@ def test_the_stream_wrappers_hand_the_rest_reading_to_the_map():
         assert got["with"][early, smile].min() > got["without"][early, smile].max() + 0.2
 
 
-@pytest.mark.parametrize("rest, says", [
-    ({"reading": {"mouthSmileLeft": 2.0}, "outputs": []}, "rest reading mouthSmileLeft"),
-    ({"reading": {"smile": 0.1}, "outputs": []}, "not an ARKit channel name"),
-    ({"reading": {"mouthSmileLeft": -0.1}, "outputs": []}, "within \\[0, 1\\]"),
-    ([0.1], "rest must be")])  # fmt: skip
-def test_a_bad_rest_reading_is_refused_in_one_line(tmp_path, rest, says):
+@pytest.mark.parametrize("section, value, says", [
+    ("rest", {"reading": {"mouthSmileLeft": 2.0}, "outputs": []}, "rest reading mouthSmileLeft"),
+    ("rest", {"reading": {"smile": 0.1}, "outputs": []}, "not an ARKit channel name"),
+    ("rest", {"reading": {"mouthSmileLeft": -0.1}, "outputs": []}, "within \\[0, 1\\]"),
+    ("rest", [0.1], "rest must be"),
+    ("closure", {"eyeBlinkLeft": {"knee": 0.5, "top": 0.4}}, "needs 0 <= knee < top"),
+    ("closure", {"eyeBlinkLeft": {"knee": 0.3}}, "closure eyeBlinkLeft top: expected a finite"),
+    ("closure", {"blink": {"knee": 0.1, "top": 0.5}}, "not an ARKit channel name"),
+    ("closure", [0.1], "closure must be")])  # fmt: skip
+def test_a_bad_rest_reading_or_closure_is_refused_in_one_line(tmp_path, section, value, says):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
                                "adaptation": {"format": "faceclean-adaptation/1",
-                                              "rest": rest}}))  # fmt: skip
+                                              section: value}}))  # fmt: skip
     with pytest.raises(FacecleanError, match=says):
         Adjust.load(bad)
 
@@ -613,17 +617,3 @@ def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not
         want = min(1.0, max(plain[2, i], (plain[2, i] - knee) / (top - knee)))
         assert got[2, i] == pytest.approx(want)
         assert got[3, i] > plain[3, i] + 0.15  # near its top: near shut
-
-
-@pytest.mark.parametrize("closure, says", [
-    ({"eyeBlinkLeft": {"knee": 0.5, "top": 0.4}}, "needs 0 <= knee < top"),
-    ({"eyeBlinkLeft": {"knee": 0.3}}, "closure eyeBlinkLeft top: expected a finite number"),
-    ({"blink": {"knee": 0.1, "top": 0.5}}, "not an ARKit channel name"),
-    ([0.1], "closure must be")])  # fmt: skip
-def test_a_bad_closure_is_refused_in_one_line(tmp_path, closure, says):
-    bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
-                               "adaptation": {"format": "faceclean-adaptation/1",
-                                              "closure": closure}}))  # fmt: skip
-    with pytest.raises(FacecleanError, match=says):
-        Adjust.load(bad)
