@@ -617,3 +617,20 @@ def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not
         want = min(1.0, max(plain[2, i], (plain[2, i] - knee) / (top - knee)))
         assert got[2, i] == pytest.approx(want)
         assert got[3, i] > plain[3, i] + 0.15  # near its top: near shut
+
+
+def test_the_command_says_and_writes_the_face_s_own_closure(tmp_path, capsys):
+    from faceclean import io
+    from faceclean.trackers.mediapipe import NAMES
+
+    tau, s = performed()
+    w = arkit_face(SCRIPT.weights(s))
+    w[:, [COL["eyeBlinkLeft"], COL["eyeBlinkRight"]]] *= 0.7  # closed eyes read short
+    take, out = tmp_path / "guided.csv", tmp_path / "calib.json"
+    io.save(Animation(tau, w[:, [COL[n] for n in NAMES]], NAMES), take, fmt="csv")
+    assert main(["calibrate", "--guided", str(take), "-o", str(out), "--tracker", "mediapipe"]) == 0
+    said = [line for line in capsys.readouterr().out.splitlines() if "shut: lifted from" in line]
+    closure = json.loads(out.read_text())["adaptation"]["closure"]
+    assert sorted(closure) == ["eyeBlinkLeft", "eyeBlinkRight"] and len(said) == 2
+    knee, top = closure["eyeBlinkLeft"]["knee"], closure["eyeBlinkLeft"]["top"]
+    assert f"reads {top:.2f} shut: lifted from {knee:.2f}" in said[0]

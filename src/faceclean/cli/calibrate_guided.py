@@ -84,6 +84,9 @@ def report(result) -> list[str]:
             n, m = len(ad.rest), len(ad.rest_outputs)
             lines.append(f"rest reading of {n} mouth and gaze channels (this face's "
                          f"neutral): {m} mouth, cheek and gaze channels rise from it")  # fmt: skip
+        for name, (knee, top) in ad.closure.items():
+            lines.append(f"  {name:<20} reads {top:.2f} shut: lifted from {knee:.2f} so that "
+                         "this face's closure reads 1")  # fmt: skip
     else:
         chans = adjust.facts.get("channels", {})
         lifted = adjust.facts.get("lifted", [])
