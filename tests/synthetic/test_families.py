@@ -96,6 +96,32 @@ def test_the_portrait_s_eyes_land_in_the_head_s_eye_openings(head, portrait_file
     assert off.mean() < 3.0 and off.max() < 5.0, off
 
 
+def test_grooming_paints_the_lids_the_lips_and_a_beard_and_nothing_else(head):
+    # The groomed look: eyeliner on the lid margin, eyeshadow above it, a beard below the
+    # nose, lipstick; the forehead and the eyes as painted, and nothing when nothing is drawn.
+    from faceclean.synthetic import groom
+    from faceclean.synthetic import head as H
+    from faceclean.synthetic.render import _albedo
+
+    bare = replace(Scene.draw(4, "studio", head.n_identity, "groomed"), liner=0.0, shadow=0.0,
+                   beard=0.0, freckles=0.0, lipstick=None)  # fmt: skip
+    plain = _albedo(head, bare)
+    assert np.array_equal(groom.paint(head, bare, plain), plain)
+    full = replace(bare, liner=0.4, shadow=0.7, beard=0.9, lipstick=(0.5, 0.02, 0.05))
+    changed = np.abs(_albedo(head, full) - plain).max(axis=1) > 1e-6  # (V,)
+    v, lm = head.neutral, head.landmarks
+    code = head.regions(full.iris_deg, full.pupil_deg, full.brow_cm, full.lid_cm)
+    liner = (head.lid_cm < 0.4) & (code == H.SKIN)
+    beard = (code == H.SKIN) & (v[:, 2] > groom.FRONT_CM) & (v[:, 1] > v[lm[8], 1])
+    beard &= v[:, 1] < v[lm[33], 1] - 1.0
+    assert changed[liner].mean() > 0.95 and changed[beard].mean() > 0.95
+    assert changed[code == H.LIPS].all()
+    eyes = np.isin(code, (H.SCLERA, H.IRIS, H.PUPIL))
+    forehead = (code == H.SKIN) & (v[:, 1] > v[lm[19], 1] + 1.0)
+    assert not changed[eyes].any() and not changed[forehead].any()
+    assert Scene.draw(4, "studio", head.n_identity, "groomed").specular >= 0.1  # oily skin
+
+
 def test_a_portrait_without_a_usable_face_is_skipped_in_one_line(head, portrait_file, tmp_path):
     from faceclean.synthetic.portrait import Fitter
 
@@ -113,8 +139,8 @@ def test_a_portrait_without_a_usable_face_is_skipped_in_one_line(head, portrait_
 
 def test_the_plan_deals_every_source_into_every_family_and_holds_each_face_at_rest():
     takes = [(f"/takes/{g}/{k}.csv", g, 40.0) for g in ("a", "b") for k in range(2)]
-    jobs = engine.plan(takes, 3, 10.0, ("studio",), (30.0,), families=FAMILIES,
-                       portraits=("p1", "p2"), independent=3, neutral=2.0)  # fmt: skip
+    jobs = engine.plan(takes, 4, 10.0, ("studio",), (30.0,), families=FAMILIES,
+                       portraits=("p1", "p2"), independent=4, neutral=2.0)  # fmt: skip
     clips = [j for j in jobs if j.group != "neutral"]
     holds = [j for j in jobs if j.group == "neutral"]
     assert len(holds) == len(clips)  # one hold per scene, the same seed: the same face
@@ -200,6 +226,6 @@ def test_pairs_skips_a_bad_portrait_and_makes_the_rest(portrait_file, tmp_path):
     skipped = [line for line in r.stderr.splitlines() if "blank" in line]
     assert len(skipped) == 1 and "no face found; skipped" in skipped[0]
     names = sorted(p.name for p in out.glob("*.json"))
-    assert len(names) == 3 and {n.split("-")[3] for n in names} == set(FAMILIES)
+    assert len(names) == 3 and {n.split("-")[3] for n in names} == {"painted", "photo", "dressed"}
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert "3 of 3 pairs already done; 0 to make" in again.stdout

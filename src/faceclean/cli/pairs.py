@@ -71,8 +71,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--families",
         default="painted",
-        help="appearance families, dealt in turn within each source: painted, photo, dressed "
-        "(default painted; docs/MODEL.md)",
+        help="appearance families, dealt in turn within each source: painted, photo, "
+        "dressed, groomed (default painted; docs/MODEL.md)",
     )
     p.add_argument(
         "--portraits",

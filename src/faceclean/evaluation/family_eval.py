@@ -297,7 +297,8 @@ def markdown(result: dict[str, Any]) -> str:
         "ICT head painted per vertex, iris, brows, lashes and hair drawn per face), `photo` "
         "(the head fitted to a real portrait and textured from it, docs/DATA.md), `dressed` "
         "(spectacles, a cap or fringe, a hand near the face, auto-exposure, white balance, "
-        "motion blur). Every identity is new. "
+        "motion blur), `groomed` (eyeliner, eyeshadow, a beard or stubble, freckles, lipstick, "
+        "oily skin: synthetic/groom.py). Every identity is new. "
         + ("The eyes turn with the eyeLook weights (`pairs --eyes turn`). "
            if result.get("gaze") else "The eyes look ahead; only the lids move with eyeLook. ")
         + f"Pairs: `{result['pairs']}`.",

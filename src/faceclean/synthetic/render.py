@@ -6,7 +6,8 @@ front of it. A vertex p (cm, camera space) lands at pixel
 Shading (linear RGB, Gouraud): ``albedo (ambient + key max(0, n.l)) + specular max(0, n.h)^24``,
 then gamma 1/2.2 per vertex (Gouraud in display space). A portrait's skin (``photo``,
 portrait.py) is sampled per pixel at coordinates interpolated like colours, lit about its
-own level. Accessories (``dressed``) are drawn over the face (dress.py). The camera:
+own level. Accessories (``dressed``) are drawn over the face (dress.py), grooming
+(``groomed``) painted on it (groom.py). The camera:
 Gaussian blur (plus motion blur from the head's turn), auto-exposure and white balance,
 sensor noise drawn from (seed, frame), JPEG.
 """
@@ -191,4 +192,8 @@ def _albedo(head: Head, s: Scene, skin: Skin | None = None) -> np.ndarray:
         table[code] = rgb
     albedo = table[head.regions(s.iris_deg, s.pupil_deg, s.brow_cm, s.lid_cm)]
     mottle = rng.normal(1.0, 0.04, (len(albedo), 1)).astype(np.float32)
+    if s.family == "groomed":
+        from faceclean.synthetic import groom
+
+        albedo = groom.paint(head, s, albedo)
     return albedo * mottle

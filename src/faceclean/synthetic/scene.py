@@ -22,7 +22,9 @@ never saw:
   skin, brows, lashes, spectacles where the person wore them;
 - ``dressed``: the painted head in a real room: spectacles, a cap's brim or a fringe of
   hair, a hand near the face, a camera's auto-exposure and white balance wandering,
-  motion blur, harder compression (dress.py).
+  motion blur, harder compression (dress.py);
+- ``groomed``: the painted head groomed (groom.py): eyeliner and eyeshadow, a beard or
+  stubble, freckles, lipstick, oilier skin: contrast where MediaPipe reads lids and lips.
 """
 
 from __future__ import annotations
@@ -76,7 +78,7 @@ SETTINGS: dict[str, dict[str, tuple[float, float]]] = {
 }
 TRAIN_SETTINGS = ("studio", "webcam")
 HELD_OUT_SETTING = "window"
-FAMILIES = ("painted", "photo", "dressed")
+FAMILIES = ("painted", "photo", "dressed", "groomed")
 
 # skin albedo (linear RGB) from light to dark: a person's tone is drawn along this line
 SKIN_TONES = np.array(
@@ -127,6 +129,12 @@ class Scene:
     glasses_colour: tuple[float, float, float] = (0.05, 0.05, 0.05)
     hat: float = 0.0  # how far a brim or fringe comes down, fraction of forehead; 0: none
     hand: float = 0.0  # a hand near the face, its size in face widths; 0: none
+    liner: float = 0.0  # groomed: eyeliner width, cm from the lid contour; 0: none
+    shadow: float = 0.0  # groomed: eyeshadow strength in [0, 1]; 0: none
+    shadow_colour: tuple[float, float, float] = (0.2, 0.12, 0.1)
+    beard: float = 0.0  # groomed: beard density in [0, 1] (stubble under 0.5); 0: none
+    freckles: float = 0.0  # groomed: share of the front skin's vertices darkened
+    lipstick: tuple[float, float, float] | None = None  # groomed: the lips' colour
 
     @classmethod
     def draw(cls, seed: int, setting: str, n_identity: int = 100, family: str = "painted",
@@ -202,7 +210,7 @@ def _look(seed: int, setting: str, family: str, portraits: tuple[str, ...]) -> d
     rng = np.random.default_rng([seed, list(SETTINGS).index(setting), 100 + FAMILIES.index(family)])
     u = rng.uniform
     look: dict = {"family": family}
-    if family in ("painted", "dressed"):
+    if family in ("painted", "dressed", "groomed"):
         look.update(iris_deg=u(17.0, 24.0), pupil_deg=u(5.5, 9.5), brow_cm=u(0.28, 0.65),
                     lid_cm=u(0.1, 0.3), specular=u(0.02, 0.3),
                     hair=_t(rng.choice(HAIR) * u(0.6, 1.3)))  # fmt: skip
@@ -220,11 +228,23 @@ def _look(seed: int, setting: str, family: str, portraits: tuple[str, ...]) -> d
             hat=u(0.2, 0.8) if rng.random() < 0.5 else 0.0,
             hand=u(0.3, 0.6) if rng.random() < 0.5 else 0.0,
         )
+    if family == "groomed":  # each part of it about half the time, drawn apart
+        look.update(
+            liner=u(0.2, 0.45) if rng.random() < 0.5 else 0.0,
+            shadow=u(0.3, 0.8) if rng.random() < 0.4 else 0.0,
+            shadow_colour=_t(rng.choice(SHADOWS) * u(0.7, 1.3)),
+            beard=u(0.2, 0.95) if rng.random() < 0.5 else 0.0,
+            freckles=u(0.05, 0.25) if rng.random() < 0.3 else 0.0,
+            lipstick=_t(rng.choice(LIPSTICKS) * u(0.8, 1.2)) if rng.random() < 0.4 else None,
+            specular=u(0.1, 0.45),  # oily skin's shine
+        )
     return look
 
 
 HAIR = np.array([[0.03, 0.02, 0.015], [0.12, 0.07, 0.04], [0.35, 0.22, 0.1], [0.6, 0.5, 0.3],
                  [0.45, 0.15, 0.06], [0.4, 0.4, 0.4]])  # fmt: skip
+SHADOWS = np.array([[0.2, 0.12, 0.1], [0.1, 0.1, 0.18], [0.3, 0.2, 0.3], [0.05, 0.05, 0.05]])
+LIPSTICKS = np.array([[0.45, 0.03, 0.05], [0.6, 0.2, 0.3], [0.2, 0.04, 0.08], [0.55, 0.35, 0.3]])
 FRAMES = np.array([[0.04, 0.04, 0.04], [0.3, 0.15, 0.05], [0.6, 0.6, 0.62], [0.5, 0.1, 0.1]])
 
 
