@@ -266,7 +266,9 @@ def test_the_stream_wrappers_hand_the_rest_reading_to_the_map():
     ("closure", {"eyeBlinkLeft": {"knee": 0.5, "top": 0.4}}, "needs 0 <= knee < top"),
     ("closure", {"eyeBlinkLeft": {"knee": 0.3}}, "closure eyeBlinkLeft top: expected a finite"),
     ("closure", {"blink": {"knee": 0.1, "top": 0.5}}, "not an ARKit channel name"),
-    ("closure", [0.1], "closure must be")])  # fmt: skip
+    ("closure", [0.1], "closure must be"),
+    ("own", ["brows"], "own must be a list of ARKit channel names"),
+    ("own", "browInnerUp", "own must be a list")])  # fmt: skip
 def test_a_bad_rest_reading_or_closure_is_refused_in_one_line(tmp_path, section, value, says):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
@@ -634,3 +636,31 @@ def test_the_command_says_and_writes_the_face_s_own_closure(tmp_path, capsys):
     assert sorted(closure) == ["eyeBlinkLeft", "eyeBlinkRight"] and len(said) == 2
     knee, top = closure["eyeBlinkLeft"]["knee"], closure["eyeBlinkLeft"]["top"]
     assert f"reads {top:.2f} shut: lifted from {knee:.2f}" in said[0]
+
+
+def test_brows_that_read_as_they_are_are_taken_from_their_own_rise(tmp_path, capsys):
+    # The shipped map's brow rows read the smile too (a habit of the training faces'
+    # readings): a face whose MediaPipe brows follow its brows, and nothing else, reads its
+    # script's brows better from their own rise, which the calibration then hands to the
+    # map (fit.OWN_GROUPS), its brows out of D; a face whose brows read at 0.3 of their
+    # aim keeps the map's rows and has D scale them.
+    from faceclean import io
+    from faceclean.trackers.mediapipe import NAMES
+
+    tau, s = performed()
+    brows = [COL[n] for n in GROUPS["brows"]]
+    found = {}
+    for read in (1.0, 0.3):
+        w = arkit_face(SCRIPT.weights(s))
+        w[:, brows] *= read
+        take = tmp_path / f"brows{read}.csv"
+        io.save(Animation(tau, w[:, [COL[n] for n in NAMES]], NAMES), take, fmt="csv")
+        out = tmp_path / f"calib{read}.json"
+        args = ["calibrate", "--guided", str(take), "-o", str(out), "--tracker", "mediapipe"]
+        assert main(args) == 0
+        found[read] = (Adjust.load(out).adaptation, capsys.readouterr().out)
+    ad, said = found[1.0]
+    assert ad.own == GROUPS["brows"] and "brows read as their own rise alone" in said
+    assert not set(ad.matrix) & set(GROUPS["brows"]) and not set(ad.offset) & set(GROUPS["brows"])
+    ad, said = found[0.3]
+    assert ad.own == () and "own rise" not in said and set(ad.matrix) >= set(GROUPS["brows"])

@@ -31,6 +31,11 @@ so that its own top reads 1, after D::
 
     "closure": {"eyeBlinkLeft": {"knee": 0.31, "top": 0.62}, ...}
     z' = max(z, clip((z - knee) / (top - knee), 0, 1))
+
+and may name outputs the map reads as their own input's rise alone, where its other rows
+misread this face (learned/tracker_map.py ``set_own_rise``; ``attach`` hands them over)::
+
+    "own": ["browDownLeft", "browDownRight", "browInnerUp", ...]
 """
 
 from __future__ import annotations
@@ -62,6 +67,7 @@ class Adaptation:
     rest: dict[str, float] = field(default_factory=dict)  # input -> the face's reading at rest
     rest_outputs: tuple[str, ...] = ()  # the outputs that measure a rise from ``rest``
     closure: dict[str, tuple[float, float]] = field(default_factory=dict)  # name -> knee, top
+    own: tuple[str, ...] = ()  # outputs the map reads as their own rise alone
 
     @classmethod
     def from_dict(cls, data: Any, label: str = "adaptation") -> Adaptation:
@@ -86,13 +92,17 @@ class Adaptation:
         tracker = data.get("tracker")
         if tracker is not None and not isinstance(tracker, str):
             raise FacecleanError(f"{where}: tracker must be a name")
-        keys = ("format", "offset", "matrix", "tracker", "rest", "closure")
+        keys = ("format", "offset", "matrix", "tracker", "rest", "closure", "own")
         others = {k: v for k, v in data.items() if k not in keys}
         offset = {n: float(v) for n, v in offset.items()}
         matrix = {o: {i: float(v) for i, v in row.items()} for o, row in matrix.items()}
         reading, outputs = _rest(data.get("rest"), where)
         closure = _closure(data.get("closure", {}), where)
-        return cls(offset, matrix, tracker, others, reading, outputs, closure)
+        own = data.get("own", [])
+        if not isinstance(own, list) or not all(isinstance(n, str) and canonical(n) == n
+                                                for n in own):  # fmt: skip
+            raise FacecleanError(f"{where}: own must be a list of ARKit channel names")
+        return cls(offset, matrix, tracker, others, reading, outputs, closure, tuple(own))
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"format": FORMAT, "tracker": self.tracker, **self.facts}
@@ -106,6 +116,8 @@ class Adaptation:
         if self.closure:
             out["closure"] = {n: {"knee": round(k, 6), "top": round(t, 6)}
                               for n, (k, t) in self.closure.items()}  # fmt: skip
+        if self.own:
+            out["own"] = list(self.own)
         return out
 
     @property
@@ -170,11 +182,17 @@ def after(cleaner: Any, adaptation: Adaptation | None, names: Sequence[str]) -> 
 
 
 def attach(cleaner: Any, adaptation: Adaptation | None) -> None:
-    """Hands ``adaptation``'s rest reading to ``cleaner`` where both have one (the tracker
-    map takes it: ``set_rest_reading``); any other cleaner keeps the stream's own rest, and
-    the correction after it applies as before."""
+    """Hands ``adaptation``'s rest reading and own-rise outputs to ``cleaner`` where both
+    have them (the tracker map takes them: ``set_rest_reading``, ``set_own_rise``); any
+    other cleaner keeps the stream's own rest and its rows, and the correction after it
+    applies as before."""
+    if adaptation is None:
+        return
+    own = getattr(cleaner, "set_own_rise", None)
+    if own is not None:  # (): the map's own rows again, after another face's
+        own(adaptation.own)
     take = getattr(cleaner, "set_rest_reading", None)
-    if adaptation is not None and adaptation.rest and take is not None:
+    if adaptation.rest and take is not None:
         take(adaptation.rest, adaptation.rest_outputs)
 
 
@@ -183,8 +201,8 @@ def unread(adjust: Any, cleaner: Any) -> str:
     for ``cleaner`` when the cleaner reads none: "" where it changes something, else why
     it changes nothing (a one-line note for the command to print)."""
     ad = adjust.adaptation
-    if (ad is None or not ad.rest or ad.matrix or ad.offset or adjust.rules
-            or getattr(cleaner, "set_rest_reading", None) is not None):  # fmt: skip
+    if (ad is None or not (ad.rest or ad.own) or ad.matrix or ad.offset or adjust.rules
+            or ad.closure or getattr(cleaner, "set_rest_reading", None) is not None):  # fmt: skip
         return ""
     return "is a rest reading for the MediaPipe map and changes nothing here"
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from faceclean.channels import GROUPS
+
 TOP_CHANGES = 6  # the adaptation's largest changes printed
 
 
@@ -84,6 +86,9 @@ def report(result) -> list[str]:
             n, m = len(ad.rest), len(ad.rest_outputs)
             lines.append(f"rest reading of {n} mouth and gaze channels (this face's "
                          f"neutral): {m} mouth, cheek and gaze channels rise from it")  # fmt: skip
+        for group, (e_map, e_own) in ad_own(adjust).items():
+            lines.append(f"{group} read as their own rise alone: the map's rows read "
+                         f"this face's prompts {e_map:.3f} off, their own {e_own:.3f}")  # fmt: skip
         for name, (knee, top) in ad.closure.items():
             lines.append(f"  {name:<20} reads {top:.2f} shut: lifted from {knee:.2f} so that "
                          "this face's closure reads 1")  # fmt: skip
@@ -95,3 +100,10 @@ def report(result) -> list[str]:
             c = chans[name]
             lines.append(f"  {name:<20} neutral {c['neutral']:.3f} gain {c['gain']:.2f}")
     return lines
+
+
+def ad_own(adjust) -> dict[str, list[float]]:
+    """{group: [the map's error, its own rise's]} of the groups read as their own rise."""
+    own = set(adjust.adaptation.own)
+    found = adjust.facts.get("guided", {}).get("own", {})
+    return {g: e for g, e in found.items() if own & set(GROUPS.get(g, ()))}

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import contextlib
 import os
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -170,6 +171,22 @@ class MapWeights:
         label = Path(path).name
         formats.write(path, self.config, self.arrays,
                       lambda a: MapWeights.build(*formats.split(a, label), label))  # fmt: skip
+
+
+def own_rise(w: MapWeights, outputs: Sequence[str]) -> MapWeights:
+    """``w`` with each of ``outputs`` (where it has an input of its name) read as that
+    input's own rise above rest, gain 1, and no other input: m_j = u_j - r_j, plus its
+    detail and lift as before (a guided calibration's choice for a face whose readings the
+    map's other rows misread: guided/fit.py ``OWN_GROUPS``). The others as they were."""
+    rows = [j for j, n in enumerate(w.outputs) if n in outputs and n in w.inputs]
+    if not rows or not w.config.get("rest", True):
+        return w
+    a = {k: w.arrays[k].copy() for k in ("a", "b", "c", "w2", "b2")}
+    for j in rows:
+        for k in a:
+            a[k][j] = 0.0
+        a["b"][j, w.inputs.index(w.outputs[j])] = 1.0
+    return replace(w, arrays={**w.arrays, **a})
 
 
 def column_setting(key: str, value: Any, default: Any, width: int, top: float = 1.0

@@ -1,9 +1,8 @@
 """The tracker map: a learned cleaner for one tracker's output, trained on real pairs.
 
-A tracker such as MediaPipe does not only jitter: it under-reads blinks, reads channels
-at the wrong scale, mixes neighbours and sits off zero on a resting face. A filter cannot
-fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, input x
-(K,) in the model's input channels, dt s after the last frame:
+A tracker such as MediaPipe under-reads blinks, reads channels at the wrong scale, mixes
+neighbours and sits off zero at rest: a filter cannot fix levels, a map fitted on
+(tracked, truth) pairs can. One step, per stream, input x (K,), dt s after the last frame:
 
     u  = OneEuro(x)                     tuned pre-filter (min_cutoff, beta, d_cutoff), so
                                         the map sees the tracker's signal, not its noise
@@ -26,41 +25,33 @@ fix levels; a map fitted on (tracked, truth) pairs can. One step, per stream, in
                                         ``noise_band`` c > 0 widened to c x the stream's
                                         own noise where that is more (learned/band.py)
 
-``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest:
-the rest feature takes each face's own resting reading off, which is where identities
-differ most (with B = 0, no hidden layer and no pre-filter it is exactly the per-channel
-ridge baseline). ``d (x - u)_own`` is the detail: output j adds d_j times what the
-pre-filter took off the input of its own name (x_j - u_j, the raw frame minus the filtered
-one). The levels come through the filter from every input; the timing comes from the
-channel's own raw input, so the output need not lag by the filter's time constant, and the
-noise of the 50 other inputs stays filtered (docs/MODEL.md). The deadband (``deadband``,
-0 if absent) lets the output stand while the map's value stays within eps of it: a still
-face's noise, which the map gathers from all its inputs, moves nothing, while a movement
-passes with a lag of eps / speed (1 ms at a blink's 10 /s) and a bias of at most eps.
-The lift restores what a least-squares map cannot: a peak. The tracker under-reads a
-closing eyelid, and a map fitted to every frame pulls each peak toward the mean; where the
-same channel's own rise above rest passes a knee k, its output is at least that rise times
-a gain g (output j reads the input of its own name). At rest the rise is below k, so the
-lift is 0. It reads the raw input through a plain low-pass (``lift_cutoff``, 4 Hz), not u:
-One Euro's slope makes u differ between frame rates, which the gain would multiply. With
-``lift_top`` the lift's top follows the stream: once a face's own rise has lifted past 1
-(an eye that reads higher than the training faces'), every lift is scaled so that the
-largest so far reaches 1, not more; the gain only ever falls. The optional
-hidden layer (``hidden`` > 0) adds what is not linear; on the pairs we have it overfits
-(docs/MODEL.md), so the shipped map is linear. Why this cannot invent motion: m is a
-function of (u, r, x - u) only; on a still face u converges to x, so the detail goes to 0,
-r is constant, and m converges and y with it; a missing frame holds u and so y.
-Why the rest is smoothed and drifts: a running minimum finds the noise's lowest dip, or a
-dip in the first frames or in a performance, and a still face then reads as a rise; the
-minimum of a smoothed reading finds the face's rest, and a drift forgets a dip while a held
-expression keeps all but rho a second (shipped: 0.005 but on the lids, docs/MODEL.md 8-19).
+``A u + B (u - r) + c`` is linear over all inputs and their rise above the stream's rest,
+which takes each face's own resting reading off, where identities differ most (B = 0, no
+hidden layer, no pre-filter: the per-channel ridge baseline). ``d (x - u)_own`` is the
+detail: output j adds d_j times what the pre-filter took off its own input, so the timing
+comes from the channel's raw input and the noise of the other 50 stays filtered. The
+deadband (``deadband``, 0 if absent) lets the output stand while the map's value stays
+within eps of it: a still face's noise moves nothing, a movement passes with a lag of
+eps / speed and a bias of at most eps. The lift restores a peak a least-squares map pulls
+toward the mean (a closing lid): past a knee k of its own rise, an output is at least the
+rise times a gain g; at rest it is 0. It reads the raw input through a plain low-pass
+(``lift_cutoff``, 4 Hz), not u, whose One Euro slope differs between frame rates. With
+``lift_top`` the lift's top follows the stream (the largest so far reaches 1, not more).
+The optional hidden layer (``hidden`` > 0) overfits the pairs we have: the shipped map is
+linear (docs/MODEL.md). It cannot invent motion: m is a function of (u, r, x - u); on a
+still face u converges to x, the detail to 0, r is constant, so m and y converge; a missing
+frame holds u and so y. The rest is smoothed and drifts: a running minimum finds the
+noise's lowest dip and a still face then reads as a rise; the minimum of a smoothed
+reading finds its rest, and a drift forgets a dip while a held expression keeps all but
+rho a second (shipped: 0.005 but on the lids, docs/MODEL.md 8-19). A guided calibration
+may set a face's own rest reading (``set_rest_reading``) and outputs read as their own
+rise alone (``set_own_rise``).
 
-Time rules are filters/base.py's, for every column (``frame_rules``; the pre-filter is
-One Euro itself): a missing frame or an old time repeats the last output, a gap restarts
-the filter (the rest level is kept: the same face came back). Input columns the model
-does not know pass through (under the same rules); model inputs the frame lacks are fed 0
-(a tracker that never reads them); model outputs the frame has no column for (tongueOut
-for MediaPipe) are not written. The weights and their checkpoint: map_weights.py.
+Time rules are filters/base.py's for every column (``frame_rules``): a missing frame or an
+old time repeats the last output, a gap restarts the filter (the rest is kept: the same
+face came back). Unknown input columns pass through; model inputs the frame lacks read 0;
+outputs it has no column for (tongueOut for MediaPipe) are not written. Weights:
+map_weights.py.
 """
 
 from __future__ import annotations
@@ -77,7 +68,7 @@ from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import band as noise
 from faceclean.learned.map_weights import MAX_DETAIL as MAX_DETAIL  # neural/map_groups.py's
-from faceclean.learned.map_weights import MAX_DRIFT, MapWeights, column_setting
+from faceclean.learned.map_weights import MAX_DRIFT, MapWeights, column_setting, own_rise
 
 if TYPE_CHECKING:
     from faceclean.animation import Animation
@@ -110,7 +101,16 @@ class TrackerMap(Stepper):
             if model is None:
                 raise FacecleanError("tracker-map needs a model file (--model FILE.npz)")
             weights = MapWeights.load(model)
-        self.weights = w = weights
+        self._base = weights
+        self._kw = {"min_cutoff": min_cutoff, "beta": beta, "d_cutoff": d_cutoff,
+                    "detail": detail, "rest_drift": rest_drift, "names": names}  # fmt: skip
+        self._build(weights, **self._kw)
+        self.set_rest_reading(None)  # (K,) r0 and (K, M+L) L: none until a face's is set
+        self.reset()
+
+    def _build(self, w: MapWeights, min_cutoff, beta, d_cutoff, detail, rest_drift, names):
+        """The constants of ``w`` and the user's settings; no stream state (``reset``)."""
+        self.weights = w
         self.names = tuple(names) if names is not None else w.inputs
         self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
         self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
@@ -185,22 +185,22 @@ class TrackerMap(Stepper):
         self._rest_drift = drift  # (K,) weight/s
         self._drift = drift if drift.any() else None  # none: r + 0 not computed
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
-        self.set_rest_reading(None)  # (K,) r0 and (K, M+L) L: none until a face's is set
-        self.reset()
+
+    def set_own_rise(self, outputs: Sequence[str] = ()) -> None:
+        """``outputs`` read as their own input's rise above rest alone, gain 1
+        (``map_weights.own_rise``); (): the map's rows. The stream goes on."""
+        self._build(own_rise(self._base, outputs), **self._kw)
+        self.set_rest_reading(*self._reading)
 
     def set_rest_reading(self, reading: dict[str, float] | None, outputs: Sequence[str] = ()):
         """A face's own reading at rest r0 of some inputs (u over a guided calibration's
         rests): ``outputs`` measure their rises from min(r, r0), a level held from the first
         frame reads as held. m += L max(0, r - r0), L = B there (else 0); None: none."""
-        self._ceil, self._lvl = None, None
+        self._ceil, self._lvl, self._reading = None, None, (reading, tuple(outputs))
         if not reading or not self.rest:
             return
-        w = self.weights
-        r0 = np.full(len(w.inputs), np.inf)  # (K,) +inf: max(0, r - inf) = 0
-        for name, v in reading.items():
-            if name in w.inputs:
-                r0[w.inputs.index(name)] = float(v)
-        on = np.isin(w.outputs, list(outputs))  # (M,)
+        r0 = np.array([float(reading.get(n, np.inf)) for n in self.weights.inputs])  # (K,)
+        on = np.isin(self.weights.outputs, list(outputs))  # (M,); r0 inf: max(0, r - inf) = 0
         lvl = np.zeros_like(self._nb)  # (K, M+L): the lift's columns take none
         lvl[:, : self._m_cols] = -self._nb[:, : self._m_cols] * on * np.isfinite(r0)[:, None]
         self._ceil, self._lvl = (r0, lvl) if lvl.any() else (None, None)
