@@ -31,7 +31,9 @@
   from the lower of it and the stream's own rest, so a mouth a performer holds slightly
   set from the first frame reads as set, not as a rest, and eyes that look down at a
   phone for a whole take read as looking down, not ahead (learned/tracker_map.py
-  ``set_rest_reading``).
+  ``set_rest_reading``). Where the brows read the script better as their own rise alone
+  than through the map's rows (OWN_GROUPS, OWN_RATIO), the map reads them so for this
+  face (``Adaptation.own``, ``set_own_rise``) and D leaves them alone.
 - ``arkit``: per-channel levels before the cleaner (faceclean.adjust, as ``calibrate``
   writes): neutral = median over the neutral holds; a channel that a seen prompt aims at
   (target v) and that rose there maps the HOLD_Q-th percentile of its hold onto v (gain
@@ -123,7 +125,7 @@ REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"] + GAZE
 # left out of D (D over it took such faces further over raw: biden's brows 1.00 -> 1.47x).
 # Chosen on the four faces of LAMBDA's choice: the brows' ratio 0.83 / 0.83 / 0.64 / 0.93
 # (painted 7, dressed 5, obama, obama3), own rise better on their speech only on obama's
-# (0.435 -> 0.423x raw, brows 1.58 -> 0.92x). The jaw's ratio is 0.55-0.75 on all ten faces
+# (0.435 -> 0.423x raw, brows 1.58 -> 0.92x). The jaw's ratio is 0.55-0.80 on all ten faces
 # measured and own rise worse on every rendered one: the script's jaw does not say how
 # speech reads, so only the brows (docs/CALIBRATION.md, "The brows from their own rise").
 OWN_GROUPS = ("brows",)
