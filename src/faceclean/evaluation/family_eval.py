@@ -273,6 +273,13 @@ def _family_kinds(found: dict | None) -> list[str]:
 
 
 BEGIN, END = "<!-- appearance families: begin -->", "<!-- appearance families: end -->"
+LOOKS = {  # what each appearance family is (synthetic/scene.py), for the table's text
+    "painted": "the ICT head painted per vertex, iris, brows, lashes and hair drawn per face",
+    "photo": "the head fitted to a real portrait and textured from it, docs/DATA.md",
+    "dressed": "spectacles, a cap or fringe, a hand near the face, auto-exposure, white "
+    "balance, motion blur",
+    "groomed": "eyeliner, eyeshadow, a beard or stubble, freckles, lipstick, oily skin",
+}
 NOTES = (
     "How to read it. *shipped before* is the model shipped since issue 18, fitted on painted "
     "faces of these same takes: on every family it has seen the performances (and on "
@@ -293,12 +300,9 @@ def markdown(result: dict[str, Any]) -> str:
     lines += [
         "Each fold fits on the pairs of the *other* appearance families and the *other* "
         "performance sources, every choice made again on those alone, and is scored on one "
-        "family's pairs of one source (evaluation/family_eval.py). Families: `painted` (the "
-        "ICT head painted per vertex, iris, brows, lashes and hair drawn per face), `photo` "
-        "(the head fitted to a real portrait and textured from it, docs/DATA.md), `dressed` "
-        "(spectacles, a cap or fringe, a hand near the face, auto-exposure, white balance, "
-        "motion blur), `groomed` (eyeliner, eyeshadow, a beard or stubble, freckles, lipstick, "
-        "oily skin: synthetic/groom.py). Every identity is new. "
+        "family's pairs of one source (evaluation/family_eval.py). Families: "
+        + ", ".join(f"`{f}` ({LOOKS[f]})" for f in LOOKS if f in result["families"])
+        + ". Every identity is new. "
         + ("The eyes turn with the eyeLook weights (`pairs --eyes turn`). "
            if result.get("gaze") else "The eyes look ahead; only the lids move with eyeLook. ")
         + f"Pairs: `{result['pairs']}`.",
