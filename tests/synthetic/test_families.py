@@ -106,11 +106,11 @@ def test_grooming_paints_the_lids_the_lips_and_a_beard_and_nothing_else(head):
     bare = replace(Scene.draw(4, "studio", head.n_identity, "groomed"), liner=0.0, shadow=0.0,
                    beard=0.0, freckles=0.0, lipstick=None)  # fmt: skip
     plain = _albedo(head, bare)
-    assert np.array_equal(groom.paint(head, bare, plain), plain)
+    code = head.regions(bare.iris_deg, bare.pupil_deg, bare.brow_cm, bare.lid_cm)
+    assert np.array_equal(groom.paint(head, bare, plain, code), plain)
     full = replace(bare, liner=0.4, shadow=0.7, beard=0.9, lipstick=(0.5, 0.02, 0.05))
     changed = np.abs(_albedo(head, full) - plain).max(axis=1) > 1e-6  # (V,)
     v, lm = head.neutral, head.landmarks
-    code = head.regions(full.iris_deg, full.pupil_deg, full.brow_cm, full.lid_cm)
     liner = (head.lid_cm < 0.4) & (code == H.SKIN)
     beard = (code == H.SKIN) & (v[:, 2] > groom.FRONT_CM) & (v[:, 1] > v[lm[8], 1])
     beard &= v[:, 1] < v[lm[33], 1] - 1.0

@@ -44,8 +44,7 @@ frame holds u and so y. The rest is smoothed and drifts: a running minimum finds
 noise's lowest dip and a still face then reads as a rise; the minimum of a smoothed
 reading finds its rest, and a drift forgets a dip while a held expression keeps all but
 rho a second (shipped: 0.005 but on the lids, docs/MODEL.md 8-19). A guided calibration
-may set a face's own rest reading (``set_rest_reading``) and outputs read as their own
-rise alone (``set_own_rise``).
+sets a face's rest reading and own-rise outputs (``set_rest_reading``, ``set_own_rise``).
 
 Time rules are filters/base.py's for every column (``frame_rules``): a missing frame or an
 old time repeats the last output, a gap restarts the filter (the rest is kept: the same
@@ -101,7 +100,7 @@ class TrackerMap(Stepper):
             if model is None:
                 raise FacecleanError("tracker-map needs a model file (--model FILE.npz)")
             weights = MapWeights.load(model)
-        self._base = weights
+        self._base, self._own = weights, ()
         self._kw = {"min_cutoff": min_cutoff, "beta": beta, "d_cutoff": d_cutoff,
                     "detail": detail, "rest_drift": rest_drift, "names": names}  # fmt: skip
         self._build(weights, **self._kw)
@@ -187,10 +186,11 @@ class TrackerMap(Stepper):
         self._lift_top = bool(w.config.get("lift_top", False)) and len(self._lo) > 0
 
     def set_own_rise(self, outputs: Sequence[str] = ()) -> None:
-        """``outputs`` read as their own input's rise above rest alone, gain 1
-        (``map_weights.own_rise``); (): the map's rows. The stream goes on."""
-        self._build(own_rise(self._base, outputs), **self._kw)
-        self.set_rest_reading(*self._reading)
+        """``outputs`` read as their own rise alone (``map_weights.own_rise``); (): none."""
+        if tuple(outputs) != self._own:  # the same outputs: nothing to rebuild
+            self._own = tuple(outputs)
+            self._build(own_rise(self._base, outputs), **self._kw)
+            self.set_rest_reading(*self._reading)
 
     def set_rest_reading(self, reading: dict[str, float] | None, outputs: Sequence[str] = ()):
         """A face's own reading at rest r0 of some inputs (u over a guided calibration's

@@ -1,9 +1,10 @@
 """What grooming paints on a face (the ``groomed`` appearance family, scene.py): eye
 make-up, a beard or stubble, freckles, lipstick, all where a tracker looks.
 
-``paint(head, scene, albedo)`` changes the per-vertex albedo (V, 3) linear RGB of the painted
-head. Zones come from the head's neutral geometry (cm, x to the subject's left, y up) and
-its 68 Multi-PIE landmarks, so they ride on the skin as it moves:
+``paint(head, scene, albedo, code)`` changes the per-vertex albedo (V, 3) linear RGB of the
+painted head (``code`` (V,): its paint codes, ``Head.regions`` for the scene's look). Zones
+come from the head's neutral geometry (cm, x to the subject's left, y up) and its 68
+Multi-PIE landmarks, so they ride on the skin as it moves:
 
 - eyeliner: the lid margin ``scene.liner`` cm wide, near black (where lashes and liner are);
 - eyeshadow: the upper lid's skin within ``SHADOW_CM`` of the lid contour, blended toward
@@ -30,12 +31,11 @@ BEARD_NECK_CM = 2.0  # ... and ends this far below the chin (landmark 8)
 FRONT_CM = 2.0  # the front half of the head: z above this (the jaw's corners sit at 4.5)
 
 
-def paint(head: Head, s: Scene, albedo: np.ndarray) -> np.ndarray:
+def paint(head: Head, s: Scene, albedo: np.ndarray, code: np.ndarray) -> np.ndarray:
     """``albedo`` (V, 3) with ``s``'s grooming painted on (a copy)."""
     rng = np.random.default_rng([s.seed, 17])
     out = albedo.copy()
     v, lm = head.neutral, head.landmarks
-    code = head.regions(s.iris_deg, s.pupil_deg, s.brow_cm, s.lid_cm)
     skin = (code == H.SKIN) & (v[:, 2] > FRONT_CM)  # (V,) the front skin, nothing painted
     if s.lipstick is not None:
         out[code == H.LIPS] = s.lipstick

@@ -190,10 +190,11 @@ def _albedo(head: Head, s: Scene, skin: Skin | None = None) -> np.ndarray:
     table = np.zeros((10, 3), np.float32)
     for code, rgb in paint.items():
         table[code] = rgb
-    albedo = table[head.regions(s.iris_deg, s.pupil_deg, s.brow_cm, s.lid_cm)]
+    code = head.regions(s.iris_deg, s.pupil_deg, s.brow_cm, s.lid_cm)  # (V,) paint codes
+    albedo = table[code]
     mottle = rng.normal(1.0, 0.04, (len(albedo), 1)).astype(np.float32)
     if s.family == "groomed":
         from faceclean.synthetic import groom
 
-        albedo = groom.paint(head, s, albedo)
+        albedo = groom.paint(head, s, albedo, code)
     return albedo * mottle
