@@ -87,8 +87,8 @@ def report(result) -> list[str]:
             lines.append(f"rest reading of {n} mouth and gaze channels (this face's "
                          f"neutral): {m} mouth, cheek and gaze channels rise from it")  # fmt: skip
         for group, (e_map, e_own) in ad_own(adjust).items():
-            lines.append(f"{group} read as their own rise alone: the map's rows read "
-                         f"this face's prompts {e_map:.3f} off, their own {e_own:.3f}")  # fmt: skip
+            lines.append(f"{group} read as their own rise alone: mean square error over "
+                         f"this face's prompts {e_own:.3f}, the map's {e_map:.3f}")  # fmt: skip
         for name, (knee, top) in ad.closure.items():
             lines.append(f"  {name:<20} reads {top:.2f} shut: lifted from {knee:.2f} so that "
                          "this face's closure reads 1")  # fmt: skip
