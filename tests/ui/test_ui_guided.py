@@ -156,7 +156,8 @@ def test_the_offline_page_fits_the_take_as_calibrate_guided_does(browser, take, 
         assert done["seen"] == len(SCRIPT.prompts), done["problem"]
         kind = "neutral" if tracker == "arkit" else "offset"  # what the table shows
         assert all(kind in c for c in done["channels"])
-        assert "gain" in tab.page.inner_text("#fc-guided-channels")
+        shown = tab.page.inner_text("#fc-guided-channels")
+        assert "gain" in shown
         tab.page.fill("#fc-guided-path", str(tmp_path / "page.json"))
         tab.note_after("#fc-guided-save", "saved guided calibration")
         assert f"--calibration {tmp_path / 'page.json'}" in tab.js("window.faceclean.state.command")
@@ -168,6 +169,10 @@ def test_the_offline_page_fits_the_take_as_calibrate_guided_does(browser, take, 
     page = json.loads((tmp_path / "page.json").read_text())
     cli = json.loads((tmp_path / "cli.json").read_text())
     assert page == cli  # the same fit, the same file
+    # the brows read as their own rise (this face's read as they are) are said on the page
+    own = cli.get("adaptation", {}).get("own", [])
+    assert bool(own) == (tracker == "mediapipe")
+    assert shown.count("read as its own rise alone") == len(own)
 
 
 def test_a_take_that_ignored_the_script_is_shown_and_applied_only_when_asked(browser, take):

@@ -272,17 +272,26 @@ class Panel:
 def changes(adjust: Adjust) -> list[dict[str, Any]]:
     """What a guided calibration changes, per channel, largest first: after the cleaner,
     the adaptation's gain on the channel's own excursion (1 + D_kk), its offset and the
-    other channels it mixes in; before it (ARKit), the levels' neutral and gain."""
+    other channels it mixes in, whether the map reads it as its own rise alone (``own``)
+    and the face's own closure (``shut``: knee, top); before it (ARKit), the levels'
+    neutral and gain."""
     rows = []
     ad = adjust.adaptation
     if ad is not None:
-        for name in sorted(set(ad.matrix) | set(ad.offset), key=ARKIT52.index):
+        named = set(ad.matrix) | set(ad.offset) | set(ad.own) | set(ad.closure)
+        for name in sorted(named, key=ARKIT52.index):
             row = ad.matrix.get(name, {})
             cross = sorted(((i, v) for i, v in row.items() if i != name), key=lambda c: -abs(c[1]))
             gain, offset = 1.0 + row.get(name, 0.0), ad.offset.get(name, 0.0)
             size = abs(gain - 1.0) + abs(offset) + sum(abs(v) for _, v in cross)
-            rows.append({"name": name, "gain": gain, "offset": offset,
-                         "cross": [[i, v] for i, v in cross], "size": size})  # fmt: skip
+            entry = {"name": name, "gain": gain, "offset": offset,
+                     "cross": [[i, v] for i, v in cross]}  # fmt: skip
+            if name in ad.own:  # its map row replaced: listed with the largest
+                entry["own"], size = True, size + 1.0
+            if name in ad.closure:  # lifted so that its top reads 1
+                entry["shut"] = list(ad.closure[name])
+                size += 1.0 - ad.closure[name][1]
+            rows.append({**entry, "size": size})
     else:
         lifted = set(adjust.facts.get("lifted", []))
         for name, c in adjust.facts.get("channels", {}).items():

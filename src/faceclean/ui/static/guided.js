@@ -103,6 +103,8 @@ export function guidedPanel(script, send, api) {
       if (c.neutral !== undefined) text += `, neutral ${c.neutral.toFixed(3)}${c.lifted ? ", lifted to its aim" : ""}`;
       if (c.offset) text += `, offset ${c.offset >= 0 ? "+" : ""}${c.offset.toFixed(3)}`;
       for (const [name, v] of c.cross || []) text += `, ${v >= 0 ? "+" : "−"} ${Math.abs(v).toFixed(2)} × ${name}`;
+      if (c.own) text += ", read as its own rise alone (the map's other inputs misread this face)";
+      if (c.shut) text += `, lifted from ${c.shut[0].toFixed(2)} so that its closure ${c.shut[1].toFixed(2)} reads 1`;
       row.insertCell().textContent = text;
     }
   }
