@@ -539,3 +539,29 @@ class _Pair:
 
     def __init__(self, anim: Animation) -> None:
         self.tracked = self.truth = anim
+
+
+def test_a_column_the_tracker_never_fills_reads_as_an_absent_input_not_the_output_fed_back():
+    # A MediaPipe stream whose brow columns are NaN throughout (rule 2: a bad cell) was fed
+    # the map's own brow outputs back as its brow inputs, which climbed to 0.99. A bad
+    # input holds its filtered value (0 before any): as if the tracker read 0 there.
+    from pathlib import Path
+
+    from faceclean.trackers.mediapipe import NAMES
+
+    model = Path(__file__).resolve().parents[2] / "src/faceclean/models/mediapipe.npz"
+    rng = np.random.default_rng(3)
+    t = np.arange(240) / 30.0
+    x = np.clip(0.2 + 0.15 * np.sin(t[:, None] * rng.uniform(1, 6, len(NAMES))), 0, 1)
+    brows = [i for i, n in enumerate(NAMES) if n.startswith("brow")]
+    zero, gone = x.copy(), x.copy()
+    zero[:, brows], gone[:, brows] = 0.0, np.nan
+    want = TrackerMap(model=model, names=NAMES).clean(Animation(t, zero, NAMES)).values
+    got = TrackerMap(model=model, names=NAMES).clean(Animation(t, gone, NAMES)).values
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    # one bad frame in a live column holds it: the take moves by little, and nowhere NaN
+    once = x.copy()
+    once[100, brows[0]] = np.nan
+    held = TrackerMap(model=model, names=NAMES).clean(Animation(t, once, NAMES)).values
+    plain = TrackerMap(model=model, names=NAMES).clean(Animation(t, x, NAMES)).values
+    assert np.isfinite(held).all() and np.abs(held - plain).max() < 0.05

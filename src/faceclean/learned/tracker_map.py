@@ -48,9 +48,8 @@ sets a face's rest reading and own-rise outputs (``set_rest_reading``, ``set_own
 
 Time rules are filters/base.py's for every column (``frame_rules``): a missing frame or an
 old time repeats the last output, a gap restarts the filter (the rest is kept: the same
-face came back). Unknown input columns pass through; model inputs the frame lacks read 0;
-outputs it has no column for (tongueOut for MediaPipe) are not written. Weights:
-map_weights.py.
+face came back), a bad input holds its filtered value. Unknown input columns pass through;
+model inputs the frame lacks read 0; outputs it has no column for are not written.
 """
 
 from __future__ import annotations
@@ -193,9 +192,8 @@ class TrackerMap(Stepper):
             self.set_rest_reading(*self._reading)
 
     def set_rest_reading(self, reading: dict[str, float] | None, outputs: Sequence[str] = ()):
-        """A face's own reading at rest r0 of some inputs (u over a guided calibration's
-        rests): ``outputs`` measure their rises from min(r, r0), a level held from the first
-        frame reads as held. m += L max(0, r - r0), L = B there (else 0); None: none."""
+        """A face's reading at rest r0 of some inputs (u over a guided calibration's rests):
+        ``outputs`` rise from min(r, r0), m += L max(0, r - r0), L = B there; None: none."""
         self._ceil, self._lvl, self._reading = None, None, (reading, tuple(outputs))
         if not reading or not self.rest:
             return
@@ -227,8 +225,7 @@ class TrackerMap(Stepper):
             self._r = np.full((s, k), np.nan)  # (S, K) resting level so far
             self._v = np.full((s, k), np.nan)  # (S, K) u smoothed for the rest (rest_tau)
             self._t0 = np.full(s, np.nan)  # (S,) s, the stream's first frame (rest_warm)
-            self._rest_h, self._rest_f = None, None  # ``_usual``'s last h, its rest factor
-            self._warm_over = False  # every stream past its rest's warm-up
+            self._rest_h, self._rest_f, self._warm_over = None, None, False  # h, factor; warm
             self._m = np.full((s, len(self.weights.outputs)), np.nan)  # (S, M) map's output
             self._top = np.full((s, len(self._lo)), -np.inf)  # (S, L) largest lift so far
             self._lp = np.full((s, len(self._lo)), np.nan)  # (S, L) the lift's low-pass
@@ -241,6 +238,9 @@ class TrackerMap(Stepper):
         start, advance = frame_rules(missing, dt, self.pre.max_gap)
         moved = start | advance  # the rest hold: the last output (rules 1, 4)
         xi = self._in_matrix(x)
+        held = self._in_matrix(bad.astype(np.float64)) > 0 if bad.any() else None  # (S, K)
+        if held is not None:  # a bad input holds its filtered value (0 before any): never
+            xi = np.where(held, np.nan_to_num(self._u, nan=0.0), xi)  # the output fed back
         u = self._u
         every = bool(advance.all())  # the usual frame: no merge of old and new rows
         if self.prefilter and (every or advance.any()):  # One Euro (filters/one_euro.py)
@@ -262,8 +262,8 @@ class TrackerMap(Stepper):
             p = np.where(start[:, None], xi[:, self._li], p)
             self._lp = p if moved.all() else np.where(moved[:, None], p, self._lp)
         self._rest(u, dt, start, advance, tt)
-        if bad.any() and len(self._do):  # a held value has no detail
-            xi = np.where(self._in_matrix(bad.astype(np.float64)) > 0, u, xi)
+        if held is not None and len(self._do):  # a held value has no detail
+            xi = np.where(held, u, xi)
         y = self._map(u, moved, xi)
         if self._noise_c > 0:  # the band widened by the noise (learned/band.py)
             go = advance & ~start
