@@ -664,3 +664,12 @@ def test_brows_that_read_as_they_are_are_taken_from_their_own_rise(tmp_path, cap
     assert not set(ad.matrix) & set(GROUPS["brows"]) and not set(ad.offset) & set(GROUPS["brows"])
     ad, said = found[0.3]
     assert ad.own == () and "own rise" not in said and set(ad.matrix) >= set(GROUPS["brows"])
+    # brows the tracker never read (NaN throughout): their prompts unseen, written anyway
+    # with --partial, and no own rise chosen from brows that never moved
+    w = arkit_face(SCRIPT.weights(s))
+    w[:, brows] = np.nan
+    take, out = tmp_path / "nobrows.csv", tmp_path / "nobrows.json"
+    io.save(Animation(tau, w[:, [COL[n] for n in NAMES]], NAMES), take, fmt="csv")
+    args = ["calibrate", "--guided", str(take), "-o", str(out), "--tracker", "mediapipe"]
+    assert main([*args, "--partial"]) == 0
+    assert Adjust.load(out).adaptation.own == () and "own rise" not in capsys.readouterr().out

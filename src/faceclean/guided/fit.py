@@ -242,7 +242,7 @@ def guided(
         },
     }
     if tracker == "mediapipe":
-        own, y_own, facts["guided"]["own"] = fit_own(anim, y, target, weight, present)
+        own, y_own, facts["guided"]["own"] = fit_own(anim, y, target, weight, present, alignment)
         adaptation = fit_adaptation(y_own, target, weight, present, fixed=own)
         still = (weight > 0) & (target.max(axis=1) == 0)  # the rests it was pivoted on
         reading = rest_reading(anim, cleaner, still)
@@ -274,10 +274,12 @@ def _frame_weights(alignment: al.Alignment, t: np.ndarray, s: np.ndarray) -> np.
 
 
 def fit_own(
-    anim: Animation, y: np.ndarray, target: np.ndarray, weight: np.ndarray, present: np.ndarray
-) -> tuple[tuple[str, ...], np.ndarray, dict[str, list[float]]]:
+    anim: Animation, y: np.ndarray, target: np.ndarray, weight: np.ndarray, present: np.ndarray,
+    alignment: al.Alignment,
+) -> tuple[tuple[str, ...], np.ndarray, dict[str, list[float]]]:  # fmt: skip
     """(the outputs read as their own rise, y (N, 52) with them so read, {group: [the map's
-    mean squared error over the prompts, its own rise's]}) for OWN_GROUPS (their comment)."""
+    mean squared error over the prompts, its own rise's]}) for OWN_GROUPS (their comment):
+    only a group a seen prompt aims at, whose own rise moved there by MOVE_MIN."""
     cleaner, _ = shipped_cleaner("mediapipe", anim.names)
     if not hasattr(cleaner, "set_own_rise"):
         return (), y, {}
@@ -286,6 +288,7 @@ def fit_own(
     alone, _ = cleaner.clean(anim).arkit()
     alone = np.where(anim.valid[:, None], alone, np.nan)
     use = weight > 0
+    seen = {n for g in alignment.segments if g.seen for n in g.prompt.targets}
     own, y, errors = (), y.copy(), {}
     for g in OWN_GROUPS:
         cols = [ARKIT52.index(n) for n in GROUPS[g] if n in names]
@@ -293,7 +296,9 @@ def fit_own(
                          / max(weight[use].sum(), 1.0)), 6)
              for z in (np.nan_to_num(y), np.nan_to_num(alone))]  # fmt: skip
         errors[g] = e
-        if (target[use][:, cols] > 0).any() and e[1] < OWN_RATIO * e[0]:  # its prompts seen
+        aimed = use & (target[:, cols] > 0).any(axis=1)  # (N,) frames a prompt moves it
+        moved = aimed.any() and np.nan_to_num(alone[aimed][:, cols]).max() >= MOVE_MIN
+        if set(GROUPS[g]) & seen and moved and e[1] < OWN_RATIO * e[0]:
             own += tuple(ARKIT52[j] for j in cols)
             y[:, cols] = alone[:, cols]
     return own, y, errors
