@@ -267,7 +267,8 @@ def test_the_stream_wrappers_hand_the_rest_reading_to_the_map():
     ("closure", {"eyeBlinkLeft": {"knee": 0.3}}, "closure eyeBlinkLeft top: expected a finite"),
     ("closure", {"blink": {"knee": 0.1, "top": 0.5}}, "not an ARKit channel name"),
     ("closure", [0.1], "closure must be"),
-    ("own", ["brows"], "own must be a list of ARKit channel names"),
+    ("own", ["browInnerUp", "brows"], "own: 'brows' is not an ARKit channel name"),
+    ("own", [" browInnerUp"], "own: ' browInnerUp' is not an ARKit channel name"),
     ("own", "browInnerUp", "own must be a list")])  # fmt: skip
 def test_a_bad_rest_reading_or_closure_is_refused_in_one_line(tmp_path, section, value, says):
     bad = tmp_path / "bad.json"
@@ -586,6 +587,8 @@ def test_a_rest_reading_given_to_a_cleaner_that_reads_none_is_said(tmp_path, cap
         ),
     )
     assert not unread(corrected, make("one-euro"))  # a correction after any cleaner applies
+    own = Adjust((), got.facts, adaptation=Adaptation({}, {}, own=("browInnerUp",)))
+    assert "channels read as their own rise" in unread(own, make("one-euro"))
 
 
 def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not_at_all():

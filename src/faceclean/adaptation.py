@@ -99,9 +99,11 @@ class Adaptation:
         reading, outputs = _rest(data.get("rest"), where)
         closure = _closure(data.get("closure", {}), where)
         own = data.get("own", [])
-        if not isinstance(own, list) or not all(isinstance(n, str) and canonical(n) == n
-                                                for n in own):  # fmt: skip
+        if not isinstance(own, list):
             raise FacecleanError(f"{where}: own must be a list of ARKit channel names")
+        bad = [n for n in own if not isinstance(n, str) or canonical(n) != n]
+        if bad:
+            raise FacecleanError(f"{where}: own: {bad[0]!r} is not an ARKit channel name")
         return cls(offset, matrix, tracker, others, reading, outputs, closure, tuple(own))
 
     def to_dict(self) -> dict[str, Any]:
@@ -204,7 +206,8 @@ def unread(adjust: Any, cleaner: Any) -> str:
     if (ad is None or not (ad.rest or ad.own) or ad.matrix or ad.offset or adjust.rules
             or ad.closure or getattr(cleaner, "set_rest_reading", None) is not None):  # fmt: skip
         return ""
-    return "is a rest reading for the MediaPipe map and changes nothing here"
+    what = "a rest reading" if ad.rest else "channels read as their own rise"
+    return f"is {what} for the MediaPipe map and changes nothing here"
 
 
 def _rest(data: Any, where: str) -> tuple[dict[str, float], tuple[str, ...]]:
