@@ -229,3 +229,17 @@ def test_pairs_skips_a_bad_portrait_and_makes_the_rest(portrait_file, tmp_path):
     assert len(names) == 3 and {n.split("-")[3] for n in names} == {"painted", "photo", "dressed"}
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert "3 of 3 pairs already done; 0 to make" in again.stdout
+
+
+@pytest.mark.parametrize("given, says", [
+    ("", "--families names none: give one or more of"),
+    (" , ", "--families names none"),
+    ("groomed,clay", "unknown appearance family 'clay'")])  # fmt: skip
+def test_a_bad_families_list_is_one_line(tmp_path, capsys, given, says):
+    from faceclean.cli import main
+
+    args = ["pairs", "--families", given, "--synthetic", "1", "-o", str(tmp_path / "p"), "--list"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0] and "groomed" in err[0]
+    assert not (tmp_path / "p").exists()

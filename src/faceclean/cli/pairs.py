@@ -180,10 +180,11 @@ def _families(text: str) -> tuple[str, ...]:
 
     names = tuple(dict.fromkeys(s.strip() for s in text.split(",") if s.strip()))
     bad = [f for f in names if f not in FAMILIES]
-    if bad or not names:
+    if not names:
+        raise FacecleanError(f"--families names none: give one or more of {', '.join(FAMILIES)}")
+    if bad:
         raise FacecleanError(
-            f"unknown appearance family {bad[0] if bad else '(none)'!r} "
-            f"(one of: {', '.join(FAMILIES)})"
+            f"unknown appearance family {bad[0]!r} (one of: {', '.join(FAMILIES)})"
         )
     return names
 
