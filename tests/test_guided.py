@@ -664,6 +664,8 @@ def test_brows_that_read_as_they_are_are_taken_from_their_own_rise(tmp_path, cap
         found[read] = (Adjust.load(out).adaptation, capsys.readouterr().out)
     ad, said = found[1.0]
     assert ad.own == GROUPS["brows"] and "brows read as their own rise alone" in said
+    assert main(["info", str(tmp_path / "calib1.0.json")]) == 0
+    assert "5 channels read as their own rise" in capsys.readouterr().out
     assert not set(ad.matrix) & set(GROUPS["brows"]) and not set(ad.offset) & set(GROUPS["brows"])
     ad, said = found[0.3]
     assert ad.own == () and "own rise" not in said and set(ad.matrix) >= set(GROUPS["brows"])

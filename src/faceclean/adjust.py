@@ -253,6 +253,8 @@ class Adjust:
                 f"adaptation after the cleaner ({ad.facts.get('cleaner', '?')}): "
                 f"{len(ad.channels)} channels corrected, {cross} cross-channel terms"
                 + (f"; the face's rest reading of {len(ad.rest)} channels" if ad.rest else "")
+                + (f"; {len(ad.closure)} blinks lifted to its closure" if ad.closure else "")
+                + (f"; {len(ad.own)} channels read as their own rise" if ad.own else "")
             )
         return lines or ["identity (no level mapping)"]
 
