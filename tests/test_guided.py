@@ -645,7 +645,7 @@ def test_brows_that_read_as_they_are_are_taken_from_their_own_rise(tmp_path, cap
     # The shipped map's brow rows read the smile too (a habit of the training faces'
     # readings): a face whose MediaPipe brows follow its brows, and nothing else, reads its
     # script's brows better from their own rise, which the calibration then hands to the
-    # map (fit.OWN_GROUPS), its brows out of D; a face whose brows read at 0.3 of their
+    # map (guided/own.py), its brows out of D; a face whose brows read at 0.3 of their
     # aim keeps the map's rows and has D scale them.
     from faceclean import io
     from faceclean.trackers.mediapipe import NAMES

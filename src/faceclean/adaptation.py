@@ -132,6 +132,19 @@ class Adaptation:
         )
         return tuple(n for n in ARKIT52 if n in touched)
 
+    def summary(self) -> str:
+        """One line of what it holds (``faceclean info``)."""
+        cross = sum(1 for o, row in self.matrix.items() for i in row if i != o)
+        parts = [
+            f"adaptation after the cleaner ({self.facts.get('cleaner', '?')}): "
+            f"{len(self.channels)} channels corrected, {cross} cross-channel terms"
+        ]
+        for n, what in ((len(self.rest), "channels in the face's rest reading"),
+                        (len(self.closure), "blinks lifted to its closure"),
+                        (len(self.own), "channels read as their own rise")):  # fmt: skip
+            parts += [f"{n} {what}"] if n else []
+        return "; ".join(parts)
+
     def operator(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(cols (K,) the columns it writes, c (K,), D (K, M)) for columns ``names``."""
         col = {n: j for j, n in enumerate(names)}

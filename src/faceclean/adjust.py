@@ -246,16 +246,8 @@ class Adjust:
             lines.append(f"calibrated from {facts.get('take', 'a take')}: "
                          f"{facts.get('frames', '?')} frames, neutral "
                          f"{facts.get('neutral_s', '?')} s; {levels}")  # fmt: skip
-        ad = self.adaptation
-        if ad is not None:
-            cross = sum(1 for o, row in ad.matrix.items() for i in row if i != o)
-            lines.append(
-                f"adaptation after the cleaner ({ad.facts.get('cleaner', '?')}): "
-                f"{len(ad.channels)} channels corrected, {cross} cross-channel terms"
-                + (f"; the face's rest reading of {len(ad.rest)} channels" if ad.rest else "")
-                + (f"; {len(ad.closure)} blinks lifted to its closure" if ad.closure else "")
-                + (f"; {len(ad.own)} channels read as their own rise" if ad.own else "")
-            )
+        if self.adaptation is not None:
+            lines.append(self.adaptation.summary())
         return lines or ["identity (no level mapping)"]
 
 

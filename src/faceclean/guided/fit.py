@@ -32,8 +32,8 @@
   set from the first frame reads as set, not as a rest, and eyes that look down at a
   phone for a whole take read as looking down, not ahead (learned/tracker_map.py
   ``set_rest_reading``). Where the brows read the script better as their own rise alone
-  than through the map's rows (OWN_GROUPS, OWN_RATIO), the map reads them so for this
-  face (``Adaptation.own``, ``set_own_rise``) and D leaves them alone.
+  than through the map's rows (guided/own.py), the map reads them so for this face
+  (``Adaptation.own``, ``set_own_rise``) and D leaves them alone.
 - ``arkit``: per-channel levels before the cleaner (faceclean.adjust, as ``calibrate``
   writes): neutral = median over the neutral holds; a channel that a seen prompt aims at
   (target v) and that rose there maps the HOLD_Q-th percentile of its hold onto v (gain
@@ -59,6 +59,7 @@ from faceclean.calibration import MAX_GAIN, MOVE_MIN
 from faceclean.channels import ARKIT52, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError
 from faceclean.guided import align as al
+from faceclean.guided.own import choose
 from faceclean.guided.script import Script, load
 
 LAMBDA = 10.0  # ridge on D relative to each input's own variance (+ V0): scale-free, so
@@ -118,18 +119,6 @@ CLOSED = 0.95
 CLOSE_MIN = 0.1  # weight units: an eye whose closure rose less was not seen closing
 CLOSE_GAIN = 4.0  # the lift's slope 1 / (top - knee) at most, else none
 REST_OUTPUTS = GROUPS["mouth"] + GROUPS["cheeks_nose"] + GAZE
-# Groups the map may read as their own rise alone for this face (``Adaptation.own``):
-# where, over the script's prompts, that reads the group's aims with under OWN_RATIO of the
-# map's own squared error, the map's other rows misread this face (a photographed face's
-# brows do not rise with its smile, as the rendered faces' readings do) and the group is
-# left out of D (D over it took such faces further over raw: biden's brows 1.00 -> 1.47x).
-# Chosen on the four faces of LAMBDA's choice: the brows' ratio 0.83 / 0.83 / 0.64 / 0.93
-# (painted 7, dressed 5, obama, obama3), own rise better on their speech only on obama's
-# (0.435 -> 0.423x raw, brows 1.58 -> 0.92x). The jaw's ratio is 0.55-0.80 on all ten faces
-# measured and own rise worse on every rendered one: the script's jaw does not say how
-# speech reads, so only the brows (docs/CALIBRATION.md, "The brows from their own rise").
-OWN_GROUPS = ("brows",)
-OWN_RATIO = 0.75
 
 
 @dataclass(frozen=True)
@@ -242,7 +231,9 @@ def guided(
         },
     }
     if tracker == "mediapipe":
-        own, y_own, facts["guided"]["own"] = fit_own(anim, y, target, weight, present, alignment)
+        fresh, _ = shipped_cleaner(tracker, anim.names)  # the take again, some rows own
+        own, y_own, facts["guided"]["own"] = choose(fresh, anim, y, target, weight, present,
+                                                    alignment)  # fmt: skip
         adaptation = fit_adaptation(y_own, target, weight, present, fixed=own)
         still = (weight > 0) & (target.max(axis=1) == 0)  # the rests it was pivoted on
         reading = rest_reading(anim, cleaner, still)
@@ -271,37 +262,6 @@ def _frame_weights(alignment: al.Alignment, t: np.ndarray, s: np.ndarray) -> np.
         inside = (t >= g.t0) & (t <= g.t1)
         w[inside] = g.prompt.weight if g.seen else 0.0
     return w
-
-
-def fit_own(
-    anim: Animation, y: np.ndarray, target: np.ndarray, weight: np.ndarray, present: np.ndarray,
-    alignment: al.Alignment,
-) -> tuple[tuple[str, ...], np.ndarray, dict[str, list[float]]]:  # fmt: skip
-    """(the outputs read as their own rise, y (N, 52) with them so read, {group: [the map's
-    mean squared error over the prompts, its own rise's]}) for OWN_GROUPS (their comment):
-    only a group a seen prompt aims at, whose own rise moved there by MOVE_MIN."""
-    cleaner, _ = shipped_cleaner("mediapipe", anim.names)
-    if not hasattr(cleaner, "set_own_rise"):
-        return (), y, {}
-    names = tuple(n for g in OWN_GROUPS for n in GROUPS[g] if present[ARKIT52.index(n)])
-    cleaner.set_own_rise(names)
-    alone, _ = cleaner.clean(anim).arkit()
-    alone = np.where(anim.valid[:, None], alone, np.nan)
-    use = weight > 0
-    seen = {n for g in alignment.segments if g.seen for n in g.prompt.targets}
-    own, y, errors = (), y.copy(), {}
-    for g in OWN_GROUPS:
-        cols = [ARKIT52.index(n) for n in GROUPS[g] if n in names]
-        e = [round(float((weight[use, None] * (z[use][:, cols] - target[use][:, cols]) ** 2).sum()
-                         / max(weight[use].sum(), 1.0)), 6)
-             for z in (np.nan_to_num(y), np.nan_to_num(alone))]  # fmt: skip
-        errors[g] = e
-        aimed = use & (target[:, cols] > 0).any(axis=1)  # (N,) frames a prompt moves it
-        moved = aimed.any() and np.nan_to_num(alone[aimed][:, cols]).max() >= MOVE_MIN
-        if set(GROUPS[g]) & seen and moved and e[1] < OWN_RATIO * e[0]:
-            own += tuple(ARKIT52[j] for j in cols)
-            y[:, cols] = alone[:, cols]
-    return own, y, errors
 
 
 def fit_adaptation(

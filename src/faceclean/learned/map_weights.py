@@ -177,7 +177,7 @@ def own_rise(w: MapWeights, outputs: Sequence[str]) -> MapWeights:
     """``w`` with each of ``outputs`` (where it has an input of its name) read as that
     input's own rise above rest, gain 1, and no other input: m_j = u_j - r_j, plus its
     detail and lift as before (a guided calibration's choice for a face whose readings the
-    map's other rows misread: guided/fit.py ``OWN_GROUPS``). The others as they were."""
+    map's other rows misread: guided/own.py). The others as they were."""
     rows = [j for j, n in enumerate(w.outputs) if n in outputs and n in w.inputs]
     if not rows or not w.config.get("rest", True):
         return w
