@@ -145,9 +145,9 @@ class Panel:
             if s.tuning.calibration is self.result.adjust:  # applied: the command names it
                 s.tuning = s.tuning.calibrated(self.result.adjust, path)
             tuning = s.tuning
+        s.broadcast({"type": "state", "seq": seq, **tuning.describe()})  # before the note
         client.send({"type": "saved", "seq": seq, "what": "guided calibration", "path": path,
                      "rest": []})  # fmt: skip
-        s.broadcast({"type": "state", "seq": seq, **tuning.describe()})
 
     # -- live: the countdown and the recording, ticked by the push thread --------------------
     def tick(self) -> None:

@@ -130,8 +130,9 @@ class Base:
                 tuning = tuning.calibrated(tuning.calibration, path)
                 with self.lock:
                     self.tuning = tuning
-        client.send({"type": "saved", "seq": seq(m), "what": what, "path": path, "rest": rest})
+        # the state first: a page that reads its note has the command that names the file
         self.broadcast({"type": "state", "seq": seq(m), **tuning.describe()})
+        client.send({"type": "saved", "seq": seq(m), "what": what, "path": path, "rest": rest})
 
     def on_load(self, client: Client, m: dict[str, Any]) -> None:
         what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)
