@@ -254,6 +254,8 @@ def test_a_refused_setting_leaves_the_state_and_is_never_saved(server, take, tmp
         assert "not finite" in got["message"] and "\n" not in got["message"]
         preset = tmp_path / "p.json"
         ws.send(json.dumps({"type": "save", "what": "preset", "path": str(preset), "seq": 32}))
+        state = _said(ws, 32)  # the state first, so a page reading the note has its command
+        assert state["type"] == "state" and state["items"] == ["q=0.5"], state
         saved = _said(ws, 32)
         assert saved["type"] == "saved", saved
     with connect(_uri(server, server.token), max_size=None) as ws:  # a page opened now
