@@ -80,7 +80,7 @@ def test_demo_cleans_both_takes_and_explains_its_columns(tmp_path, capsys):
     legend = said[said.index("columns (both tables") :]
     for column in ("MSE x raw", "gaze..cheeks_nose", "blink closure", "jitter", "lag ms"):
         assert column in legend
-    assert "never saw this performer" in said and "trained on the painted look" in said
+    assert "never saw this performer" in said and "no shipped fit trains on" in said
 
 
 def test_demo_refuses_a_bad_length(tmp_path, capsys):
@@ -99,8 +99,9 @@ def test_the_demo_pair_is_small_package_data_the_project_made():
         assert any(fnmatch(rel, g) for g in globs), rel
     [pair] = paired.load(demo.PAIR)
     job = pair.meta["job"]
-    # a synthetic performer of `pairs --seed 7`, never one of the training pairs' (--seed 0)
-    assert job["source"] == "synth:700000" and job["family"] == "painted"
+    # a synthetic performer of `pairs --seed 7`, never one of the training pairs' (--seed 0),
+    # on a look no shipped fit trains on
+    assert job["source"] == "synth:700000" and job["family"] == "groomed"
     assert pair.tracked.n_frames == pair.truth.n_frames > 100
 
 

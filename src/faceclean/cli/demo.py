@@ -51,13 +51,13 @@ IPHONE = """\
     files in {out}/: noisy.csv (Live Link Face), cleaned.csv, truth.csv,
     curves.png (the first {span:g} s of eyeBlinkLeft, jawOpen, mouthSmileLeft)"""
 MEDIAPIPE = """\
-(b) MediaPipe pair: a rendered face (look family painted, studio setting) tracked by
+(b) MediaPipe pair: a rendered face (look family groomed, studio setting) tracked by
     MediaPipe Face Landmarker, {seconds:.1f} s at {fps:g} fps, {channels} channels, shipped in the
     package (faceclean/data/demo/README.md says how it was made). Cleaned with --tracker
     mediapipe (models/mediapipe.npz: a map over each channel's rise above rest), beside raw
     MediaPipe and the tuned One Euro filter. That cleaner never saw this performer
-    (synthetic seed {performer}) nor this face; it was trained on the painted look, the
-    studio setting and other synthetic performers (held-out figures: docs/RESULTS.md,
+    (synthetic seed {performer}), this face nor its look: eyeliner, eyeshadow, a beard and
+    freckles, a family no shipped fit trains on (held-out figures: docs/RESULTS.md,
     "MediaPipe on looks no fit saw").
     files in {out}/: tracked.csv (raw), cleaned.csv, one-euro.csv, truth.csv,
     curves.png (eyeBlinkLeft, jawOpen, mouthSmileLeft)"""
