@@ -105,3 +105,40 @@ def test_set_rest_drift_zero_keeps_a_held_expression_whole(tmp_path):
     np.testing.assert_allclose(shipped, outs[("rest_drift=0.005",)], atol=1e-12)
     assert kept[-1] - shipped[-1] > 0.05  # 18 s held: the climbing rest took some off
     assert np.ptp(kept[-90:]) < 1e-9  # held still, and whole
+
+
+def _jitter(y: np.ndarray) -> float:
+    return float(np.mean(np.diff(y, 2, axis=0) ** 2))
+
+
+def test_set_noise_band_trades_a_noisy_face_s_jitter_for_lag(tmp_path):
+    # a slow smile under MediaPipe-like noise: the band widened further over the stream's
+    # noise (--set noise_band=32, the model's 8) holds more of it; 0 is the fixed band
+    rng = np.random.default_rng(3)
+    t = np.arange(12 * 30) / 30.0
+    x = np.full((len(t), 51), 0.1) + rng.normal(0, 0.03, (len(t), 51))
+    x[:, NAMES.index("mouthSmileLeft")] += 0.3 * (1 - np.cos(t * 2 * np.pi / 6))
+    src = tmp_path / "noisy.csv"
+    io.save(Animation(t, np.clip(x, 0, 1), NAMES), src, fmt="mediapipe")
+    outs = {}
+    for c in (None, "0", "8", "32"):
+        out = tmp_path / f"out-{c}.csv"
+        words = ["--set", f"noise_band={c}"] if c else []
+        r = subprocess.run([*CLI, "clean", str(src), "-o", str(out), "--tracker", "mediapipe",
+                            *words], capture_output=True, text=True)  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        outs[c] = io.load(out).values
+    np.testing.assert_allclose(outs[None], outs["8"], atol=1e-12)  # the shipped map's own
+    assert _jitter(outs["32"]) < 0.7 * _jitter(outs["8"]) < 0.7 * _jitter(outs["0"])
+    step = TrackerMap(weights=MapWeights.load(MODELS / "mediapipe.npz"), names=NAMES,
+                      noise_band=32)  # fmt: skip
+    step.reset()
+    take = io.load(src)
+    by_frame = np.array([step.step(v, s) for s, v in zip(take.times, take.values, strict=True)])
+    np.testing.assert_allclose(by_frame, outs["32"], atol=1e-9)  # the step as the whole take
+    for bad in ("-1", "101", "nan", "1,2"):
+        r = subprocess.run([*CLI, "clean", str(src), "-o", str(tmp_path / "bad.csv"),
+                            "--tracker", "mediapipe", "--set", f"noise_band={bad}"],
+                           capture_output=True, text=True)  # fmt: skip
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, (bad, r.stderr)
+        assert "noise_band" in r.stderr and not (tmp_path / "bad.csv").exists()

@@ -192,14 +192,15 @@ def own_rise(w: MapWeights, outputs: Sequence[str]) -> MapWeights:
 def column_setting(key: str, value: Any, default: Any, width: int, top: float = 1.0
                    ) -> float | np.ndarray:  # fmt: skip
     """A per-channel setting of the map (``detail``, ``rest_drift``) checked: a number in [0,
-    top], or ``width`` of them (one per column); None: ``default``."""
+    top], or ``width`` of them (one per column; width 0: a number only); None: ``default``."""
     if value is None:
         return default if isinstance(default, np.ndarray) else float(default)
     v = None
     if isinstance(value, (int, float, list, tuple, np.ndarray)) and not isinstance(value, bool):
         with contextlib.suppress(TypeError, ValueError):  # (ragged lists, text)
             v = np.asarray(value, dtype=np.float64)
-    if v is None or v.shape not in ((), (width,)) or not ((v >= 0) & (v <= top)).all():
+    shapes = ((), (width,)) if width else ((),)
+    if v is None or v.shape not in shapes or not ((v >= 0) & (v <= top)).all():
         raise FacecleanError(
             f"tracker-map: {key} must be a number within [0, {top:g}], not {value!r}"
         )

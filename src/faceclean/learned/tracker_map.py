@@ -30,21 +30,19 @@ which takes each face's own resting reading off, where identities differ most (B
 hidden layer, no pre-filter: the per-channel ridge baseline). ``d (x - u)_own`` is the
 detail: output j adds d_j times what the pre-filter took off its own input, so the timing
 comes from the channel's raw input and the noise of the other 50 stays filtered. The
-deadband (``deadband``, 0 if absent) lets the output stand while the map's value stays
-within eps of it: a still face's noise moves nothing, a movement passes with a lag of
-eps / speed and a bias of at most eps. The lift restores a peak a least-squares map pulls
-toward the mean (a closing lid): past a knee k of its own rise, an output is at least the
-rise times a gain g; at rest it is 0. It reads the raw input through a plain low-pass
-(``lift_cutoff``, 4 Hz), not u, whose One Euro slope differs between frame rates. With
-``lift_top`` the lift's top follows the stream (the largest so far reaches 1, not more).
-The optional hidden layer (``hidden`` > 0) overfits the pairs we have: the shipped map is
-linear (docs/MODEL.md). It cannot invent motion: m is a function of (u, r, x - u); on a
-still face u converges to x, the detail to 0, r is constant, so m and y converge; a missing
-frame holds u and so y. The rest is smoothed and drifts: a running minimum finds the
-noise's lowest dip and a still face then reads as a rise; the minimum of a smoothed
-reading finds its rest, and a drift forgets a dip while a held expression keeps all but
-rho a second (shipped: 0.005 but on the lids, docs/MODEL.md 8-19). A guided calibration
-sets a face's rest reading and own-rise outputs (``set_rest_reading``, ``set_own_rise``).
+deadband (``deadband``, 0 if absent) holds the output while the map's value stays within
+eps of it: a still face's noise moves nothing, a movement passes with a lag of eps / speed.
+The lift restores a peak a least-squares map pulls toward the mean (a closing lid): past a
+knee k of its own rise, an output is at least the rise times a gain g (0 at rest), read
+through a plain low-pass (``lift_cutoff``, 4 Hz: One Euro's slope differs between frame
+rates); with ``lift_top`` the largest so far reaches 1. The optional hidden layer
+(``hidden`` > 0) overfits the pairs we have: the shipped map is linear (docs/MODEL.md).
+It cannot invent motion: m is a function of (u, r, x - u); on a still face u converges to
+x, the detail to 0, r is constant, so m and y converge; a missing frame holds u and so y.
+The rest is smoothed and drifts: the minimum of a smoothed reading finds a face's rest,
+not its noise's lowest dip, and a drift forgets a dip while a held expression keeps all
+but rho a second (docs/MODEL.md 8-19). A guided calibration sets a face's rest reading
+and own-rise outputs (``set_rest_reading``, ``set_own_rise``).
 
 Time rules are filters/base.py's for every column (``frame_rules``): a missing frame or an
 old time repeats the last output, a gap restarts the filter (the rest is kept: the same
@@ -66,7 +64,7 @@ from faceclean.filters.base import MAX_ABS, MIN_DT, Stepper, frame_rules
 from faceclean.filters.one_euro import DT_MIN, OneEuro, alpha
 from faceclean.learned import band as noise
 from faceclean.learned.map_weights import MAX_DETAIL as MAX_DETAIL  # neural/map_groups.py's
-from faceclean.learned.map_weights import MAX_DRIFT, MapWeights, column_setting, own_rise
+from faceclean.learned.map_weights import MAX_DRIFT, MAX_NOISE, MapWeights, column_setting, own_rise
 
 if TYPE_CHECKING:
     from faceclean.animation import Animation
@@ -74,11 +72,11 @@ if TYPE_CHECKING:
 
 class TrackerMap(Stepper):
     """Tracker map cleaner (module docstring). ``min_cutoff``/``beta``/``d_cutoff`` (Hz)
-    replace the model's pre-filter settings (scalars, or one per model input); ``detail``
-    in [0, 1] replaces its detail scale: how much of the lag the pre-filter adds the map
-    takes back (0: none, 1: the fitted detail, all of it), trading jitter for lag; a
-    scalar, or one per column of ``names`` (the output written there); ``rest_drift`` how
-    fast the rest of the input read there climbs back (weight/s; 0: held expressions kept)."""
+    replace the model's pre-filter settings (scalars, or one per model input); ``detail`` in
+    [0, 1] how much of the pre-filter's lag the map takes back (1: the fitted detail, all of
+    it), trading jitter for lag, and ``rest_drift`` how fast the rest climbs back (weight/s;
+    0: held expressions kept), each a scalar or one per column of ``names`` (the output
+    written there); ``noise_band`` how far the band widens over the stream's noise."""
 
     name = "tracker-map"
     PER_CHANNEL = ("detail", "rest_drift")
@@ -93,6 +91,7 @@ class TrackerMap(Stepper):
         d_cutoff: float | Sequence[float] | None = None,
         detail: float | Sequence[float] | None = None,
         rest_drift: float | Sequence[float] | None = None,
+        noise_band: float | None = None,
         names: Sequence[str] | None = None,
     ) -> None:
         if weights is None:
@@ -100,13 +99,13 @@ class TrackerMap(Stepper):
                 raise FacecleanError("tracker-map needs a model file (--model FILE.npz)")
             weights = MapWeights.load(model)
         self._base, self._own = weights, ()
-        self._kw = {"min_cutoff": min_cutoff, "beta": beta, "d_cutoff": d_cutoff,
-                    "detail": detail, "rest_drift": rest_drift, "names": names}  # fmt: skip
+        self._kw = {"min_cutoff": min_cutoff, "beta": beta, "d_cutoff": d_cutoff, "detail": detail,
+                    "rest_drift": rest_drift, "noise_band": noise_band, "names": names}  # fmt: skip
         self._build(weights, **self._kw)
         self.set_rest_reading(None)  # (K,) r0 and (K, M+L) L: none until a face's is set
         self.reset()
 
-    def _build(self, w: MapWeights, min_cutoff, beta, d_cutoff, detail, rest_drift, names):
+    def _build(self, w, min_cutoff, beta, d_cutoff, detail, rest_drift, noise_band, names):
         """The constants of ``w`` and the user's settings; no stream state (``reset``)."""
         self.weights = w
         self.names = tuple(names) if names is not None else w.inputs
@@ -162,7 +161,8 @@ class TrackerMap(Stepper):
         self._xs = span(self._in.src)
         self._ys = span(self._out.src)
         band = np.asarray(w.config.get("deadband", 0.0), np.float64)
-        self._noise_c = float(w.config.get("noise_band", 0.0))  # learned/band.py's c
+        c_band = w.config.get("noise_band", 0.0) if noise_band is None else noise_band  # one
+        self.noise_band = self._noise_c = column_setting("noise_band", c_band, 0, 0, MAX_NOISE)
         on = band.any() or self._noise_c > 0
         self._band = np.broadcast_to(band, (len(w.outputs),)).copy() if on else None
         eps = self._band if self._band is None or np.ptp(self._band) else float(self._band[0])
