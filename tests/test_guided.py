@@ -162,6 +162,11 @@ def test_the_command_writes_a_file_clean_reads_and_today_s_files_still_load(tmp_
     assert "smile" in lines and "seen" in lines and "not performed" not in lines
     doc = json.loads(out.read_text())
     assert doc["format"] == "faceclean-adjust/1" and "adaptation" not in doc
+    # info shows what was measured; a channel no prompt aims at has no top (null): "-"
+    assert doc["calibration"]["channels"]["mouthClose"]["top"] is None
+    assert main(["info", str(out)]) == 0
+    row = next(ln.split() for ln in capsys.readouterr().out.splitlines() if "mouthClose" in ln)
+    assert [w for w in row if not w.replace(".", "").isdigit()] == ["mouthClose", "-"]
     cleaned = tmp_path / "clean.csv"
     assert main(["clean", str(take), "-o", str(cleaned), "--calibration", str(out)]) == 0
     old = tmp_path / "old.json"  # a file as today's calibrate writes it

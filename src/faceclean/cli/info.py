@@ -174,12 +174,20 @@ def _levels_file(args: argparse.Namespace) -> int:
     for line in adjust.describe():
         print(f"{'':<12}{line}")
     chans = adjust.facts.get("channels", {})
-    if chans:
+    if chans and isinstance(chans, dict):  # the facts are what was measured, as written
         print(f"{'':<12}{'channel':<20}{'neutral':>9}{'top':>9}{'noise':>9}")
         for name, c in chans.items():
-            cols = "".join(f"{c.get(k, float('nan')):>9.4f}" for k in ("neutral", "top", "noise"))
-            print(f"{'':<12}{name:<20}{cols}")
+            c = c if isinstance(c, dict) else {}
+            cols = "".join(_measured(c.get(k)) for k in ("neutral", "top", "noise"))
+            print(f"{'':<12}{str(name):<20}{cols}")
     return 0
+
+
+def _measured(v: object) -> str:
+    """One measured fact, 9 wide: a number, or "-" where none was measured (null: a
+    guided calibration's top of a channel no prompt aims at)."""
+    number = isinstance(v, (int, float)) and not isinstance(v, bool)
+    return f"{v:>9.4f}" if number else f"{'-':>9}"
 
 
 def _model_file(args: argparse.Namespace) -> int:
