@@ -165,7 +165,8 @@ def test_the_command_writes_a_file_clean_reads_and_today_s_files_still_load(tmp_
     # info shows what was measured; a channel no prompt aims at has no top (null): "-"
     assert doc["calibration"]["channels"]["mouthClose"]["top"] is None
     assert main(["info", str(out)]) == 0
-    row = next(ln.split() for ln in capsys.readouterr().out.splitlines() if "mouthClose" in ln)
+    rows = [ln.split() for ln in capsys.readouterr().out.splitlines()]
+    row = next(r for r in rows if r[:1] == ["mouthClose"])  # the table's row
     assert [w for w in row if not w.replace(".", "").isdigit()] == ["mouthClose", "-"]
     cleaned = tmp_path / "clean.csv"
     assert main(["clean", str(take), "-o", str(cleaned), "--calibration", str(out)]) == 0
