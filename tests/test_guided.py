@@ -304,6 +304,20 @@ def test_a_calibration_from_another_tracker_is_one_line(tmp_path, capsys):
         Adjust.load(bad)
 
 
+def test_cells_that_are_infinite_or_past_any_weight_are_missing_as_nan_ones_are():
+    # a take with 5 % of its cells inf, -inf or 1e308 fits as the same take with them NaN
+    tau, s = performed()
+    x = arkit_face(SCRIPT.weights(s))
+    rng = np.random.default_rng(5)
+    cells = rng.random(x.shape) < 0.05
+    fits = []
+    for bad in (np.nan, np.inf, -np.inf, 1e308):
+        y = x.copy()
+        y[cells] = bad
+        fits.append(guided(Animation(tau, y, ARKIT52), "arkit").adjust.to_dict())
+    assert fits[0]["channels"] and all(f == fits[0] for f in fits[1:])
+
+
 @pytest.mark.parametrize("case", ["short", "lost", "still", "skipped"])
 def test_bad_takes_are_one_line_per_prompt_and_write_nothing(tmp_path, capsys, case):
     from faceclean import io

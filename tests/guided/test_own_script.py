@@ -57,7 +57,9 @@ def test_a_take_of_ones_own_script_calibrates_with_it(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("case", ["not json", "no neutral first", "overlap", "too many",
-                                  "too long", "a folder", "a fifo"])  # fmt: skip
+                                  "too long", "a folder", "a fifo", "keys of one",
+                                  "keys of three", "keys a number", "keys text",
+                                  "nothing aimed at", "a weight of 1e300"])  # fmt: skip
 def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case):
     doc = copy.deepcopy(SHORT)
     path = tmp_path / "bad.json"
@@ -72,6 +74,13 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
                           for k in range(MAX_PROMPTS + 1)]  # fmt: skip
     elif case == "too long":
         doc["prompts"][-1]["duration"] = 900.0
+    elif case.startswith("keys"):  # the shape of keys: [[seconds, {weights}], ...]
+        doc["prompts"][1]["keys"] = {"keys of one": [[0.0]], "keys of three": [[0.0, {}, 5]],
+                                     "keys a number": [5], "keys text": "abc"}[case]  # fmt: skip
+    elif case == "nothing aimed at":  # a neutral hold alone: nothing to fit
+        doc["prompts"] = doc["prompts"][:1]
+    elif case == "a weight of 1e300":
+        doc["prompts"][1]["targets"] = {"jawOpen": 1e300}
     elif case == "a folder":
         path = tmp_path
     elif case == "a fifo":
@@ -87,7 +96,9 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
         assert main([*argv, "--script", str(path)]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-        assert not out.exists()
+        assert "internal error" not in err and not out.exists()
+        if case == "a weight of 1e300":  # the limit said is the one broken
+            assert "a weight from 0 to 1" in err, err
 
 
 def test_script_goes_only_where_a_guided_script_is_used(tmp_path, capsys):

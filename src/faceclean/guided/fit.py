@@ -58,6 +58,7 @@ from faceclean.animation import Animation
 from faceclean.calibration import MAX_GAIN, MOVE_MIN
 from faceclean.channels import ARKIT52, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError
+from faceclean.filters.base import MAX_ABS
 from faceclean.guided import align as al
 from faceclean.guided.own import choose
 from faceclean.guided.script import Script, load
@@ -209,6 +210,10 @@ def guided(
     if tracker not in TRACKERS:
         raise FacecleanError(f"guided calibration: unknown tracker {tracker!r}")
     script = script or load()
+    v = anim.values
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(v) <= MAX_ABS)  # inf or past any weight: a missing cell, as NaN is
+    anim = anim.with_values(np.where(bad, np.nan, v)) if bad.any() else anim
     x, present = anim.arkit()
     if not present.any():
         raise FacecleanError("guided calibration: the take has no ARKit blendshape channels")

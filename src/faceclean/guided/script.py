@@ -39,6 +39,7 @@ SHIPPED = Path(__file__).resolve().parent.parent / "scripts" / "guided.json"
 MAX_PROMPTS = 200
 MAX_SECONDS = 600.0  # s a script may last (a live recording holds it whole)
 MAX_BYTES = 1 << 20  # a script file
+MAX_NUMBER = 1e4  # any time (s), weight or ramp a script gives: past it, a typo
 _COL = {n: i for i, n in enumerate(ARKIT52)}
 
 
@@ -156,7 +157,11 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         where = f"{label}: prompt {k + 1}"
         if not isinstance(p, dict) or not isinstance(p.get("id"), str):
             raise FacecleanError(f"{where}: an object with an id")
-        keys = tuple((_number(u, where), _weights(w, where)) for u, w in p.get("keys", []))
+        given_keys = p.get("keys", [])
+        pair = lambda k: isinstance(k, list) and len(k) == 2  # noqa: E731
+        if not isinstance(given_keys, list) or not all(pair(k) for k in given_keys):
+            raise FacecleanError(f"{where} keys: a list of [seconds, {{weights}}] pairs")
+        keys = tuple((_number(u, f"{where} keys"), _weights(w, where)) for u, w in given_keys)
         prompts.append(
             Prompt(
                 id=p["id"],
@@ -171,6 +176,8 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         )
     if not prompts or not any(not p.channels for p in prompts[:1]):
         raise FacecleanError(f"{label}: needs prompts, the first a neutral hold (no targets)")
+    if not any(p.channels and p.weight > 0 for p in prompts):
+        raise FacecleanError(f"{label}: no prompt aims at a channel (targets, weight over 0)")
     if any(b.start < a.end for a, b in zip(prompts, prompts[1:], strict=False)):
         raise FacecleanError(f"{label}: prompts overlap or are out of order")
     if prompts[-1].end > MAX_SECONDS:
@@ -179,15 +186,16 @@ def from_dict(data: object, label: str = "guided script") -> Script:
 
 
 def _number(v: object, where: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < 1e4:
-        raise FacecleanError(f"{where}: expected a number >= 0, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v < MAX_NUMBER:
+        raise FacecleanError(f"{where}: expected a number from 0 to under {MAX_NUMBER:g}, "
+                             f"got {v!r}")  # fmt: skip
     return float(v)
 
 
 def _weights(w: object, where: str) -> dict[str, float]:
     if not isinstance(w, dict) or any(n not in _COL for n in w):
         raise FacecleanError(f"{where}: weights map ARKit names to 0..1")
-    out = {n: _number(v, f"{where} {n}") for n, v in w.items()}
-    if any(v > 1 for v in out.values()):
-        raise FacecleanError(f"{where}: a weight above 1")
-    return out
+    for n, v in w.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            raise FacecleanError(f"{where} {n}: a weight from 0 to 1, got {v!r}")
+    return {n: float(v) for n, v in w.items()}
