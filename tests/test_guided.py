@@ -285,6 +285,47 @@ def test_a_bad_rest_reading_or_closure_is_refused_in_one_line(tmp_path, section,
         Adjust.load(bad)
 
 
+def test_a_correction_is_applied_only_after_the_cleaner_it_was_fitted_after(tmp_path, capsys):
+    from faceclean import io
+    from faceclean.adaptation import fitted_after
+    from faceclean.resolve import tracker_words
+
+    take = tmp_path / "t.csv"
+    io.save(Animation(np.arange(10) / 30, np.zeros((10, 52)), ARKIT52), take, fmt="csv")
+    shipped = fitted_after(tracker_words("mediapipe"))  # "mediapipe.npz sha256:..."
+    assert shipped is not None and shipped.startswith("mediapipe.npz sha256:")
+
+    def calibration(cleaner: str, tracker: str = "mediapipe", said: str = "mediapipe"):
+        path = tmp_path / f"c{len(list(tmp_path.glob('c*.json')))}.json"
+        path.write_text(json.dumps({
+            "format": "faceclean-adjust/1", "channels": {}, "calibration": {"tracker": said},
+            "adaptation": {"format": "faceclean-adaptation/1", "tracker": tracker,
+                           "cleaner": cleaner, "offset": {"jawOpen": -0.01}}}))  # fmt: skip
+        return path
+
+    def clean(path, *words):
+        code = main(["clean", str(take), "-o", str(tmp_path / "o.csv"), "--calibration",
+                     str(path), "--tracker", "mediapipe", *words])  # fmt: skip
+        return code, capsys.readouterr().err.strip()
+
+    assert clean(calibration(shipped))[0] == 0
+    assert clean(calibration("tracker-map (an older file)"))[0] == 0  # no fingerprint: as is
+    retrained = calibration("mediapipe.npz sha256:000000000000")
+    for path, words in ((retrained, ()), (calibration(shipped), ("--method", "one-euro"))):
+        code, err = clean(path, *words)
+        assert code == 2 and len(err.splitlines()) == 1, err
+        assert "fitted after" in err and "calibrate again" in err
+    unknown, disagree = calibration(shipped, "kinect", None), calibration(shipped, said="arkit")
+    for path, says in ((unknown, "tracker must be one of"), (disagree, "made for tracker arkit")):
+        code, err = clean(path)
+        assert code == 2 and len(err.splitlines()) == 1 and says in err, err
+        assert main(["info", str(path)]) == 2 and says in capsys.readouterr().err
+    for seen in (None, True, 1e308, [1]):  # the guided facts info shows, of their own type
+        doc = {"format": "faceclean-adjust/1", "calibration": {"guided": {"seen": seen}}}
+        with pytest.raises(FacecleanError, match="calibration fact 'guided'"):
+            Adjust.from_dict(doc, "x.json")
+
+
 def test_a_calibration_from_another_tracker_is_one_line(tmp_path, capsys):
     path = tmp_path / "mp.json"
     Adjust((), {}, adaptation=adaptation()).save(path)

@@ -40,14 +40,16 @@ misread this face (learned/tracker_map.py ``set_own_rise``; ``attach`` hands the
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, canonical
+from faceclean.channels import ARKIT52, TRACKERS, canonical
 from faceclean.errors import FacecleanError
 
 FORMAT = "faceclean-adaptation/1"
@@ -90,8 +92,9 @@ class Adaptation:
             for i, v in row.items():
                 _bounded(v, MAX_COEF, f"{where} matrix {o}.{i}")
         tracker = data.get("tracker")
-        if tracker is not None and not isinstance(tracker, str):
-            raise FacecleanError(f"{where}: tracker must be a name")
+        if tracker is not None and tracker not in TRACKERS:
+            raise FacecleanError(f"{where}: tracker must be one of {', '.join(TRACKERS)}, not "
+                                 f"{tracker!r}")  # fmt: skip
         keys = ("format", "offset", "matrix", "tracker", "rest", "closure", "own")
         others = {k: v for k, v in data.items() if k not in keys}
         offset = {n: float(v) for n, v in offset.items()}
@@ -209,6 +212,31 @@ def attach(cleaner: Any, adaptation: Adaptation | None) -> None:
     take = getattr(cleaner, "set_rest_reading", None)
     if adaptation.rest and take is not None:
         take(adaptation.rest, adaptation.rest_outputs)
+
+
+def fitted_after(words: str | None) -> str | None:
+    """The label of a cleaner an adaptation corrects, as the file records it (``cleaner``): a
+    model file's name and the first 12 hex digits of its sha256; None where ``words`` name
+    no file (a method, a preset, the default)."""
+    path = Path(words) if words else None
+    if path is None or not path.is_file():
+        return None
+    return f"{path.name} sha256:{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
+
+
+def check_cleaner(adaptation: Adaptation | None, words: str | None, where: str) -> None:
+    """Refuses an adaptation fitted after another cleaner than ``words`` name (a retrained
+    model, another method): its correction is of that cleaner's output. A file that records
+    no model's sha256 (made before it did) is taken as it is."""
+    want = adaptation.facts.get("cleaner") if adaptation is not None else None
+    if not isinstance(want, str) or " sha256:" not in want:
+        return
+    have = fitted_after(words)
+    if have != want:
+        raise FacecleanError(
+            f"{where}: its correction was fitted after {want}, and this command cleans with "
+            f"{have or words or 'the default cleaner'}: calibrate again with that cleaner"
+        )
 
 
 def unread(adjust: Any, cleaner: Any) -> str:

@@ -14,11 +14,10 @@ full closure, not 1.09). A calibrated overshoot is asked for explicitly: ``clamp
 (that range), or ``clamp=none`` (no clamp at all; written ``"clamp": false`` in the file).
 
 The identity (scale 1, gain 1, offset 0, curve 1, no rule, on) leaves a channel bit-for-bit
-unchanged: the arithmetic is skipped for it, not merely neutral. Rules are (pattern, key, value)
-with key in ``MAP_KEYS``. A pattern is a channel name in any spelling ``faceclean.channels``
-accepts (``eyeBlinkLeft``, ``EyeBlink_L``), a glob on the canonical name (``eyeBlink*``,
-``mouth*Left``), or a channel group (``eyes``, ``mouth``, ...: ``channels.GROUPS``); matching is
-case-insensitive. Later rules win, so ``a.merged(b)`` is a with b's rules on top.
+unchanged (its arithmetic skipped). Rules are (pattern, key, value), key in ``MAP_KEYS``; a
+pattern is a channel name in any spelling ``faceclean.channels`` accepts (``EyeBlink_L``), a
+glob on the canonical name (``mouth*Left``), or a channel group (``eyes``, ...:
+``channels.GROUPS``), case-insensitive. Later rules win: ``a.merged(b)`` is b's on a's.
 
 The file format (what ``faceclean calibrate`` writes and ``--calibration`` reads)::
 
@@ -128,7 +127,11 @@ class Adjust:
             from faceclean.adaptation import Adaptation
 
             adaptation = Adaptation.from_dict(data["adaptation"], label)
-        return cls(rules, _facts(data.get("calibration", {}), label), adaptation=adaptation)
+        facts = _facts(data.get("calibration", {}), label)
+        said = (facts.get("tracker"), getattr(adaptation, "tracker", None))
+        if None not in said and said[0] != said[1]:
+            raise FacecleanError(f"{label}: made for tracker {said[0]}, adapted for {said[1]}")
+        return cls(rules, facts, adaptation=adaptation)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Adjust:
@@ -405,6 +408,9 @@ def _facts(facts: Any, label: str) -> dict[str, Any]:
         "channels": (channels, "channel -> {neutral, top, noise, gain: numbers}"),
         "hold": (lambda v: isinstance(v, list) and len(v) == 2 and all(map(number, v)),
                  "[start, end] seconds"),
+        "guided": (lambda v: isinstance(v, dict) and all(names(v.get(k, []))
+                                                         for k in ("seen", "not_seen", "placed")),
+                   "{seen, not_seen, placed: lists of prompt ids, ...}"),
     }  # fmt: skip
     for key, (ok, what) in kinds.items():
         if key in facts and not ok(facts[key]):

@@ -476,6 +476,26 @@ def test_info_json_is_strict_json_with_infinite_cells(tmp_path, take, capsys):
     json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in info --json"))
 
 
+@pytest.mark.parametrize("bad", [np.inf, -np.inf])
+def test_info_says_the_range_of_the_finite_cells_and_counts_the_infinite(tmp_path, take, capsys,
+                                                                         bad):  # fmt: skip
+    anim = io.load(take)
+    v = anim.values.copy()
+    v[::2, :] = bad  # every channel has an infinite cell
+    v[1, 0] = 1e308  # and one far past any weight
+    p = tmp_path / "inf.npz"
+    io.save(anim.with_values(v), p)
+    assert main(["info", str(p)]) == 0
+    shown = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("range"))
+    low = float(v[1::2].min())  # the finite cells' least
+    assert f"min {low:.4f}, max 1e+308" in shown and "infinite (read as missing)" in shown
+    assert len(shown) < 400, shown  # no 309-digit numbers
+    assert main(["info", str(p), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["infinite_cells"] == v[::2].size and facts["max"] == 1e308
+    assert facts["min"] == low
+
+
 def test_npz_bytes_names_are_names_and_complex_values_are_refused(tmp_path, take, capsys):
     anim = io.load(take)
     p = tmp_path / "b.npz"

@@ -38,17 +38,12 @@ def describe(anim) -> dict[str, Any]:
     gap_at = np.flatnonzero(dt > GAP_FACTOR * median) if median else np.zeros(0, int)
     dropped = int(sum(round(dt[i] / median) - 1 for i in gap_at))
     arkit = {canonical(n) for n in anim.names} - {None}
+    rows = anim.values[valid]
+    infinite = int(np.isinf(rows).sum())  # cells counted apart: the range is of the finite
+    rows = np.where(np.isinf(rows), np.nan, rows)
     with np.errstate(all="ignore"):
-        lo = (
-            np.nanmin(anim.values[valid], axis=0)
-            if valid.any()
-            else np.full(anim.n_channels, np.nan)
-        )
-        hi = (
-            np.nanmax(anim.values[valid], axis=0)
-            if valid.any()
-            else np.full(anim.n_channels, np.nan)
-        )
+        lo = np.nanmin(rows, axis=0) if len(rows) else np.full(anim.n_channels, np.nan)
+        hi = np.nanmax(rows, axis=0) if len(rows) else np.full(anim.n_channels, np.nan)
     outside = [
         {"channel": n, "min": float(a), "max": float(b)}
         for n, a, b in zip(anim.names, lo, hi, strict=True)
@@ -70,6 +65,7 @@ def describe(anim) -> dict[str, Any]:
         "min": float(np.nanmin(lo)) if np.isfinite(lo).any() else None,
         "max": float(np.nanmax(hi)) if np.isfinite(hi).any() else None,
         "outside_0_1": outside,
+        "infinite_cells": infinite,
         "pose_channels": list(anim.meta.get("pose_names", ())),
         "timecode_start": anim.meta.get("timecode_start"),
         # a relay recording of a stream without timecode keeps its arrival times
@@ -249,14 +245,22 @@ def _gaps(f: dict[str, Any]) -> str:
 
 
 def _range(f: dict[str, Any]) -> str:
+    inf = f.get("infinite_cells", 0)
+    said = f"; {inf} cells infinite (read as missing)" if inf else ""
     if f["min"] is None:
-        return "no values"
-    text = f"min {f['min']:.4f}, max {f['max']:.4f}"
+        return "no values" + said
+    text = f"min {_num(f['min'], 4)}, max {_num(f['max'], 4)}"
     out = f["outside_0_1"]
     if out:
-        worst = ", ".join(f"{o['channel']} [{o['min']:.3f}, {o['max']:.3f}]" for o in out[:6])
+        worst = ", ".join(f"{o['channel']} [{_num(o['min'], 3)}, {_num(o['max'], 3)}]"
+                          for o in out[:6])  # fmt: skip
         more = f" and {len(out) - 6} more" if len(out) > 6 else ""
         text += f"; {len(out)} channels outside [0, 1]: {worst}{more}"
     else:
         text += "; all within [0, 1]"
-    return text
+    return text + said
+
+
+def _num(v: float, places: int) -> str:
+    """A value to ``places`` decimals; one far past any weight in 4 significant digits."""
+    return f"{v:.{places}f}" if abs(v) < 1e4 else f"{v:.4g}"

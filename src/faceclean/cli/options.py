@@ -92,6 +92,9 @@ def calibration(args: argparse.Namespace):
             f"--calibration {path}: a calibration for tracker {made_for}, not "
             f"{tracker}: give --tracker {made_for}, or calibrate again with --tracker {tracker}"
         )
+    from faceclean.adaptation import check_cleaner
+
+    check_cleaner(adjust.adaptation, words(args), f"--calibration {path}")  # its cleaner's own
     return adjust
 
 

@@ -45,14 +45,12 @@ Nothing here prints; the command (cli/calibrate.py) reports per prompt.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from faceclean.adaptation import Adaptation
+from faceclean.adaptation import Adaptation, fitted_after
 from faceclean.adjust import Adjust
 from faceclean.animation import Animation
 from faceclean.calibration import MAX_GAIN, MOVE_MIN
@@ -140,11 +138,7 @@ def shipped_cleaner(tracker: str, names: tuple[str, ...]):
 
     words = tracker_words(tracker)
     choice = resolve(words)
-    label = choice.source
-    if words is not None:
-        digest = hashlib.sha256(Path(words).read_bytes()).hexdigest()[:12]
-        label = f"{Path(words).name} sha256:{digest}"
-    return choice.build(names), label
+    return choice.build(names), fitted_after(words) or choice.source
 
 
 def response(anim: Animation, tracker: str) -> tuple[np.ndarray, np.ndarray, str, Any]:
