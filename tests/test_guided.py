@@ -7,6 +7,7 @@ score the calibration on another clip of the same face.
 
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import replace
 
@@ -80,6 +81,31 @@ def test_print_script_shows_each_prompt(capsys):
     assert main(["calibrate", "--print-script"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert len(out) == len(SCRIPT.prompts) + 1 and "Big smile" in "\n".join(out)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--print-script", "json", "-o", "keep.json"], "give it without -o"),
+    (["--print-script", "--guided"], "give it without --guided"),
+    (["--guided", "T", "-o", "c.json", "--rom"], "--rom is the plain calibration's"),
+    (["--guided", "T", "-o", "c.json", "--neutral", "5"], "--neutral is the plain"),
+    (["T", "-o", "c.json", "--partial"], "give it with --guided"),
+    (["--print-script", "xml"], "invalid choice: 'xml'"),  # the parser's: one line too
+])  # fmt: skip
+def test_an_option_that_does_nothing_in_its_mode_is_refused_in_one_line(tmp_path, capsys,
+                                                                        argv, says):  # fmt: skip
+    from faceclean import io
+
+    take = tmp_path / "t.csv"
+    io.save(Animation(np.arange(90) / 30, np.zeros((90, 52)), ARKIT52), take, fmt="csv")
+    keep = tmp_path / "keep.json"
+    keep.write_text("{}")
+    argv = [str(take) if a == "T" else str(tmp_path / a) if a.endswith(".json") else a
+            for a in argv]  # fmt: skip
+    with contextlib.suppress(SystemExit):  # argparse exits; main returns otherwise
+        assert main(["calibrate", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and err.startswith("faceclean: "), err
+    assert keep.read_text() == "{}" and not (tmp_path / "c.json").exists()
 
 
 def test_alignment_finds_each_prompt_of_a_late_slow_uneven_take():
@@ -275,7 +301,11 @@ def test_the_stream_wrappers_hand_the_rest_reading_to_the_map():
     ("closure", [0.1], "closure must be"),
     ("own", ["browInnerUp", "brows"], "own: 'brows' is not an ARKit channel name"),
     ("own", [" browInnerUp"], "own: ' browInnerUp' is not an ARKit channel name"),
-    ("own", "browInnerUp", "own must be a list")])  # fmt: skip
+    ("own", "browInnerUp", "own must be a list"),
+    ("tracker", ["mediapipe"], "tracker must be one of"),
+    ("tracker", {"a": 1}, "tracker must be one of"),
+    ("cleaner", ["mediapipe.npz"], "cleaner must be the name"),
+    ("cleaner", None, "cleaner must be the name")])  # fmt: skip
 def test_a_bad_rest_reading_or_closure_is_refused_in_one_line(tmp_path, section, value, says):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},

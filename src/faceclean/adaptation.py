@@ -92,9 +92,11 @@ class Adaptation:
             for i, v in row.items():
                 _bounded(v, MAX_COEF, f"{where} matrix {o}.{i}")
         tracker = data.get("tracker")
-        if tracker is not None and tracker not in TRACKERS:
+        if tracker is not None and (not isinstance(tracker, str) or tracker not in TRACKERS):
             raise FacecleanError(f"{where}: tracker must be one of {', '.join(TRACKERS)}, not "
                                  f"{tracker!r}")  # fmt: skip
+        if not isinstance(data.get("cleaner", ""), str):
+            raise FacecleanError(f"{where}: cleaner must be the name of the cleaner it follows")
         keys = ("format", "offset", "matrix", "tracker", "rest", "closure", "own")
         others = {k: v for k, v in data.items() if k not in keys}
         offset = {n: float(v) for n, v in offset.items()}
@@ -225,10 +227,13 @@ def fitted_after(words: str | None) -> str | None:
 
 
 def check_cleaner(adaptation: Adaptation | None, words: str | None, where: str) -> None:
-    """Refuses an adaptation fitted after another cleaner than ``words`` name (a retrained
-    model, another method): its correction is of that cleaner's output. A file that records
-    no model's sha256 (made before it did) is taken as it is."""
-    want = adaptation.facts.get("cleaner") if adaptation is not None else None
+    """Refuses an adaptation whose correction (offset, matrix, closure: of one cleaner's
+    output) was fitted after another cleaner than ``words`` name (a retrained model, another
+    method). A rest reading or own-rise list alone is the map's input, kept (``unread`` says
+    where nothing reads it); a file that records no model's sha256 is taken as it is."""
+    if adaptation is None or not (adaptation.offset or adaptation.matrix or adaptation.closure):
+        return
+    want = adaptation.facts.get("cleaner")
     if not isinstance(want, str) or " sha256:" not in want:
         return
     have = fitted_after(words)

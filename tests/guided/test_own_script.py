@@ -115,3 +115,18 @@ def test_script_goes_only_where_a_guided_script_is_used(tmp_path, capsys):
         err = capsys.readouterr().err
         assert words in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "c.json").exists() and not (tmp_path / "o.csv").exists()
+
+
+def test_a_script_in_the_performers_language_prints_where_the_terminal_cannot_show_it(tmp_path):
+    import subprocess
+    import sys
+
+    doc = copy.deepcopy(SHORT)
+    doc["prompts"][1]["text"] = "Souriez \u2014 grand sourire, \u00e7a y est"
+    path = tmp_path / "fr.json"
+    path.write_text(json.dumps(doc, ensure_ascii=False), encoding="utf-8")
+    env = {**os.environ, "PYTHONIOENCODING": "ascii"}  # a terminal of ASCII alone
+    argv = [sys.executable, "-m", "faceclean", "calibrate", "--print-script", "--script", path]
+    r = subprocess.run(argv, capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "Souriez \\u2014 grand sourire, \\xe7a y est" in r.stdout

@@ -40,8 +40,18 @@ def _modules() -> dict[str, object]:
     return found
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's, but a bad command line is one line, as every other refusal is, not the
+    usage block and then the error: the options are one ``--help`` away."""
+
+    def error(self, message: str):  # type: ignore[override]
+        command = self.prog.removeprefix("faceclean").strip()
+        at = f"{command}: " if command else ""
+        self.exit(2, f"faceclean: {at}{message} ({self.prog} --help shows the options)\n")
+
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = Parser(  # its subcommands' parsers are Parsers too (add_subparsers: type(self))
         prog="faceclean",
         description="Clean facial-capture blendshape animation, offline or live.",
     )
@@ -99,6 +109,9 @@ def _command() -> Iterator[None]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    for stream in (sys.stdout, sys.stderr):  # a terminal that cannot show a prompt's or a
+        with contextlib.suppress(AttributeError, ValueError):  # name's letters gets \u escapes
+            stream.reconfigure(errors="backslashreplace")
     try:  # Ctrl-C while the commands import (a second or so): no traceback either
         p = parser()
         args = p.parse_args(argv)

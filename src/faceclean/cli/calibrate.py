@@ -86,7 +86,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--neutral",
         type=float,
-        default=NEUTRAL_S,
         metavar="SECONDS",
         help=f"length of the neutral hold at the start of the take (default {NEUTRAL_S:g})",
     )
@@ -109,6 +108,19 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.calibration import MAX_GAIN, REPORT_GAIN, calibrate, high_gains
     from faceclean.errors import FacecleanError
 
+    given = [o for o, on in (("-o", args.output), ("--guided", args.guided),
+                             ("--partial", args.partial), ("--rom", args.rom),
+                             ("--neutral", args.neutral is not None)) if on]  # fmt: skip
+    if args.print_script and given:  # an option that does nothing here is said, not ignored
+        raise FacecleanError(f"--print-script prints the script to the screen: give it without "
+                             f"{given[0]}")  # fmt: skip
+    plain = [o for o in ("--rom", "--neutral") if args.guided and o in given]
+    if plain:
+        raise FacecleanError(f"{plain[0]} is the plain calibration's: --guided finds the "
+                             "script's own neutral hold and tops")  # fmt: skip
+    if args.partial and not args.guided:
+        raise FacecleanError("--partial writes a guided calibration from the prompts seen: "
+                             "give it with --guided")  # fmt: skip
     if args.print_script:
         from faceclean.guided.script import load
 
@@ -134,9 +146,8 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
     io.atomic.check_writable(out)
     anim = io.load(args.take)
-    adjust = calibrate(
-        anim, args.neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker
-    )
+    neutral = NEUTRAL_S if args.neutral is None else args.neutral
+    adjust = calibrate(anim, neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker)
     if args.tracker == "mediapipe" and not args.rom:  # the face's rest reading, for the map
         from faceclean.guided.fit import rest_calibration
 
