@@ -375,6 +375,29 @@ def test_a_calibration_from_another_tracker_is_one_line(tmp_path, capsys):
         Adjust.load(bad)
 
 
+def test_a_steady_take_of_boxes_shows_both_blinks_each_in_its_own_window():
+    # every prompt held at 0.9 of its aim with no ease, a quiet face between: the first
+    # blink's window, padded, once reached into the second blink's closure 0.2 s later and
+    # read it as a movement the first prompt did not make ("not performed")
+    import random
+
+    t = np.arange(int(SCRIPT.seconds * 60) + 1) / 60
+    draw = random.Random(1)  # the red team's take, cell for cell (its alignment found blink1
+    x = 0.02 + 0.01 * np.array([[draw.random() for _ in range(52)] for _ in t])  # 0.3 s early)
+    for p in SCRIPT.prompts:
+        held = (t >= p.start) & (t < p.end)
+        for name, v in p.targets.items():
+            x[held, COL[name]] = 0.9 * v
+        for i in np.flatnonzero(held) if p.keys else ():  # the speech: its nearest key's shape
+            u = t[i] - p.start
+            for name, v in min(p.keys, key=lambda k: abs(k[0] - u))[1].items():
+                x[i, COL[name]] = v
+    fit = guided(Animation(t, x, ARKIT52), "arkit")
+    seen = {g.prompt.id: g.seen for g in fit.alignment.segments}
+    assert seen["blink1"] and seen["blink2"], seen
+    assert all(seen[p.id] for p in SCRIPT.prompts if p.targets), seen
+
+
 def test_cells_that_are_infinite_or_past_any_weight_are_missing_as_nan_ones_are():
     # a take with 5 % of its cells inf, -inf or 1e308 fits as the same take with them NaN
     tau, s = performed()

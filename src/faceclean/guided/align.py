@@ -163,8 +163,16 @@ def align(
     hold = (grid >= h0) & (grid <= h1) & ~lost
     rest = np.median(r[hold], axis=0) if hold.sum() >= MIN_HOLD else base
     segs = []
-    for p, (t0, t1) in zip(script.prompts, spans, strict=True):
-        g = _judge(p, float(t0), float(t1), grid, r, rest, hold, lost, shows)
+    moves = [bool(p.channels) for p in script.prompts]
+    for k, (p, (t0, t1)) in enumerate(zip(script.prompts, spans, strict=True)):
+        # padded, but never into the next or the last prompt that moves (two blinks 0.2 s
+        # apart: the second's closure is no evidence of the first, nor its absence)
+        lo, hi = t0 - PAD, t1 + PAD
+        if k > 0 and moves[k - 1]:
+            lo = max(lo, spans[k - 1][1])
+        if k + 1 < len(spans) and moves[k + 1]:
+            hi = min(hi, spans[k + 1][0])
+        g = _judge(p, float(t0), float(t1), grid, r, rest, hold, lost, shows, (lo, hi))
         readable = not p.channels or bool(p.keys) or not set(p.channels) <= unread
         segs.append(replace(g, readable=readable))
     take_s, segs = _place(script_s, take_s, segs, reading.label(tracker))
@@ -267,10 +275,11 @@ def _dtw(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _judge(
     p: Prompt, t0: float, t1: float, grid: np.ndarray, r: np.ndarray, rest: np.ndarray,
-    hold: np.ndarray, lost: np.ndarray, shows: np.ndarray,
+    hold: np.ndarray, lost: np.ndarray, shows: np.ndarray, window: tuple[float, float],
 ) -> Segment:  # fmt: skip
-    """The prompt's segment, and whether the take shows it there (module docstring)."""
-    inside = (grid >= t0 - PAD) & (grid <= t1 + PAD)
+    """The prompt's segment, and whether the take shows it in ``window`` (s: the segment
+    padded, module docstring)."""
+    inside = (grid >= window[0]) & (grid <= window[1])
     if not inside.any():
         return Segment(p, t0, t1, False, "not performed", 0.0, 0.0)
     if lost[inside].mean() > MAX_LOST:
