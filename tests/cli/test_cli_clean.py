@@ -262,3 +262,23 @@ def test_clean_compress_deflates_npz_and_refuses_other_outputs(tmp_path, capsys)
     assert main(["clean", str(src), "-o", str(tmp_path / "o.csv"), "--compress"]) == 2
     assert capsys.readouterr().err == "faceclean: o.csv: --compress is for npz output, not csv\n"
     assert not (tmp_path / "o.csv").exists()
+
+
+@needs_takes
+def test_an_output_written_over_is_said_replaced_never_in_silence(tmp_path, capsys):
+    src = tmp_path / "take.csv"
+    shutil.copy(TAKE, src)
+    other = tmp_path / "other.csv"  # another raw take, named as the output
+    shutil.copy(TAKE, other)
+    other.chmod(0o644)  # (writable: a read-only one is refused, "nothing replaces it unasked")
+    fresh = tmp_path / "fresh.csv"
+    for out, said in ((fresh, "wrote"), (other, "replaced"), (fresh, "replaced")):
+        assert main(["clean", str(src), "-o", str(out)]) == 0
+        assert capsys.readouterr().out.startswith(f"{said} {out}: "), said
+    calib = tmp_path / "calib.json"
+    for said in ("wrote", "replaced"):
+        assert main(["calibrate", str(src), "-o", str(calib)]) == 0
+        assert capsys.readouterr().out.startswith(f"{said} {calib}: "), said
+    for said in ("wrote", "replaced"):
+        assert main(["convert", str(src), "-o", str(tmp_path / "t.npz")]) == 0
+        assert capsys.readouterr().out.startswith(f"{said} "), said

@@ -146,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
     io.atomic.check_writable(out)
     anim = io.load(args.take)
+    done = io.paths.verb(out)  # "replaced": said, as the file goes
     neutral = NEUTRAL_S if args.neutral is None else args.neutral
     adjust = calibrate(anim, neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker)
     if args.tracker == "mediapipe" and not args.rom:  # the face's rest reading, for the map
@@ -158,14 +159,14 @@ def run(args: argparse.Namespace) -> int:
                                  "at rest (a MediaPipe take has them)")  # fmt: skip
         adjust.save(args.output)
         n = len(adjust.adaptation.rest)
-        print(f"wrote {args.output}: the face's rest reading of {n} mouth and gaze channels "
+        print(f"{done} {args.output}: the face's rest reading of {n} mouth and gaze channels "
               f"from the first {facts['neutral_s']:.2f} s, for the shipped MediaPipe map; no "
               "levels before it (the map measures rises itself: docs/CALIBRATION.md)")  # fmt: skip
         return 0
     adjust.save(args.output)
     facts = adjust.facts
     print(
-        f"wrote {args.output}: {len(facts['channels'])} channels, neutral from the first "
+        f"{done} {args.output}: {len(facts['channels'])} channels, neutral from the first "
         f"{facts['neutral_s']:.2f} s; {len(facts['moved'])} moved, {len(facts['lifted'])} "
         f"lifted to their top ({'range of motion' if args.rom else f'tracker {args.tracker}'}), "
         f"{len(facts['closed'])} eyelids scaled to close (their blinks)"

@@ -50,8 +50,9 @@ def run_guided(args: argparse.Namespace) -> int:
         raise FacecleanError(f"{why}; nothing written (--partial writes from the prompts seen)")
     if why is not None:
         print(f"warning: {why}; written from the prompts seen (--partial)")
+    done = io.paths.verb(out)
     result.adjust.save(out)
-    print(f"wrote {out} (tracker {result.tracker}; use it with --calibration {out.name}"
+    print(f"{done} {out} (tracker {result.tracker}; use it with --calibration {out.name}"
           f"{' --tracker ' + result.tracker if result.tracker != 'arkit' else ''})")  # fmt: skip
     return 0
 

@@ -39,6 +39,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     src = Path(input)
     in_place = getattr(args, "in_place", False)
     io.paths.onto_input(input, output, in_place, "a raw take is never overwritten")
+    done = io.paths.verb(output)  # "replaced": said before the file is gone
     fmt_in = io.detect(src) if src.is_file() else None
     if getattr(args, "compress", False):  # refused before any work, the streamed path too
         io.save_options(output, fmt_in, args.fmt, compress=True)
@@ -58,7 +59,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
                 pose = choice.build_pose(angles)
             frames, missing = _stream(src, output, cleaner, fmt_in, progress, guard, pose,
                                       len(names))  # fmt: skip
-            return _line(output, frames, missing, names, what, adjust, choice, pose)
+            return _line(done, output, frames, missing, names, what, adjust, choice, pose)
     anim = io.load(src)
     if args.scale is None:  # the same judgement as the stream's, block by block
         for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
@@ -77,7 +78,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     io.save(cleaned, output, fmt=args.fmt, compress=getattr(args, "compress", False))
     angles = rotation.pose_columns(anim)[1]
     missing = int((~anim.valid).sum())
-    return _line(output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)
+    return _line(done, output, anim.n_frames, missing, anim.names, what, adjust, choice, angles)
 
 
 def _signature(args: argparse.Namespace, anim: Animation, label: str) -> None:
@@ -129,6 +130,7 @@ def build_cleaner(choice: Choice, names: tuple[str, ...]) -> tuple[Stepper, str]
 
 
 def _line(
+    done: str,
     out: str,
     frames: int,
     missing: int,
@@ -141,7 +143,7 @@ def _line(
     n = 0 if adjust.is_identity else len(adjust.levels(names).active)
     n_angles = len(getattr(angles, "names", angles) or ())
     return (
-        f"wrote {out}: {frames} frames"
+        f"{done} {out}: {frames} frames"
         + (f" ({missing} missing)" if missing else "")
         + f", {len(names)} channels, cleaned with {what}"
         + (f" after levels on {n} channels" if n else "")

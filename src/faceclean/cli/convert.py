@@ -38,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     rule = "a take is never converted over itself"
     io.paths.onto_input(args.input, args.output, args.in_place, rule)
+    done = io.paths.verb(args.output)
     anim = io.load(args.input)
     fmt = io.output_format(args.output, anim.meta.get("format"), args.fmt)
     new_gltf = fmt == "gltf" and (args.mesh is not None or "gltf" not in anim.meta)
@@ -46,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     if not new_gltf:
         io.save(anim, args.output, fmt=args.fmt)
         print(
-            f"wrote {args.output}: {anim.n_frames} frames, {anim.n_channels} channels "
+            f"{done} {args.output}: {anim.n_frames} frames, {anim.n_channels} channels "
             f"({anim.meta.get('format')} -> {fmt})"
         )
         return 0
@@ -69,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         else ""
     )
     print(
-        f"wrote {args.output}: {kept} keyframes over {counts['seconds']:.2f} s{rate}, "
+        f"{done} {args.output}: {kept} keyframes over {counts['seconds']:.2f} s{rate}, "
         f"{counts['channels']} ARKit channels, on {mesh.name} ({len(mesh.vertices)} vertices, "
         f"52 morph targets)"
         + (f"; dropped {' and '.join(dropped)} frames" if dropped else "")

@@ -60,6 +60,12 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
         return False
 
 
+def verb(out: str | os.PathLike) -> str:
+    """How a command says it wrote ``out``, asked before it writes: "replaced" where a file
+    is there now (a file written over is said, never in silence), else "wrote"."""
+    return "replaced" if os.path.isfile(out) else "wrote"
+
+
 def onto_input(src: str | os.PathLike, out: str | os.PathLike, in_place: bool, rule: str) -> None:
     """An output that is its command's input (``same_file``): refused, saying ``rule``,
     unless ``in_place``; with it, declared rewritable. A raw take is never replaced
