@@ -609,6 +609,12 @@ def test_live_records_the_script_from_a_vmc_stream_while_prompting():
     assert any("Big smile" in line for line in lines)
     assert take.n_frames > 60 and take.times[-1] > mini.seconds
     assert np.nanmax(take.values[:, COL["mouthSmileLeft"]]) > 0.9
+    # port 0: the system chooses one, and that one is what a tracker is told to send to
+    lines.clear()
+    with pytest.raises(FacecleanError, match="no face frames arrived"):
+        record("vmc://127.0.0.1:0", mini, countdown=0, out=lines.append)
+    chosen = int(lines[0].rsplit(":", 1)[1])
+    assert "listening on vmc://127.0.0.1:" in lines[0] and chosen > 0, lines[0]
 
 
 def test_a_neutral_calibration_for_mediapipe_holds_the_faces_rest_reading(tmp_path, capsys):

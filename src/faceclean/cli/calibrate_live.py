@@ -11,6 +11,7 @@ from __future__ import annotations
 import select
 import socket
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -40,6 +41,7 @@ def record(url: str, script=None, countdown: int = COUNTDOWN, clock=time.monoton
         sock.close()
         raise FacecleanError(f"--live {url}: cannot listen ({e.strerror or e})") from None
     sock.setblocking(False)
+    listen = replace(listen, port=sock.getsockname()[1])  # port 0: the one the system chose
     decoder, columns, sender = listen.decoder(), ArkitColumns(), None
     times: list[float] = []
     rows: list[np.ndarray] = []
