@@ -496,6 +496,17 @@ def test_info_says_the_range_of_the_finite_cells_and_counts_the_infinite(tmp_pat
     assert facts["min"] == low
 
 
+def test_info_shows_a_name_s_escape_code_as_text_never_acts_on_it(tmp_path, capsys):
+    from faceclean.animation import Animation
+
+    p = tmp_path / "esc.csv"
+    io.save(Animation(np.arange(5) / 30, np.zeros((5, 2)), ("jawOpen", "x\x1b[2Jy")), p,
+            fmt="csv")  # fmt: skip
+    assert main(["info", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "\x1b" not in out and "x\\x1b[2Jy" in out, out
+
+
 def test_npz_bytes_names_are_names_and_complex_values_are_refused(tmp_path, take, capsys):
     anim = io.load(take)
     p = tmp_path / "b.npz"

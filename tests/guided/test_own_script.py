@@ -59,7 +59,8 @@ def test_a_take_of_ones_own_script_calibrates_with_it(tmp_path, capsys):
 @pytest.mark.parametrize("case", ["not json", "no neutral first", "overlap", "too many",
                                   "too long", "a folder", "a fifo", "keys of one",
                                   "keys of three", "keys a number", "keys text",
-                                  "nothing aimed at", "a weight of 1e300"])  # fmt: skip
+                                  "nothing aimed at", "a weight of 1e300",
+                                  "an escape code"])  # fmt: skip
 def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case):
     doc = copy.deepcopy(SHORT)
     path = tmp_path / "bad.json"
@@ -79,6 +80,8 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
                                      "keys a number": [5], "keys text": "abc"}[case]  # fmt: skip
     elif case == "nothing aimed at":  # a neutral hold alone: nothing to fit
         doc["prompts"] = doc["prompts"][:1]
+    elif case == "an escape code":  # a terminal acts on it where the prompt is shown
+        doc["prompts"][1]["text"] = "Smile\x1b[2J"
     elif case == "a weight of 1e300":
         doc["prompts"][1]["targets"] = {"jawOpen": 1e300}
     elif case == "a folder":

@@ -136,8 +136,16 @@ def run(args: argparse.Namespace) -> int:
             lines.append(("", about))
         lines.append(("after", "range " + _range(after)))
     for key, text in lines:
-        print(f"{key:<12}{text}")
+        print(f"{key:<12}{plain(text)}")
     return 0
+
+
+def plain(text: str) -> str:
+    """``text`` as a terminal should show it: a character that is not printable (an escape
+    code in a channel's name) written as its escape, never acted on."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
 
 
 def _pose_lines(names: list[str]) -> list[tuple[str, str]]:
@@ -168,14 +176,14 @@ def _levels_file(args: argparse.Namespace) -> int:
     print(f"{'file':<12}{args.file}")
     print(f"{'format':<12}faceclean-adjust/1 (level mapping)")
     for line in adjust.describe():
-        print(f"{'':<12}{line}")
+        print(f"{'':<12}{plain(line)}")
     chans = adjust.facts.get("channels", {})
     if chans and isinstance(chans, dict):  # the facts are what was measured, as written
         print(f"{'':<12}{'channel':<20}{'neutral':>9}{'top':>9}{'noise':>9}")
         for name, c in chans.items():
             c = c if isinstance(c, dict) else {}
             cols = "".join(_measured(c.get(k)) for k in ("neutral", "top", "noise"))
-            print(f"{'':<12}{str(name):<20}{cols}")
+            print(f"{'':<12}{plain(str(name)):<20}{cols}")
     return 0
 
 

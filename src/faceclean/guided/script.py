@@ -157,6 +157,8 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         where = f"{label}: prompt {k + 1}"
         if not isinstance(p, dict) or not isinstance(p.get("id"), str):
             raise FacecleanError(f"{where}: an object with an id")
+        if not all(str(p.get(k, "")).isprintable() for k in ("id", "text")):  # shown as is
+            raise FacecleanError(f"{where}: its id and text are printable characters only")
         given_keys = p.get("keys", [])
         pair = lambda k: isinstance(k, list) and len(k) == 2  # noqa: E731
         if not isinstance(given_keys, list) or not all(pair(k) for k in given_keys):
@@ -182,6 +184,8 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         raise FacecleanError(f"{label}: prompts overlap or are out of order")
     if prompts[-1].end > MAX_SECONDS:
         raise FacecleanError(f"{label}: lasts {prompts[-1].end:g} s (at most {MAX_SECONDS:g})")
+    if not str(data.get("title", "")).isprintable():
+        raise FacecleanError(f"{label}: its title is printable characters only")
     return Script(tuple(prompts), str(data.get("title", "")))
 
 
