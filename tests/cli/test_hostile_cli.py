@@ -539,3 +539,14 @@ def test_library_never_imports_hypothesis():
     env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-500:]
+
+
+def test_an_output_past_the_file_size_limit_is_one_line_and_leaves_nothing(tmp_path, take):
+    # a real limit (ulimit -f, 8 blocks of 512 bytes: the cleaned take is larger)
+    out = tmp_path / "o.csv"
+    script = f"ulimit -f 8; exec {sys.executable} -m faceclean clean {take} -o {out}"
+    r = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=120)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and len(lines) == 1, r.stderr
+    assert "file size limit (ulimit -f)" in lines[0] and "Errno" not in lines[0]
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import importlib
 import importlib.util
 import os
@@ -139,7 +140,12 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, MemoryError) as e:
         if os.environ.get("FACECLEAN_DEBUG"):
             raise
-        print(f"faceclean: {e}", file=sys.stderr)
+        why = {errno.ENOSPC: "the disk is full: free some space and run it again",
+               errno.EDQUOT: "the disk quota is spent: free some space and run it again",
+               errno.EFBIG: "the output passes this system's file size limit (ulimit -f): "
+               "raise it, or write less"}.get(getattr(e, "errno", None))  # fmt: skip
+        said = f"{why} (no output was left half-written)" if why else str(e)
+        print(f"faceclean: {_short(said)}", file=sys.stderr)
         return 1
     except Exception as e:  # never a traceback for a user; FACECLEAN_DEBUG=1 shows it
         if os.environ.get("FACECLEAN_DEBUG"):
