@@ -282,3 +282,26 @@ def test_an_output_written_over_is_said_replaced_never_in_silence(tmp_path, caps
     for said in ("wrote", "replaced"):
         assert main(["convert", str(src), "-o", str(tmp_path / "t.npz")]) == 0
         assert capsys.readouterr().out.startswith(f"{said} "), said
+
+
+def test_a_format_its_output_s_name_contradicts_is_refused_and_the_take_kept(tmp_path, capsys):
+    # an npz named .csv (or a Live Link CSV named .json) is a file no reader takes back;
+    # with --in-place it would have replaced a readable take with it
+    from faceclean import io
+    from faceclean.animation import Animation
+    from faceclean.channels import ARKIT52
+
+    src = tmp_path / "a.csv"
+    io.save(Animation(np.arange(30) / 30, np.full((30, 52), 0.2), ARKIT52), src)
+    before = src.read_bytes()
+    s = str(src)
+    for argv in (["clean", s, "-o", str(tmp_path / "o.csv"), "--format", "npz"],
+                 ["clean", s, "-o", str(tmp_path / "o.json"), "--format", "livelink"],
+                 ["clean", s, "-o", str(tmp_path / "o"), "--format", "gltf"],
+                 ["clean", s, "--in-place", "--format", "npz"],
+                 ["convert", s, "-o", s, "--in-place", "--format", "npz"]):  # fmt: skip
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--format" in err and "name the output" in err
+    assert src.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["a.csv"]
+    assert main(["clean", str(src), "-o", str(tmp_path / "o.npz"), "--format", "npz"]) == 0

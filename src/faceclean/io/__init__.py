@@ -141,10 +141,14 @@ def _short(e: BaseException) -> str:
 def output_format(path: str | os.PathLike, source: str | None, fmt: str | None = None) -> str:
     """The format a write to ``path`` uses: ``fmt``, else by extension, the ``source``
     format when the extension allows it (a Live Link take to ``.csv`` stays Live Link)."""
-    if fmt is not None:
-        return fmt
     p = Path(path)
     candidates = EXTENSIONS.get(p.suffix.lower())
+    if fmt is not None:  # a name that says another format: no reader would take it back
+        if candidates is None or fmt not in candidates:
+            fits = " or ".join(e for e, c in EXTENSIONS.items() if fmt in c) or "its own"
+            raise FacecleanError(f"--format {fmt} writes a {fits} file, not {p.name}: name "
+                                 "the output so")  # fmt: skip
+        return fmt
     if candidates is None:
         raise FacecleanError(f"{p.name}: unknown output type {p.suffix or '(none)'!r}")
     return source if source in candidates else candidates[-1]
