@@ -88,3 +88,43 @@ def nominal_rate(rate: float) -> float:
     Link's sub-frames read 59.88 or 59.90 for a 59.94 Hz take)."""
     near = min(NOMINAL_RATES, key=lambda r: abs(r - rate))
     return near if abs(near - rate) <= NOMINAL_TOLERANCE * near else round(rate, 3)
+
+
+STALE_RUN = 30  # frames in a row older than the newest before them: the times restarted
+
+
+class Restarts:
+    """Watches a take's times, block after block, for a restart: STALE_RUN valid frames in a
+    row each at or before the newest time before them. A cleaner holds a frame older than
+    its last (filters/base.py: it repeats its last output), so a take whose times restart
+    (a recording restarted, takes joined, a timecode past midnight) would come out still
+    from there: refused, where one late frame (a tracker's jitter) is not."""
+
+    def __init__(self, label: str) -> None:
+        self.label, self.newest, self.run, self.since = label, -np.inf, 0, 0.0
+
+    def see(self, times: np.ndarray) -> None:
+        """The next block's times (the valid frames', s); FacecleanError at a restart."""
+        from faceclean.errors import FacecleanError
+
+        t = np.asarray(times, dtype=np.float64)
+        t = t[np.isfinite(t)]
+        if not len(t):
+            return
+        before = np.maximum.accumulate(np.concatenate([[self.newest], t]))[:-1]  # (N,)
+        stale = t <= before
+        k = np.arange(len(t))
+        fresh = np.maximum.accumulate(np.where(stale, -1, k))  # the last fresh frame so far
+        run = np.where(stale, k - fresh + np.where(fresh < 0, self.run, 0), 0)  # (N,) frames
+        start = np.where(fresh < 0, self.since, t[np.clip(fresh + 1, 0, len(t) - 1)])
+        over = np.flatnonzero(run >= STALE_RUN)
+        if len(over):
+            i = int(over[0])
+            raise FacecleanError(
+                f"{self.label}: the times go back to {start[i]:.3f} s after {before[i]:.3f} s "
+                f"and stay behind ({STALE_RUN} frames): the take restarts there (a recording "
+                "restarted, takes joined?), and a cleaner holds such frames still; split the "
+                "take there, or give it increasing times"
+            )
+        self.run, self.since = int(run[-1]), float(start[-1])
+        self.newest = max(self.newest, float(t.max()))

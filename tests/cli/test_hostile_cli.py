@@ -550,3 +550,20 @@ def test_an_output_past_the_file_size_limit_is_one_line_and_leaves_nothing(tmp_p
     assert r.returncode == 1 and len(lines) == 1, r.stderr
     assert "file size limit (ulimit -f)" in lines[0] and "Errno" not in lines[0]
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])  # streamed block by block / in memory
+def test_a_take_whose_times_restart_is_refused_not_held_still(tmp_path, capsys, suffix):
+    # two recordings joined: every frame of the second is older than the first's last, and
+    # a cleaner holds an old frame (repeats its last output): the face would freeze
+    t = np.arange(240) / 60.0
+    x = 0.5 + 0.4 * np.sin(2 * np.pi * t[:, None] + np.arange(52))
+    joined = tmp_path / f"joined{suffix}"
+    io.save(Animation(np.concatenate([t, t]), np.concatenate([x, x]), ARKIT52), joined)
+    out = tmp_path / f"out{suffix}"
+    assert main(["clean", str(joined), "-o", str(out)]) == 2
+    one_line(capsys, "the times go back to 0.000 s after 3.983 s")
+    assert not out.exists()
+    late = np.concatenate([t[:100], t[80:85], t[100:]])  # five late frames: a tracker's jitter
+    io.save(Animation(late, np.concatenate([x, x[:5]]), ARKIT52), joined)
+    assert main(["clean", str(joined), "-o", str(out)]) == 0

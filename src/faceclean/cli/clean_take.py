@@ -34,6 +34,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     from faceclean.adjust import Adjusted, check_range
     from faceclean.filters import rotation
     from faceclean.io import stream
+    from faceclean.timing import Restarts
 
     choice = options.choice(args)
     src = Path(input)
@@ -61,6 +62,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
                                       len(names))  # fmt: skip
             return _line(done, output, frames, missing, names, what, adjust, choice, pose)
     anim = io.load(src)
+    Restarts(src.name).see(anim.times[anim.valid])  # as the stream's: never held still
     if args.scale is None:  # the same judgement as the stream's, block by block
         for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
             check_range(anim.values[a : a + stream.BLOCK], anim.names, input)

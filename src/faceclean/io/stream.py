@@ -33,6 +33,7 @@ from faceclean.channels import pose_name
 from faceclean.errors import FacecleanError
 from faceclean.io import livelink_csv, plain_csv, source
 from faceclean.io.atomic import atomic_open
+from faceclean.timing import Restarts
 
 BLOCK = 4096  # lines per block
 FORMATS = ("livelink", "csv")
@@ -102,7 +103,7 @@ def clean_file(
     if fmt not in FORMATS:
         raise FacecleanError(f"cannot stream format {fmt!r} (only {', '.join(FORMATS)})")
     p = Path(src)
-    rows = _Rows(step, check, steps)
+    rows = _Rows(step, check, steps, Restarts(p.name))
     pose = None if pose_step is None else _Rows(pose_step, pose_check)
     with source.open_binary(p) as f, atomic_open(dst, "wb") as out:
         try:
@@ -135,12 +136,15 @@ class _Rows:
     """Cleaned (R, M) values of a block: valid rows stepped in order, missing rows NaN
     (as Cleaner.clean), then ``check``ed. ``steps``: the valid rows in one call."""
 
-    def __init__(self, step: Step, check: Check | None, steps: Steps | None = None) -> None:
-        self.step, self.check, self.steps = step, check, steps
+    def __init__(self, step: Step, check: Check | None, steps: Steps | None = None,
+                 restarts: Restarts | None = None) -> None:  # fmt: skip
+        self.step, self.check, self.steps, self.restarts = step, check, steps, restarts
 
     def __call__(self, times: np.ndarray, values: np.ndarray) -> np.ndarray:
         out = np.full_like(values, np.nan)
         valid = ~np.all(np.isnan(values), axis=1) if values.shape[1] else np.ones(len(values), bool)
+        if self.restarts is not None:  # times that restart: refused, not held still
+            self.restarts.see(times[valid])
         if self.steps is not None:
             rows = np.flatnonzero(valid)
             if len(rows):
