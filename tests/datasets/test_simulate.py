@@ -303,3 +303,19 @@ def test_corrupt_keeps_a_live_link_take_live_link_with_its_angles(tmp_path, clea
         main(["tune", str(out), "--truth", str(truth), "--method", "rotation", "-o", str(tuned)])
         == 0
     )
+
+
+def test_a_channel_never_tracked_stays_missing_and_the_others_keep_their_frames(clean):
+    # one channel NaN throughout (and another's cells here and there): the crosstalk once
+    # mixed those NaNs into every channel, and every frame came out a tracking loss
+    x = clean.values.copy()
+    x[:, clean.names.index("jawOpen")] = np.nan
+    x[::7, clean.names.index("mouthSmileLeft")] = np.nan
+    holed = clean.with_values(x)
+    noisy, truth = simulate.corrupt(holed, seed=3, preset="iphone")
+    whole, _ = simulate.corrupt(clean, seed=3, preset="iphone")
+    lost = np.isnan(noisy.values).all(axis=1)
+    assert lost.sum() == np.isnan(whole.values).all(axis=1).sum() < 0.1 * noisy.n_frames
+    assert np.isnan(col(noisy, "jawOpen")).all() and np.isnan(col(truth, "jawOpen")).all()
+    others = [j for j, n in enumerate(noisy.names) if n not in ("jawOpen", "mouthSmileLeft")]
+    assert np.isfinite(noisy.values[~lost][:, others]).all()

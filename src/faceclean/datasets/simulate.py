@@ -184,6 +184,8 @@ def apply(
     truth = resample(times[np.isfinite(times)], x[np.isfinite(times)], t)  # (N, 52)
     seen = ~np.isnan(truth).all(1)  # (N,) the source has this instant
     y = np.where(seen[:, None], truth, 0.0)
+    blank = np.isnan(y)  # cells the source lacks (a channel never tracked): NaN again at the
+    y = np.where(blank, 0.0, y)  # end, never mixed into the others by the crosstalk
     n = len(t)
 
     y = _saturate(y, params, rng)
@@ -196,6 +198,7 @@ def apply(
     y = hold_last(y, runs(n, params.freeze_rate / 1.5, 1.5, rng))
     lost = runs(n, params.loss_rate / 60.0 / params.fps, params.loss_duration * params.fps, rng)
     y[lost | ~seen] = np.nan
+    y[blank] = np.nan
     keep = ~runs(n, params.drop_rate / params.drop_burst, params.drop_burst, rng)
     if keep.sum() < 2:
         keep[:] = True
