@@ -282,6 +282,17 @@ def test_an_output_written_over_is_said_replaced_never_in_silence(tmp_path, caps
     for said in ("wrote", "replaced"):
         assert main(["convert", str(src), "-o", str(tmp_path / "t.npz")]) == 0
         assert capsys.readouterr().out.startswith(f"{said} "), said
+    syn, noisy, truth = (tmp_path / f"{n}.csv" for n in ("syn", "noisy", "truth"))
+    corrupt = ["corrupt", str(syn), "-o", str(noisy), "--truth-out", str(truth), "--seed", "1"]
+    for said in ("wrote", "replaced"):  # every other writer says it too
+        for argv in (["synth", "-o", str(syn), "--seconds", "2"], corrupt,
+                     ["plot", str(noisy), "-o", str(tmp_path / "p.png"), "--method", "ema"],
+                     ["tune", str(noisy), "--truth", str(truth), "--method", "ema", "-o",
+                      str(tmp_path / "t.json")]):  # fmt: skip
+            assert main(argv) == 0, argv
+            shown = capsys.readouterr().out
+            assert f"{said} " in shown and ("replaced" in shown) == (said == "replaced"), shown
+    assert main(corrupt) == 0 and f"; replaced {truth}: the truth" in capsys.readouterr().out
 
 
 def test_a_format_its_output_s_name_contradicts_is_refused_and_the_take_kept(tmp_path, capsys):

@@ -28,12 +28,14 @@ def run(args: argparse.Namespace) -> int:
     for out in filter(None, (args.output, args.truth_out)):  # both, before writing one
         io.check_output(out, args.fmt, clean.meta.get("format"))
     noisy, truth = simulate.corrupt(clean, args.seed, args.preset, args.strength)
+    done = [io.paths.verb(out) for out in (args.output, args.truth_out) if out]
     io.save(noisy, args.output, fmt=args.fmt)
     if args.truth_out:
         io.save(truth, args.truth_out, fmt=args.fmt)
     lost = int((~noisy.valid).sum())
     print(
-        f"wrote {args.output}: {noisy.n_frames} frames at {noisy.rate:.1f} Hz "
+        f"{done[0]} {args.output}: {noisy.n_frames} frames at {noisy.rate:.1f} Hz "
         f"({args.preset}, strength {args.strength:g}, {lost} tracking-loss frames)"
+        + (f"; {done[1]} {args.truth_out}: the truth at its times" if args.truth_out else "")
     )
     return 0

@@ -25,14 +25,16 @@ def run(args: argparse.Namespace) -> int:
 
     from faceclean.errors import FacecleanError
     from faceclean.io.atomic import check_writable
+    from faceclean.io.paths import verb
     from faceclean.learned.export import export
 
     if Path(args.model).resolve() == Path(args.output).resolve():
         raise FacecleanError("OUT must not be the model file")
     check_writable(args.output)
+    done = verb(args.output)
     facts = export(args.model, args.output)
     print(
-        f"wrote {args.output}: {facts['channels']} channels, {facts['layers']} x "
+        f"{done} {args.output}: {facts['channels']} channels, {facts['layers']} x "
         f"{facts['hidden']} LSTM, {facts['bytes'] / 1e6:.2f} MB"
     )
     if args.check:

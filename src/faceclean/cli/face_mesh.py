@@ -18,13 +18,15 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.errors import FacecleanError
     from faceclean.face import mesh
     from faceclean.io import gltf_take
+    from faceclean.io.paths import verb
 
     if Path(args.output).suffix.lower() != ".glb":
         raise FacecleanError(f"{args.output}: the face mesh is written as .glb")
     face = mesh.stylised()
+    done = verb(args.output)
     gltf_take.save_mesh(face, args.output)
     print(
-        f"wrote {args.output}: {len(face.vertices)} vertices, {len(face.faces)} triangles, "
+        f"{done} {args.output}: {len(face.vertices)} vertices, {len(face.faces)} triangles, "
         f"{int(face.present.sum())} ARKit morph targets"
     )
     return 0

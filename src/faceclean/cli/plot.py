@@ -53,12 +53,14 @@ def comparison_from(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from faceclean.io.atomic import check_writable
+    from faceclean.io.paths import verb
     from faceclean.report import plot
 
     check_writable(args.output)  # now, not after cleaning
     comp = comparison_from(args)
     channels = [c for c in (args.channels or "").split(",") if c.strip()] or None
+    done = verb(args.output)
     plot.save_figure(comp, args.output, channels, args.start, args.end)
     shown = ", ".join(comp.outputs)
-    print(f"wrote {args.output}: {comp.input.n_frames} frames, cleaned with {shown}")
+    print(f"{done} {args.output}: {comp.input.n_frames} frames, cleaned with {shown}")
     return 0

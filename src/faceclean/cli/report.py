@@ -30,15 +30,17 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.errors import FacecleanError
     from faceclean.face import mesh
     from faceclean.io.atomic import check_writable
+    from faceclean.io.paths import verb
 
     if Path(args.output).suffix.lower() not in (".html", ".htm"):
         raise FacecleanError(f"{args.output}: the report must be an .html file")
     check_writable(args.output)  # now, not after cleaning and building the page
     face = mesh.load(args.mesh) if args.mesh else None
     comp = comparison_from(args)
+    done = verb(args.output)
     size = report.write(comp, args.output, face, source=Path(args.input).name)
     print(
-        f"wrote {args.output} ({size / 1e6:.1f} MB): {comp.input.n_frames} frames, "
+        f"{done} {args.output} ({size / 1e6:.1f} MB): {comp.input.n_frames} frames, "
         f"cleaned with {', '.join(comp.outputs)}"
     )
     return 0

@@ -20,6 +20,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.datasets import performer
 
     anim = performer.perform(args.seconds, args.seed, args.fps)
+    done = io.paths.verb(args.output)
     io.save(anim, args.output, fmt=args.fmt)
-    print(f"wrote {args.output}: {anim.n_frames} frames, {anim.duration:.1f} s at {args.fps:g} Hz")
+    print(f"{done} {args.output}: {anim.n_frames} frames, {anim.duration:.1f} s at {args.fps:g} Hz")
     return 0

@@ -167,13 +167,14 @@ def track_one(
     if adjust.adaptation is not None:  # a guided calibration's correction, after the cleaner
         cleaned = cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
     cleaned = rotation.clean_pose(cleaned, choice.build_pose)
+    done = io.paths.verb(out)
     io.save(cleaned, out, fmt=fmt)
     if raw is not None:
         io.save(anim, raw, fmt="livelink")
     lost = int((~anim.valid).sum())
     ms = 1000.0 * tracked / max(anim.n_frames, 1)
     text = "".join(f"{video}: {line}\n" for line in said) + (
-        f"wrote {out}: {anim.n_frames} frames"
+        f"{done} {out}: {anim.n_frames} frames"
         + (f" ({lost} without a face: missing)" if lost else "")
         + f", {len(anim.names)} channels + head yaw/pitch/roll, cleaned with {what}"
         + f"; tracked in {tracked:.1f} s ({ms:.1f} ms/frame)"

@@ -70,13 +70,14 @@ def run(args: argparse.Namespace) -> int:
         "noisy": [Path(n).name for n in args.noisy],
         "truth": [Path(c).name for c in args.truth],
     }
+    done = io.paths.verb(args.output)
     result.save(args.output, about=about)
     print(f"{'unit':<12} {'raw MSE':>10} {'tuned MSE':>10}  parameters")
     for unit in result.mse:
         values = result.groups.get(unit, result.params)
         text = ", ".join(f"{k}={v:g}" for k, v in values.items())
         print(f"{unit:<12} {result.raw_mse[unit]:>10.3g} {result.mse[unit]:>10.3g}  {text}")
-    print(f"wrote {args.output} ({args.method}{', per group' if args.per_group else ''})")
+    print(f"{done} {args.output} ({args.method}{', per group' if args.per_group else ''})")
     return 0
 
 
