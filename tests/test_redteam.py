@@ -1973,6 +1973,22 @@ def test_replay_absurd_speed_is_refused(take, sink, speed):
     refused(fc("replay", take, "--send", sink, *flag, timeout=HANG))
 
 
+@pytest.mark.parametrize("start, jump", [(0.0, 1e7), (0.0, 1e12), (1e12, 1e3)])
+def test_replay_of_times_that_jump_is_refused(tmp_path, sink, start, jump):
+    # a jump of 1e7 s waited 116 days in silence; 1e12 s stopped on an internal error
+    from faceclean import io
+    from faceclean.animation import Animation
+    from faceclean.channels import ARKIT52
+
+    t = start + np.arange(40) / 60.0
+    t[5:] += jump
+    p = tmp_path / "jump.csv"
+    io.save(Animation(t, np.full((40, 52), 0.2), ARKIT52), p)
+    r = fc("replay", p, "--send", sink, timeout=HANG)
+    refused(r)
+    assert f"the times jump {jump:.4g} s" in r.stderr and "sent" not in r.stdout, r.stderr
+
+
 def test_replay_infinite_speed_sends_everything_or_is_refused(take, sink):
     r = fc("replay", take, "--send", sink, "--speed", "inf", timeout=HANG)
     if ok_or_refused(r):

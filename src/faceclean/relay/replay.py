@@ -32,6 +32,7 @@ from faceclean.relay.frame import POSE_NAMES, Frame, Malformed
 from faceclean.relay.url import Endpoint
 
 MIN_SPEED, MAX_SPEED = 1e-3, 1e3  # --speed: playback rate bounds
+MAX_PAUSE = 600.0  # s between two frames: a longer one is a broken clock, not a pause
 
 
 def frames_from_animation(anim: Animation) -> list[Frame]:
@@ -91,6 +92,14 @@ def load_frames(path: str | os.PathLike) -> list[Frame]:
         frames = frames_from_animation(load(path))
     if not frames:
         raise FacecleanError(f"{Path(path).name}: no frames to replay")
+    t = np.array([f.t for f in frames if f.t is not None], dtype=np.float64)
+    t = t[np.isfinite(t)]
+    jumps = np.flatnonzero(np.diff(t) > MAX_PAUSE)
+    if len(jumps):  # replay waits out each pause in real time
+        i = int(jumps[0])
+        raise FacecleanError(f"{Path(path).name}: the times jump {t[i + 1] - t[i]:.4g} s at "
+                             f"{t[i]:.3f} s, and replay would wait that long: cut the take "
+                             "there, or fix its times")  # fmt: skip
     return frames
 
 
