@@ -79,6 +79,7 @@ def test_livelink_without_pose_and_with_bad_rate():
         LL_PACKET[:32] + b"\x3c" + LL_PACKET[33:],  # count 60 != 61 floats
         b"\x06\xff\xff\xff\xff",  # negative string length
         b"\x06\x00\x00\x00\x03\xff\xfe\xfd" + LL_PACKET[8:],  # device id not UTF-8
+        LL_PACKET[:24] + b"\xff\xff\xff\xc4" + LL_PACKET[28:],  # rate -60/1: no rate
     ],
 )
 def test_livelink_rejects_malformed_packets(packet):

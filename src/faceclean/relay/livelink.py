@@ -68,6 +68,8 @@ def decode(data: bytes) -> Frame:
     at += _TIMING.size
     if count not in (N_SHAPES, N_SHAPES + N_POSE) or at + 4 * count != len(data):
         raise Malformed(f"livelink: {count} values in a {len(data)}-byte packet")
+    if num < 0 or den < 0:  # no rate at all (0) falls back to arrival time; a negative one
+        raise Malformed(f"livelink: frame rate {num}/{den} is negative")  # means nothing
     floats = np.frombuffer(data, _BE_F32, count, at).astype(np.float64)  # (count,)
     t = (number + float(sub)) * den / num if num > 0 and den > 0 else None
     pose = floats[N_SHAPES:].copy() if count > N_SHAPES else None
