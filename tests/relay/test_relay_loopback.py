@@ -609,6 +609,7 @@ def test_relay_calibrates_the_neutral_from_its_first_seconds(capsys):
 
 def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
     session = tmp_path / "session.csv"
+    (tmp_path / "session.clean.csv").write_text("an older session's")  # replaced, and said
     with raw_receiver() as rx:
         proc = _start(
             ["--listen", "vmc://127.0.0.1:0", "--send", f"vmc://127.0.0.1:{rx.getsockname()[1]}"]
@@ -626,7 +627,9 @@ def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
             out, err = interrupt(proc, timeout=30)
     assert proc.returncode == 0, err
     assert "calibrated the neutral of 2 channels" in out
-    assert f"recorded 30 frames: {session} (input)" in out
+    assert f"recorded 30 frames: {session} (input), {tmp_path / 'session.clean.csv'} (cleaned, " \
+           "replaced)" in out  # fmt: skip
+    assert f"--record will replace {tmp_path / 'session.clean.csv'} when" in err
     from faceclean import io
 
     take, cleaned = io.load(session), io.load(tmp_path / "session.clean.csv")

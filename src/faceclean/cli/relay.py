@@ -139,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
     ui.check_nice(args)
     script = ui.script(args, args.ui)  # checked before the relay binds
     recorder = Recorder(args.record) if args.record else None
+    if recorder is not None and (there := recorder.there()):
+        print(f"faceclean: warning: --record will replace {' and '.join(map(str, there))} "
+              "when the relay stops", file=sys.stderr, flush=True)  # fmt: skip
     if args.ui:
         return _with_page(args, listen, send, recorder, script)
     choice = options.choice(args)
@@ -202,8 +205,11 @@ def _loopback(host: str) -> bool:
 def _done(stats: Any, send: Any, recorder: Any) -> int:
     print(f"stopped: {stats.line()}", flush=True)
     if recorder is not None and len(recorder):
+        there = recorder.there()
         take, cleaned = recorder.save()
-        print(f"recorded {len(recorder)} frames: {take} (input), {cleaned} (cleaned)", flush=True)
+        said = [f"{p} ({what}{', replaced' if p in there else ''})"
+                for p, what in ((take, "input"), (cleaned, "cleaned"))]  # fmt: skip
+        print(f"recorded {len(recorder)} frames: {', '.join(said)}", flush=True)
     elif recorder is not None:
         print("recorded nothing: no frame was sent, so no file was written", flush=True)
     if stats.send_errors:

@@ -156,6 +156,10 @@ class Recorder:
             takes.append(Animation(times, values, names, m))
         return takes[0], takes[1]
 
+    def there(self) -> list[Path]:
+        """The files ``save`` would write over (said, never replaced in silence)."""
+        return [p for p in (self.path, clean_path(self.path)) if p.is_file()]
+
     def save(self) -> tuple[Path, Path]:
         """Write the input and the cleaned output; their paths."""
         from faceclean import io
