@@ -148,6 +148,11 @@ def test_offline_page_tunes_calibrates_and_saves_what_clean_reproduces(browser, 
         tab.note_after("#fc-save-preset", "saved preset")
         tab.page.fill("#fc-path", str(tmp_path / "levels.json"))
         tab.note_after("#fc-save-levels", "saved levels")
+        assert "replacing" not in tab.js("window.faceclean.notes.at(-1)")
+        tab.note_after("#fc-save-levels", "saved levels")  # again: the file is there now
+        assert tab.js("window.faceclean.notes.at(-1)").endswith(
+            "(replacing the file that was there)"
+        )
         assert tab.errors() == []
         tab.page.screenshot(path=str(tmp_path / "offline.png"))
         if os.environ.get("FACECLEAN_SCREENSHOTS"):  # docs/ui-offline.png

@@ -312,3 +312,21 @@ def test_the_guided_panel_refuses_in_one_line_and_a_short_take_is_said(server):
         assert "shorter than the script" in m["why"], m
         m = _reply(ws)
         assert m["type"] == "error" and m["for"] == "guided" and "\n" not in m["message"]
+
+
+def test_a_file_the_page_writes_over_is_said_replaced(server, tmp_path):
+    """save (a preset, levels) and export: ``replaced`` where a file was there, which the
+    page's note says ("replacing the file that was there"), never in silence."""
+    there = tmp_path / "there.json"
+    there.write_text("{}")
+    with _open(server) as ws:
+        for k, (kind, path) in enumerate([("preset", tmp_path / "new.json"), ("preset", there),
+                                          ("levels", there)]):  # fmt: skip
+            ws.send(json.dumps({"type": "save", "what": kind, "path": str(path), "seq": 40 + k}))
+            _said(ws, 40 + k)  # the state
+            saved = _said(ws, 40 + k)
+            assert saved["type"] == "saved" and saved["replaced"] == (k > 0), saved
+        for k, name in enumerate(("out.csv", "out.csv")):
+            ws.send(json.dumps({"type": "export", "path": str(tmp_path / name), "seq": 50 + k}))
+            done = _said(ws, 50 + k)
+            assert done["type"] == "exported" and done["replaced"] == (k > 0), done

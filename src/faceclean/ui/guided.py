@@ -22,6 +22,7 @@ From the page: ``{"type": "guided", "action": "start" | "stop" | "apply" | "undo
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -139,6 +140,7 @@ class Panel:
         path = text(m, "path", limit=MAX_PATH)
         json_path(path, "calibration")
         atomic.check_writable(path)
+        replaced = os.path.isfile(path)
         self.result.adjust.save(path)  # what calibrate --guided -o writes
         s = self.session
         with s.lock:
@@ -147,7 +149,7 @@ class Panel:
             tuning = s.tuning
         s.broadcast({"type": "state", "seq": seq, **tuning.describe()})  # before the note
         client.send({"type": "saved", "seq": seq, "what": "guided calibration", "path": path,
-                     "rest": []})  # fmt: skip
+                     "rest": [], "replaced": replaced})  # fmt: skip
 
     # -- live: the countdown and the recording, ticked by the push thread --------------------
     def tick(self) -> None:

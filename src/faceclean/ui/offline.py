@@ -133,8 +133,9 @@ class Offline(Base):
         path = text(m, "path", limit=MAX_PATH)
         with self.lock:
             tuning = self.tuning
+        replaced = io.paths.verb(path) == "replaced"  # said on the page, never in silence
         io.save(tuning.clean(self.take), path)
-        client.send({"type": "exported", "seq": seq(m), "path": path})
+        client.send({"type": "exported", "seq": seq(m), "path": path, "replaced": replaced})
 
     # -- the worker -----------------------------------------------------------------------
     def _run(self) -> None:

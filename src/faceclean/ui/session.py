@@ -13,6 +13,7 @@ A change is answered by a ``state`` message to every open page (``Tuning.describ
 from __future__ import annotations
 
 import math
+import os
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -122,6 +123,7 @@ class Base:
         with self.lock:
             tuning = self.tuning
         rest: list[str] = []
+        replaced = os.path.isfile(path)  # said on the page, never in silence
         if what == "preset":
             rest = tuning.save_preset(path)
         else:
@@ -132,7 +134,8 @@ class Base:
                     self.tuning = tuning
         # the state first: a page that reads its note has the command that names the file
         self.broadcast({"type": "state", "seq": seq(m), **tuning.describe()})
-        client.send({"type": "saved", "seq": seq(m), "what": what, "path": path, "rest": rest})
+        client.send({"type": "saved", "seq": seq(m), "what": what, "path": path, "rest": rest,
+                     "replaced": replaced})  # fmt: skip
 
     def on_load(self, client: Client, m: dict[str, Any]) -> None:
         what, path = choice(m, "what", ("preset", "levels")), text(m, "path", limit=MAX_PATH)

@@ -32,6 +32,9 @@ ws.onmessage = (e) => {
   onMessage(m);
 };
 
+// A file the page wrote over is said, never replaced in silence.
+const over = (m) => (m.replaced ? " (replacing the file that was there)" : "");
+
 function onMessage(m) {
   if (m.type === "hello") return start(m);
   if (m.type === "state") return onState(m);
@@ -46,9 +49,9 @@ function onMessage(m) {
   if (m.type === "guided") return guided && guided.on(m);
   if (m.type === "saved") {
     const rest = m.rest.length ? ` (not in a preset, keep as --set: ${m.rest.join(" ")})` : "";
-    return note(`saved ${m.what} ${m.path}${rest}`);
+    return note(`saved ${m.what} ${m.path}${rest}${over(m)}`);
   }
-  if (m.type === "exported") return note(`exported ${m.path}`);
+  if (m.type === "exported") return note(`exported ${m.path}${over(m)}`);
   if (m.type === "recording") {
     $("fc-record").textContent = m.on ? "stop recording" : "start recording";
     return note(m.on ? `recording to ${m.path}` : `recorded ${m.frames} frames: ${m.path}`);
