@@ -142,3 +142,13 @@ def test_set_noise_band_trades_a_noisy_face_s_jitter_for_lag(tmp_path):
                            capture_output=True, text=True)  # fmt: skip
         assert r.returncode == 2 and r.stderr.count("\n") == 1, (bad, r.stderr)
         assert "noise_band" in r.stderr and not (tmp_path / "bad.csv").exists()
+
+
+def test_a_channel_group_s_setting_out_of_range_is_said_as_the_user_gave_it(tmp_path):
+    src = tmp_path / "t.csv"
+    _mediapipe_csv(src)
+    for words, said in (("mouth.detail=2", "detail must be a number within [0, 1], not 2 on "),
+                        ("mouth.rest_drift=1e308", "not 1e+308 on ")):  # fmt: skip
+        argv = ["clean", str(src), "-o", str(tmp_path / "o.csv"), "--tracker", "mediapipe"]
+        r = subprocess.run([*CLI, *argv, "--set", words], capture_output=True, text=True)
+        assert r.returncode == 2 and said in r.stderr and "array(" not in r.stderr, r.stderr

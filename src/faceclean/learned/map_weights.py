@@ -201,7 +201,8 @@ def column_setting(key: str, value: Any, default: Any, width: int, top: float = 
             v = np.asarray(value, dtype=np.float64)
     shapes = ((), (width,)) if width else ((),)
     if v is None or v.shape not in shapes or not ((v >= 0) & (v <= top)).all():
-        raise FacecleanError(
-            f"tracker-map: {key} must be a number within [0, {top:g}], not {value!r}"
-        )
+        bad = v[~((v >= 0) & (v <= top))] if v is not None and v.ndim == 1 else None
+        said = f"{bad[0]:g} on {len(bad)} channels" if bad is not None and len(bad) else \
+            repr(value)  # fmt: skip
+        raise FacecleanError(f"tracker-map: {key} must be a number within [0, {top:g}], not {said}")
     return float(v) if v.ndim == 0 else v
