@@ -12,6 +12,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, canonical, channel_key
 
 MIN_DT = 1e-12  # s; a step this small or smaller is a duplicate (the cleaners' rule 4)
+MAX_ABS = 1e6  # |value| above this is no value: non-finite to the cleaners (rule 2)
 
 
 @dataclass(eq=False)

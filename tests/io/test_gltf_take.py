@@ -94,6 +94,20 @@ def test_keyframes_follow_the_documented_rule():
     assert weights.dtype == np.float32 and not np.isnan(weights).any()
 
 
+def test_a_cell_past_any_weight_is_held_as_a_missing_one_never_written_as_inf():
+    # 1e308 is inf in float32, and glTF's accessors hold finite numbers only
+    take = _take()
+    v = take.values.copy()
+    j = take.names.index("jawOpen")
+    v[3:6, j] = [1e308, np.inf, -1e9]
+    _, weights, _ = gltf_take.keyframes(take.with_values(v))
+    _, clean, _ = gltf_take.keyframes(take)
+    assert np.isfinite(weights).all() and np.abs(weights).max() <= 1.0
+    k = INDEX["jawOpen"]
+    held = weights[:, k][np.abs(weights[:, k] - clean[:, k]) > 1e-7]
+    assert len(held) and np.all(np.isin(held, clean[:, k]))  # an earlier frame's value
+
+
 def test_the_glb_reads_back_as_the_take(glb, capsys):
     back = load(glb)
     want_t, want_w = _expected(_take())

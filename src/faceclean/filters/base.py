@@ -33,11 +33,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from faceclean.animation import MIN_DT, Animation  # MIN_DT: rule 4
+from faceclean.animation import MAX_ABS, MIN_DT, Animation  # rules 2 and 4
 from faceclean.errors import FacecleanError
 
 State = tuple[np.ndarray, ...]  # each (S, M)
-MAX_ABS = 1e6  # |value| above this is treated as non-finite (rule 2); weights live in [0, 1]
 MAX_GAP = 0.5  # s; the default max_gap: a longer pause restarts the state (rule 3)
 PROGRESS_EVERY = 1000  # frames between two reports to StreamCleaner.clean's progress
 BLOCK = 4096  # frames a whole-take clean holds at once beside its input and output

@@ -51,8 +51,8 @@ from typing import Any
 import numpy as np
 
 from faceclean.adaptation import Adaptation, fitted_after
-from faceclean.adjust import MAX_ABS, Adjust  # filters/base.py's bound on a value
-from faceclean.animation import Animation
+from faceclean.adjust import Adjust
+from faceclean.animation import MAX_ABS, Animation
 from faceclean.calibration import MAX_GAIN, MOVE_MIN
 from faceclean.channels import ARKIT52, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError

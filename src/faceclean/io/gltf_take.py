@@ -43,7 +43,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from faceclean.animation import Animation
+from faceclean.animation import MAX_ABS, Animation
 from faceclean.channels import ARKIT52, pose_name
 from faceclean.errors import FacecleanError
 from faceclean.face.mesh import FaceMesh
@@ -74,7 +74,9 @@ def keyframes(anim: Animation) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     times = (anim.times - anim.times[0]).astype(np.float32)
     valid = anim.valid
     advance = np.isin(np.flatnonzero(valid), rows)
-    weights = _hold(values[rows])
+    with np.errstate(invalid="ignore"):  # inf or past any weight (1e308 is inf in float32):
+        w = np.where(np.abs(values[rows]) <= MAX_ABS, values[rows], np.nan)  # a missing cell
+    weights = _hold(w)  # held from its channel's last, as a tracking loss is
     counts = {
         "lost": int((~valid).sum()),
         "unordered": int((~advance).sum()),
