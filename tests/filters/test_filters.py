@@ -142,6 +142,19 @@ def test_savgol_is_a_local_polynomial_fit_in_time():
     np.testing.assert_allclose(c.clean(Animation(t, poly, NAMES)).values, poly, atol=1e-9)
 
 
+def test_savgol_never_leaves_the_range_its_input_spans():
+    # a blink's edges: the local polynomial overshoots under 0 and past 1 there (a negative
+    # weight bends the face the other way); the output stays within its input's range
+    t = np.arange(120) / 60.0
+    x = np.zeros((120, 3))
+    x[50:56] = 1.0  # a crisp blink, 0.1 s shut
+    for window in (0.15, 0.3):
+        fit = make("savgol", {"window": window}, names=NAMES).clean(Animation(t, x, NAMES))
+        poly = savgol_filter(x, int(round(window * 60)) | 1, 2, axis=0)  # unclipped, for scale
+        assert poly.min() < -0.02  # the polynomial itself overshoots here
+        assert fit.values.min() >= 0.0 and fit.values.max() <= 1.0
+
+
 def test_savgol_window_frames_is_scipy_on_a_regular_grid():
     t = np.arange(200) / 60.0
     x = _signal(t, seed=7)

@@ -74,4 +74,11 @@ class SavGol(OfflineCleaner):
             b += powers[:, : p + 1].T[:, :, None] * values[m][None]
         a = s[:, np.arange(p + 1)[:, None] + np.arange(p + 1)]  # (N, p+1, p+1) Hankel
         e0 = np.linalg.pinv(a, rcond=1e-10, hermitian=True)[:, 0, :]  # (N, p+1)
-        return np.einsum("nj,jnm->nm", e0, b)
+        y = np.einsum("nj,jnm->nm", e0, b)
+        # a polynomial overshoots a blink's edge (a weight under 0 bends the face the other
+        # way): no output leaves the range its channel's input spans
+        seen = ~np.isnan(values)
+        lo = np.where(seen, values, np.inf).min(axis=0)  # (M,); a column with none: no bound
+        hi = np.where(seen, values, -np.inf).max(axis=0)
+        return np.clip(y, np.where(seen.any(axis=0), lo, -np.inf), np.where(seen.any(axis=0), hi,
+                                                                              np.inf))  # fmt: skip
