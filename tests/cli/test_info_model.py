@@ -42,6 +42,11 @@ def test_an_npz_that_is_neither_take_nor_model_is_still_one_line(tmp_path):
     np.savez(p, junk=np.zeros(3))  # no config: read as a take, refused in one line
     r = info(p)
     assert r.returncode != 0 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    for fmt in ("[1]", '{"a": 1}'):  # a format that is no name: one line, never a TypeError
+        np.savez(p, config=np.array(f'{{"format": {fmt}}}'), w=np.zeros(3))
+        r = info(p)
+        assert r.returncode == 2 and "format is not a name" in r.stderr, r.stderr
+        assert r.stderr.count("\n") == 1 and "internal error" not in r.stderr
 
 
 def test_steps_too_small_to_be_frames_give_no_rate(tmp_path, capsys):

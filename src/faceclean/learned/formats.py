@@ -71,6 +71,8 @@ def split(arrays: dict[str, Any], label: str) -> tuple[dict[str, Any], dict]:
     config = strict_json.loads(raw, f"{label}: config", max_depth=strict_json.MAX_DEPTH)
     if not isinstance(config, dict):
         raise FacecleanError(f"{label}: 'config' is not a JSON object")
+    if not isinstance(config.get("format", ""), str):  # every reader looks it up by name
+        raise FacecleanError(f"{label}: the config's format is not a name")
     return config, arrays
 
 
