@@ -313,8 +313,16 @@ def test_a_take_in_percent_is_refused_with_the_fix_then_cleaned_with_scale(tmp_p
     # a rare glitch in an ordinary take is no reason to refuse it
     x = np.full((120, 52), 0.3)
     x[10, 3] = 50.0
+    x[20, 4] = 1e300  # nor one past any weight
     io.save(Animation(t, x, ARKIT52, {"format": fmt}), path, fmt=fmt)
     assert main(["clean", str(path), "-o", str(out), *ONE_EURO]) == 0
+    # a take past any weight throughout: once cleaned into a take of empty cells, unsaid
+    out.unlink()
+    io.save(Animation(t, np.full((120, 52), 1e300), ARKIT52, {"format": fmt}), path, fmt=fmt)
+    assert main(["clean", str(path), "-o", str(out), *ONE_EURO]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "reach 1e+300 in 6240 cells: add --scale 1e-300" in err[0], err
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("seconds", ["inf", "1e400", "nan", "0", "-1", "4000"])

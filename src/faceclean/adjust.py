@@ -8,16 +8,13 @@ One equation per channel (x the tracker value, y what the cleaner sees)::
     y = clip(u, lo, hi)                # clamp = (lo, hi); [0, 1] unless one is set
     y = 0  where the channel is off    # muted (a missing frame, NaN, stays NaN)
 
-Levels stay in ARKit's range: a channel whose gain, offset, curve or scale is not the
-identity is clamped to [0, 1] after its mapping (``eyeBlink*.gain=1.2`` reads 1.0 at
-full closure, not 1.09). A calibrated overshoot is asked for explicitly: ``clamp=0,1.2``
-(that range), or ``clamp=none`` (no clamp at all; written ``"clamp": false`` in the file).
-
-The identity (scale 1, gain 1, offset 0, curve 1, no rule, on) leaves a channel bit-for-bit
-unchanged (its arithmetic skipped). Rules are (pattern, key, value), key in ``MAP_KEYS``; a
-pattern is a channel name in any spelling ``faceclean.channels`` accepts (``EyeBlink_L``), a
-glob on the canonical name (``mouth*Left``), or a channel group (``eyes``, ...:
-``channels.GROUPS``), case-insensitive. Later rules win: ``a.merged(b)`` is b's on a's.
+Levels stay in ARKit's range: a channel not at the identity (scale 1, gain 1, offset 0,
+curve 1, on: bit-for-bit unchanged, its arithmetic skipped) is clamped to [0, 1] after its
+mapping (``eyeBlink*.gain=1.2`` reads 1.0 at full closure); an overshoot is asked for:
+``clamp=0,1.2``, or ``clamp=none`` (written ``"clamp": false``). Rules are (pattern, key,
+value), key in ``MAP_KEYS``; a pattern is a channel name in any spelling ``channels``
+accepts (``EyeBlink_L``), a glob (``mouth*Left``) or a group (``eyes``: ``channels.GROUPS``),
+any case. Later rules win: ``a.merged(b)`` is b on a.
 
 The file format (what ``faceclean calibrate`` writes and ``--calibration`` reads)::
 
@@ -257,15 +254,18 @@ class Adjust:
 def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
     """FacecleanError (one line, with the fix) when ``values`` (N, M) of ARKit-named
     columns are far outside [0, 1] as a whole: their 99th percentile of |value| beyond
-    FAR (a take in percent reads 7.5, not 0.075). A rare glitch does not count; the
-    caller skips this when the user gave ``--scale``."""
+    FAR (a take in percent reads 7.5, not 0.075), or over 1 % of them past MAX_ABS (a rare
+    glitch does not count); the caller skips this when the user gave ``--scale``."""
     cols = [j for j, n in enumerate(names) if canonical(n) is not None]
     x = np.abs(np.asarray(values, dtype=np.float64))
     x = x if len(cols) == x.shape[-1] else x[..., cols]  # (every column ARKit's: no copy)
-    # n values count: finite, no absurd glitch (filters/base.py rule 2). The 99th percentile
-    # lies between the sorted values at floor(p) and ceil(p), p = 0.99 (n - 1): when the one
-    # at ceil(p) is within FAR (counted, no sort: exact), so is the percentile.
-    n = np.count_nonzero(x <= MAX_ABS)
+    # The 99th percentile of the n values within MAX_ABS lies between the sorted values at
+    # floor(p) and ceil(p), p = 0.99 (n - 1): when ceil(p)'s is within FAR, so is it.
+    n, huge = np.count_nonzero(x <= MAX_ABS), np.count_nonzero(np.isfinite(x) & (x > MAX_ABS))
+    if huge > 0.01 * (n + huge):  # the take itself, a unit a million times off
+        top = float(np.max(x, where=np.isfinite(x), initial=0.0))
+        raise FacecleanError(f"{where}: blendshape values reach {top:.3g} in {huge} cells: "
+                             f"add --scale {10.0 ** -math.ceil(math.log10(top)):g}")  # fmt: skip
     if not n or math.ceil(0.99 * (n - 1)) < n - np.count_nonzero((x > FAR) & (x <= MAX_ABS)):
         return
     high = float(np.percentile(x[x <= MAX_ABS], 99))
