@@ -125,4 +125,11 @@ def test_cli_plot_from_files(tmp_path, capsys):
     assert main(["plot", str(noisy_path), "--channels", "nope", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("faceclean: ") and err.count("\n") == 1
+    # a channel named twice is one panel; a list past any take's channels is one line, at once
+    twice = tmp_path / "twice.svg"
+    assert main(["plot", str(noisy_path), "--channels", "jawOpen,jawOpen", "-o", str(twice)]) == 0
+    assert twice.read_text().count('id="axes_') == 1
+    many = ",".join(["jawOpen", "eyeBlinkLeft"] * 40 + [f"x{k}" for k in range(70)])
+    assert main(["plot", str(noisy_path), "--channels", many, "-o", str(out)]) == 2
+    assert "names 72 channels: a figure shows at most 61" in capsys.readouterr().err
     assert main(["plot", str(tmp_path / "absent.csv"), "-o", str(out)]) == 2

@@ -7,6 +7,7 @@ import argparse
 
 from faceclean.cli import options
 
+MAX_PANELS = 61  # channels in one figure: a take's 52 blendshapes and 9 head/eye angles
 HELP = "plot channels over time: input, truth, cleaned and compared methods (PNG, SVG, PDF)"
 EPILOG = options.SETTINGS_HELP  # the cleaner options and --set syntax
 
@@ -52,13 +53,18 @@ def comparison_from(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from faceclean.errors import FacecleanError
     from faceclean.io.atomic import check_writable
     from faceclean.io.paths import verb
     from faceclean.report import plot
 
     check_writable(args.output)  # now, not after cleaning
+    asked = [c.strip() for c in (args.channels or "").split(",") if c.strip()]
+    channels = list(dict.fromkeys(asked)) or None  # each once, in the order given
+    if channels and len(channels) > MAX_PANELS:
+        raise FacecleanError(f"--channels names {len(channels)} channels: a figure shows at "
+                             f"most {MAX_PANELS} (a take has 52 blendshapes)")  # fmt: skip
     comp = comparison_from(args)
-    channels = [c for c in (args.channels or "").split(",") if c.strip()] or None
     done = verb(args.output)
     plot.save_figure(comp, args.output, channels, args.start, args.end)
     shown = ", ".join(comp.outputs)
