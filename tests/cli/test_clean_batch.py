@@ -172,3 +172,22 @@ def test_a_batch_says_it_left_its_earlier_outputs_alone(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "cleaned 1 of 1 files" in out
     assert f"(1 file already in {takes / 'sub'}, inside the input folder, not cleaned again)" in out
+
+
+def test_a_link_planted_in_the_output_folder_is_refused_never_written_through(tmp_path, capsys):
+    src, out = tmp_path / "in", tmp_path / "out"
+    (src / "sub").mkdir(parents=True)
+    io.save(_take(1), src / "a.csv")
+    io.save(_take(2), src / "sub" / "b.csv")
+    victim, elsewhere = tmp_path / "victim.csv", tmp_path / "elsewhere"
+    victim.write_text("a take of someone else's")
+    elsewhere.mkdir()
+    out.mkdir()
+    for link, target in ((out / "a.csv", victim), (out / "sub", elsewhere)):
+        link.symlink_to(target)
+        assert main(["clean", str(src), "-o", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and f"{link} is a symbolic link" in err, err
+        link.unlink()
+    assert victim.read_text() == "a take of someone else's" and not any(elsewhere.iterdir())
+    assert main(["clean", str(src), "-o", str(out)]) == 0  # no link: as before
