@@ -506,9 +506,15 @@ def test_calibrate_sets_the_neutral_from_the_held_seconds(live):
 def test_the_page_records_the_session(live):
     tab, _, _, folder, _ = live
     tab.page.fill("#fc-path", str(folder / "page.csv"))
+    (folder / "page.clean.csv").write_text("an older session's")  # replaced, and said
     tab.note_after("#fc-record", "recording to")
+    assert tab.js("window.faceclean.notes.at(-1)").endswith(
+        f"(replacing {folder / 'page.clean.csv'} when it stops)")  # fmt: skip
     tab.until(f"window.faceclean.frames > {tab.js('window.faceclean.frames') + 30}")
     tab.note_after("#fc-record", "recorded")
+    assert tab.js("window.faceclean.notes.at(-1)").endswith(
+        f"(replacing {folder / 'page.clean.csv'})"
+    )
     anim = io.load(folder / "page.csv")
     assert anim.n_frames >= 30 and io.load(folder / "page.clean.csv").n_frames == anim.n_frames
 

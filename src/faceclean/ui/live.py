@@ -198,13 +198,16 @@ class Live(Base):
             recorder = Recorder(text(m, "path", limit=MAX_PATH))  # the --record checks
             self.page_recorder = recorder
             self.tap.join(recorder)
-            self.broadcast({"type": "recording", "on": True, "path": str(recorder.path)})
+            there = " and ".join(map(str, recorder.there()))  # said now, while one can stop
+            self.broadcast({"type": "recording", "on": True, "path": str(recorder.path),
+                            "replaces": there})  # fmt: skip
         elif action == "stop":
             recorder = self.page_recorder
             if recorder is None:
                 raise FacecleanError("not recording")
             self.tap.leave(recorder)
             self.page_recorder = None
+            there = " and ".join(map(str, recorder.there()))
             take, cleaned = recorder.save()
             self.broadcast(
                 {
@@ -212,6 +215,7 @@ class Live(Base):
                     "on": False,
                     "path": f"{take} and {cleaned}",
                     "frames": len(recorder),
+                    "replaces": there,
                 }
             )
         else:

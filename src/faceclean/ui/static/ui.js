@@ -54,7 +54,8 @@ function onMessage(m) {
   if (m.type === "exported") return note(`exported ${m.path}${over(m)}`);
   if (m.type === "recording") {
     $("fc-record").textContent = m.on ? "stop recording" : "start recording";
-    return note(m.on ? `recording to ${m.path}` : `recorded ${m.frames} frames: ${m.path}`);
+    const over = m.replaces ? ` (replacing ${m.replaces}${m.on ? " when it stops" : ""})` : "";
+    return note((m.on ? `recording to ${m.path}` : `recorded ${m.frames} frames: ${m.path}`) + over);
   }
 }
 
