@@ -254,15 +254,15 @@ class Adjust:
 def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
     """FacecleanError (one line, with the fix) when ``values`` (N, M) of ARKit-named
     columns are far outside [0, 1] as a whole: their 99th percentile of |value| beyond
-    FAR (a take in percent reads 7.5, not 0.075), or over 1 % of them past MAX_ABS (a rare
-    glitch does not count); the caller skips this when the user gave ``--scale``."""
+    FAR (a take in percent reads 7.5, not 0.075), or most of them past MAX_ABS (fewer are
+    glitches, read as missing); the caller skips this when the user gave ``--scale``."""
     cols = [j for j, n in enumerate(names) if canonical(n) is not None]
     x = np.abs(np.asarray(values, dtype=np.float64))
     x = x if len(cols) == x.shape[-1] else x[..., cols]  # (every column ARKit's: no copy)
     # The 99th percentile of the n values within MAX_ABS lies between the sorted values at
     # floor(p) and ceil(p), p = 0.99 (n - 1): when ceil(p)'s is within FAR, so is it.
     n, huge = np.count_nonzero(x <= MAX_ABS), np.count_nonzero(np.isfinite(x) & (x > MAX_ABS))
-    if huge > 0.01 * (n + huge):  # the take itself, a unit a million times off
+    if huge > n:  # the take itself, a unit a million times off
         top = float(np.max(x, where=np.isfinite(x), initial=0.0))
         raise FacecleanError(f"{where}: blendshape values reach {top:.3g} in {huge} cells: "
                              f"add --scale {10.0 ** -math.ceil(math.log10(top)):g}")  # fmt: skip
