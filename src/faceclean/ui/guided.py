@@ -22,7 +22,6 @@ From the page: ``{"type": "guided", "action": "start" | "stop" | "apply" | "undo
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -36,6 +35,7 @@ from faceclean.channels import ARKIT52, DEFAULT_TRACKER
 from faceclean.errors import FacecleanError
 from faceclean.guided.script import COUNTDOWN, TAIL, Script, load
 from faceclean.io import atomic
+from faceclean.io.paths import verb
 from faceclean.ui.session import MAX_PATH, text
 from faceclean.ui.tuning import json_path
 
@@ -140,7 +140,7 @@ class Panel:
         path = text(m, "path", limit=MAX_PATH)
         json_path(path, "calibration")
         atomic.check_writable(path)
-        replaced = os.path.isfile(path)
+        replaced = verb(path) == "replaced"  # said on the page
         self.result.adjust.save(path)  # what calibrate --guided -o writes
         s = self.session
         with s.lock:

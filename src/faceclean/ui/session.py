@@ -13,7 +13,6 @@ A change is answered by a ``state`` message to every open page (``Tuning.describ
 from __future__ import annotations
 
 import math
-import os
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -23,6 +22,7 @@ import numpy as np
 from faceclean.adjust import Adjust
 from faceclean.channels import ARKIT52, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError
+from faceclean.io.paths import verb
 from faceclean.ui.server import Client
 from faceclean.ui.tuning import MAX_ITEMS, MAX_TEXT, Tuning
 
@@ -123,7 +123,7 @@ class Base:
         with self.lock:
             tuning = self.tuning
         rest: list[str] = []
-        replaced = os.path.isfile(path)  # said on the page, never in silence
+        replaced = verb(path) == "replaced"  # said on the page, never in silence
         if what == "preset":
             rest = tuning.save_preset(path)
         else:
