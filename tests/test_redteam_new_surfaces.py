@@ -212,6 +212,15 @@ def test_pairs_shard_garbage(tmp_path, shard):
     untouched(out)
 
 
+@pytest.mark.parametrize("seed", ["-1", "18446744073709551616", "92232798040567"])
+def test_pairs_seed_out_of_range_is_one_line_before_any_work(tmp_path, seed):
+    # -1 ended on numpy's "internal error"; 2**64 passed --list and failed every pair
+    r, out = pairs(tmp_path, "--seed", seed, "--list")
+    refused(r)
+    assert "--seed must be in [0, 92232798040567)" in r.stderr
+    untouched(out)
+
+
 @pytest.mark.parametrize("jobs", ["0", "x"])
 def test_pairs_jobs_garbage(tmp_path, jobs):
     r, out = pairs(tmp_path, "--jobs", jobs)

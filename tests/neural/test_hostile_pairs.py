@@ -210,3 +210,27 @@ def test_an_lstm_with_a_nan_weight_is_never_written(tmp_path):
     with pytest.raises(FacecleanError, match="lstm.0.w_hh"):
         checkpoint.save(model, tmp_path / "m.npz")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_train_says_the_model_it_replaces_and_refuses_a_seed_out_of_range(tmp_path):
+    folder = write_pairs(tmp_path / "p")
+    out = tmp_path / "m.npz"
+    out.write_text("keep")  # not even a model: written over, and said
+    r, _ = train(tmp_path, folder, "--arch", "ridge")
+    assert r is not None and r.returncode == 0, r.stderr[-600:]
+    assert f"\nreplaced {out}: ridge" in r.stdout, r.stdout
+    for seed in ("-1", str(2**63)):
+        r, _ = train(tmp_path, folder, "--arch", "ridge", "--seed", seed)
+        refused(r)
+        assert "--seed must be in [0, 2**63)" in r.stderr
+
+
+def test_a_broken_resume_file_is_said_without_a_word_about_the_pairs(tmp_path):
+    pytest.importorskip("torch")
+    folder = write_pairs(tmp_path / "p")
+    last = tmp_path / "m.last.npz"
+    last.write_text("garbage")
+    r, _ = train(tmp_path, folder, "--arch", "lstm", "--epochs", "1", "--hidden", "4",
+                 "--resume", str(last))  # fmt: skip
+    refused(r)
+    assert "m.last.npz: not a model .npz" in r.stderr and "no pair holds" not in r.stderr

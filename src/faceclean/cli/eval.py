@@ -55,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.evaluation import evaluate
     from faceclean.evaluation import results as results_md
     from faceclean.io.atomic import atomic_write, check_writable
+    from faceclean.io.paths import verb
 
     def progress(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
@@ -70,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     )
     text = results_md.markdown(results)
     text = _keep_tracker_section(args.markdown, text)
-    if args.json:
+    said = {p: verb(p) for p in (args.json, args.markdown) if p}  # "replaced": said, never
+    if args.json:  # in silence (the markdown keeps the sections it does not write)
         atomic_write(args.json, evaluate.dumps(results))
     if args.markdown:
         atomic_write(args.markdown, text)
@@ -78,9 +80,8 @@ def run(args: argparse.Namespace) -> int:
     for head in ("## Never ship worse", "## degrade 60 fps"):
         section = text.split(head, 1)[-1].split("\n## ", 1)[0]
         print(head.lstrip("# ") + section.rstrip() + "\n")
-    for path in (args.json, args.markdown):
-        if path:
-            print(f"wrote {path}")
+    for path, done in said.items():
+        print(f"{done} {path}")
     return 0
 
 

@@ -17,6 +17,7 @@ from faceclean.errors import FacecleanError
 
 _LOADING = threading.Lock()  # a cluster worker's threads load its Worker once
 
+MAX_SEED = 2**63 // 100_001  # --seed: every performer's seed (seed * 100000 + k) an int64
 HELP = "render faces from known weights, track them with MediaPipe: paired training data"
 EPILOG = """examples:
   faceclean pairs --shared --synthetic 20 -o ~/.cache/faceclean/pairs --jobs 2
@@ -226,6 +227,8 @@ def _plan(args: argparse.Namespace, families: tuple[str, ...] = ("painted",),
     for flag, n in (("--synthetic", args.synthetic), ("--independent", args.independent)):
         if not 0 <= n <= 100_000:
             raise FacecleanError(f"{flag} must be in [0, 100000], got {n}")
+    if not 0 <= args.seed < MAX_SEED:  # each performer's own is seed * 100000 + k, < 2**63
+        raise FacecleanError(f"--seed must be in [0, {MAX_SEED}), got {args.seed}")
     if not 0.0 <= args.neutral <= 60.0:
         raise FacecleanError(f"--neutral must be in [0, 60] s, got {args.neutral}")
     paths = []

@@ -114,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
     from faceclean import workers
     from faceclean.errors import FacecleanError
 
+    if not 0 <= args.seed < 2**63:  # every generator takes such a seed, and no other
+        raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
     if args.pairs:
         from faceclean.cli import train_pairs
 

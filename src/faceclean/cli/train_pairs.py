@@ -39,6 +39,9 @@ def run(args: argparse.Namespace) -> int:
         )
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
+    from faceclean.io.paths import verb
+
+    done = verb(args.out)  # "replaced": said, as the file goes at the end
     if args.resume:  # torch-free: a refusal is immediate
         from pathlib import Path
 
@@ -140,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                               resume=bool(args.resume))  # fmt: skip
         except FacecleanError as e:
             raise FacecleanError(f"{e}{_poisoned(raw)}") from None
-        print(f"wrote {args.out}: lstm, validation MSE {best.get('val_mse', float('nan')):.5f}")
+        print(f"{done} {args.out}: lstm, validation MSE {best.get('val_mse', float('nan')):.5f}")
         return 0
     if arch == "rises":  # chosen on its own folds: every pair trains
         from faceclean.neural import map_rises
@@ -161,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         w.save(args.out)  # checked first: finite, and loadable as written
     except FacecleanError as e:
         raise FacecleanError(f"{e}{_poisoned(raw)}") from None
-    print(f"wrote {args.out}: {arch}, {len(w.inputs)} channels, hidden {w.config['hidden']}")
+    print(f"{done} {args.out}: {arch}, {len(w.inputs)} channels, hidden {w.config['hidden']}")
     return 0
 
 
@@ -170,7 +173,7 @@ FAR = 10.0  # a value this far outside a weight's [0, 1] is no blendshape readin
 
 def _poisoned(pairs) -> str:
     """The pairs a refused model was made from whose values lie far outside [0, 1] (the
-    largest first), as the end of the refusal's line."""
+    largest first), as the end of the refusal's line; "" where none does."""
     import numpy as np
 
     worst = {}
@@ -180,8 +183,8 @@ def _poisoned(pairs) -> str:
                 big = np.abs(a[~np.isnan(a)])
             if big.size and big.max() > FAR:
                 worst[p.name] = max(worst.get(p.name, 0.0), float(big.max()))
-    if not worst:
-        return "; no pair holds a value far outside [0, 1]"
+    if not worst:  # nothing to add: the refusal's own words say what is wrong
+        return ""
     names = sorted(worst, key=lambda n: -worst[n])
     listed = ", ".join(f"{n} ({worst[n]:.3g})" for n in names[:5])
     more = f" and {len(names) - 5} more" if len(names) > 5 else ""
