@@ -100,6 +100,11 @@ def _unpaired(root: Path) -> str:
 def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
     # every entry but folders: a FIFO or a dangling link is found, then refused by its reader
     files = {p.name: p for p in root.iterdir() if not p.name.startswith(".") and not p.is_dir()}
+    partners: dict[tuple[str, str], list[Path]] = {}  # (NAME, role) -> its files, by name:
+    for fname in sorted(files):  # one pass, not one per take (10,000 takes: a second, not 1 min)
+        m = re.fullmatch(rf"(.+)\.({'|'.join(c for _, c in ROLES)})\.\w+", fname)
+        if m is not None:
+            partners.setdefault((m.group(1), m.group(2)), []).append(files[fname])
     found = []
     for fname, p in sorted(files.items()):
         for raw, clean in ROLES:
@@ -109,8 +114,7 @@ def _in_folder(root: Path) -> list[tuple[str, Path, Path, Path | None]]:
             name = m.group(1)
             if name.endswith(".rom"):  # NAME.rom.tracked.csv: a pair's calibration clip
                 continue
-            want = rf"{re.escape(name)}\.{clean}\.\w+"
-            partner = [files[n] for n in sorted(files) if re.fullmatch(want, n)]
+            partner = partners.get((name, clean))
             if partner:
                 found.append((name, p, partner[0], files.get(f"{name}.json")))
     return found
