@@ -3174,3 +3174,16 @@ def test_relay_broken_preset_is_refused(tmp_path):
     relay_refused(
         "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9", "--preset", str(p)
     )
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["bench", "--quick", "--streams", "3000000"], "--streams: counts from 1 to 65536"),
+    (["bench", "--quick", "--streams", "1,99999999999"], "--streams: counts from 1 to 65536"),
+    (["eval", "--quick", "--seed", "-1"], "--seed must be in [0, 2**63), got -1"),
+    (["eval", "--quick", "--seed", str(2**64)], "--seed must be in [0, 2**63)"),
+])  # fmt: skip
+def test_a_count_or_seed_out_of_range_is_one_line_before_any_work(argv, said):
+    # bench --streams 3000000 grew to 20 GB; eval --seed -1 ended on an internal error
+    r = fc(*argv, timeout=HANG)
+    refused(r)
+    assert said in r.stderr

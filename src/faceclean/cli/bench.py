@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+MAX_STREAMS = 65536  # faces at once: 8 x N x 52 float64 per frame is 218 MB there
 HELP = "benchmark every cleaner's speed against the eager-torch reference"
 CHILD = "FACECLEAN_BENCH_CHILD"
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -79,8 +80,8 @@ def run(args: argparse.Namespace) -> int:
         streams = tuple(int(s) for s in args.streams.split(",")) if args.streams else None
     except ValueError:
         raise FacecleanError(f"--streams {args.streams!r}: expected e.g. 1,64,1024") from None
-    if streams is not None and (not streams or min(streams) < 1):
-        raise FacecleanError("--streams: counts must be >= 1")
+    if streams is not None and (not streams or min(streams) < 1 or max(streams) > MAX_STREAMS):
+        raise FacecleanError(f"--streams: counts from 1 to {MAX_STREAMS}")
     if args.quick:
         sizes = bench.Sizes.quick(streams or (1, 4))
     else:

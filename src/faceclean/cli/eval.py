@@ -61,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     check_writable(args.json, args.markdown)  # now, not after the evaluation
+    if args.seed is not None and not 0 <= args.seed < 2**63:  # the simulator's seeds
+        from faceclean.errors import FacecleanError
+
+        raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
     if args.pairs and args.families:
         return _families(args, progress)
     if args.pairs:
