@@ -3176,6 +3176,19 @@ def test_relay_broken_preset_is_refused(tmp_path):
     )
 
 
+def test_eval_refuses_an_output_in_the_data_it_reads_before_any_fold(tmp_path):
+    data = tmp_path / "data"
+    for src in ("s1", "s2"):
+        (data / src).mkdir(parents=True)
+        (data / src / "a.csv").write_bytes(livelink_text())
+    take = data / "s1" / "a.csv"
+    before = take.read_bytes()
+    r = fc("eval", "--data", data, "--quick", "--json", take, timeout=HANG)
+    refused(r)
+    assert "which this command reads" in r.stderr and "fold" not in r.stderr  # no fold ran
+    assert take.read_bytes() == before
+
+
 @pytest.mark.parametrize("argv, said", [
     (["bench", "--quick", "--streams", "3000000"], "--streams: counts from 1 to 65536"),
     (["bench", "--quick", "--streams", "1,99999999999"], "--streams: counts from 1 to 65536"),

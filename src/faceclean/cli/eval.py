@@ -61,10 +61,16 @@ def run(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     check_writable(args.json, args.markdown)  # now, not after the evaluation
-    if args.seed is not None and not 0 <= args.seed < 2**63:  # the simulator's seeds
-        from faceclean.errors import FacecleanError
+    from faceclean.errors import FacecleanError
 
+    if args.seed is not None and not 0 <= args.seed < 2**63:  # the simulator's seeds
         raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
+    for out in (args.json, args.markdown):  # a file of the data it reads: refused now
+        folder = args.data or args.pairs
+        if out and folder and Path(out).is_file() and Path(folder).resolve() in \
+                Path(out).resolve().parents:  # fmt: skip
+            raise FacecleanError(f"{out} is in {folder}, which this command reads: name "
+                                 "another file")  # fmt: skip
     if args.pairs and args.families:
         return _families(args, progress)
     if args.pairs:
