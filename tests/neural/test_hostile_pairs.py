@@ -234,3 +234,14 @@ def test_a_broken_resume_file_is_said_without_a_word_about_the_pairs(tmp_path):
                  "--resume", str(last))  # fmt: skip
     refused(r)
     assert "m.last.npz: not a model .npz" in r.stderr and "no pair holds" not in r.stderr
+
+
+@pytest.mark.parametrize("flag, value", [("--epochs", "-1"), ("--patience", "-1"),
+                                         ("--hidden", "0"), ("--lr", "nan"), ("--K", "-1"),
+                                         ("--layers", "0"), ("--batch", "0"),
+                                         ("--w-acc", "nan")])  # fmt: skip
+def test_a_training_number_that_means_nothing_is_refused_before_any_work(tmp_path, flag, value):
+    # --epochs -1 ran no epoch and said "wrote" a model it never wrote
+    r, model = train(tmp_path, write_pairs(tmp_path / "p"), "--arch", "lstm", flag, value)
+    refused(r)
+    assert flag in r.stderr and not model.exists()

@@ -108,14 +108,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     # fmt: skip
 
 
+def _check_numbers(args: argparse.Namespace) -> None:
+    """One line for a number no training means (it was taken, or meant something else:
+    --epochs -1 ran none and said it wrote a model; --hidden 0 meant 128)."""
+    import math
+
+    from faceclean.errors import FacecleanError
+
+    if not 0 <= args.seed < 2**63:  # every generator takes such a seed, and no other
+        raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
+    for flag, v in (("--epochs", args.epochs), ("--patience", args.patience),
+                    ("--batch", args.batch), ("--hidden", args.hidden),
+                    ("--layers", args.layers), ("--K", args.K)):  # fmt: skip
+        if v is not None and v < 1:
+            raise FacecleanError(f"{flag} must be a whole number of at least 1, got {v}")
+    for flag, v in (("--lr", args.lr), ("--w-acc", args.w_acc), ("--w-dis", args.w_dis),
+                    ("--w-der", args.w_der)):  # fmt: skip
+        if v is not None and not (math.isfinite(v) and v >= 0 and (flag != "--lr" or v > 0)):
+            least = "over" if flag == "--lr" else "of at least"
+            raise FacecleanError(f"{flag} must be a finite number {least} 0, got {v}")
+
+
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from faceclean import workers
     from faceclean.errors import FacecleanError
 
-    if not 0 <= args.seed < 2**63:  # every generator takes such a seed, and no other
-        raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
+    _check_numbers(args)  # every path's numbers, before any work
+    args.threads, note = workers.count(args.threads, None, flag="--threads")
+    if note:
+        print(note, file=sys.stderr)
     if args.pairs:
         from faceclean.cli import train_pairs
 
@@ -131,9 +154,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.out or not args.out.endswith(".npz"):
         raise FacecleanError("--out must end in .npz")
     check_outputs(args)  # before torch is imported: a refusal is immediate
-    args.threads, note = workers.count(args.threads, None, flag="--threads")
-    if note:
-        print(note, file=sys.stderr)
 
     from tqdm import tqdm
 
