@@ -221,6 +221,20 @@ def test_pairs_seed_out_of_range_is_one_line_before_any_work(tmp_path, seed):
     untouched(out)
 
 
+def test_pairs_refuse_a_link_planted_in_their_output_folder(tmp_path):
+    # a pair's file name linked to a file elsewhere: pairs wrote the truth through it
+    out = tmp_path / "out"
+    out.mkdir()
+    victim = tmp_path / "victim.csv"
+    victim.write_text("someone's take")
+    r = fc("pairs", *TINY, "-o", out, "--list", timeout=HANG)
+    name = r.stdout.split()[0]
+    (out / f"{name}.truth.csv").symlink_to(victim)
+    r = fc("pairs", *TINY, "-o", out, timeout=HANG)
+    refused(r)
+    assert "is a symbolic link" in r.stderr and victim.read_text() == "someone's take"
+
+
 @pytest.mark.parametrize("jobs", ["0", "x"])
 def test_pairs_jobs_garbage(tmp_path, jobs):
     r, out = pairs(tmp_path, "--jobs", jobs)

@@ -141,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
         todo += [(j, "rom")] if args.rom and not engine.rom_done(j, out) else []
     if out.exists() and not out.is_dir():
         raise FacecleanError(f"output is not a folder: {out}")
+    linked = sorted(p for p in out.iterdir() if p.is_symlink()) if out.is_dir() else []
+    if linked:  # a link planted there would take a pair's file elsewhere
+        raise FacecleanError(f"{linked[0]} is a symbolic link: pairs are written only inside "
+                             f"{out} (remove it, or give another -o folder)")  # fmt: skip
     try:  # the output folder before any work (issue 21: outputs are checked at start)
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
