@@ -245,3 +245,10 @@ def test_a_training_number_that_means_nothing_is_refused_before_any_work(tmp_pat
     r, model = train(tmp_path, write_pairs(tmp_path / "p"), "--arch", "lstm", flag, value)
     refused(r)
     assert flag in r.stderr and not model.exists()
+
+
+def test_eval_of_pairs_of_one_source_says_there_is_no_fold(tmp_path):
+    # one source leaves no fold: max() of nothing ended on an internal error
+    r = fc("eval", "--pairs", write_pairs(tmp_path / "p", groups=("a",)), timeout=120.0)
+    refused(r)
+    assert "no fold to score" in r.stderr and "two sources or more" in r.stderr

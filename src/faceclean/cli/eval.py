@@ -165,6 +165,11 @@ def _pairs(args: argparse.Namespace, progress) -> int:
     from faceclean.learned.tracker_map import TrackerMap
 
     result = tracker_eval.evaluate(args.pairs, lstm=args.lstm, report=progress)
+    if not result["folds"]:  # each fold leaves one source out: one source leaves nothing
+        from faceclean.errors import FacecleanError
+
+        raise FacecleanError(f"{args.pairs}: no fold to score (each fold leaves one source "
+                             "out of the rest: give pairs of two sources or more)")  # fmt: skip
     model = settings.tracker_model()
     still_rows = None
     if model is not None and model.is_file():
