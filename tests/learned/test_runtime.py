@@ -413,7 +413,9 @@ def test_bench_quick_structure(tmp_path, capsys):
     text = md.read_text()
     assert text.startswith("# Title\n\nprose\n") and text.endswith("tail\n") and "old" not in text
     assert "| lstm-numpy |" in text and "Machine:" in text
-    assert "| lstm-numpy |" in capsys.readouterr().out
+    shown = capsys.readouterr().out
+    assert "| lstm-numpy |" in shown  # and the files, the one that was there said replaced
+    assert f"\nwrote {out}\n" in shown and f"\nreplaced {md}\n" in shown
     # issue 19: the shipped default has its own reference, eager torch on its network
     if result["reference"] is not None:
         default = rows["default (adaptive)"]

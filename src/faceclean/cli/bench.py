@@ -89,10 +89,15 @@ def run(args: argparse.Namespace) -> int:
     result = bench.run(sizes, args.model, progress=lambda s: print(f"  {s}", file=sys.stderr))
     table = markdown(result)
     print(table)
+    from faceclean.io.paths import verb
+
+    said = {p: verb(p) for p in (args.json, args.markdown) if p}  # never in silence
     if args.json:
         atomic_write(args.json, json.dumps(result, indent=2) + "\n")
     if args.markdown:
         atomic_write(args.markdown, _spliced(args.markdown, table))
+    for path, done in said.items():
+        print(f"{done} {path}")
     return 0
 
 
