@@ -109,3 +109,16 @@ def test_a_killed_run_resumes_without_redoing_finished_pairs(tmp_path):
     assert again.returncode == 0, again.stderr
     assert f"{len(done)} of 3 pairs already done" in again.stdout
     assert done <= {m.name for m in out.glob("*.json")} and len(list(out.glob("*.json"))) == 3
+
+
+def test_a_pair_whose_json_cannot_be_written_writes_none_of_its_files(tmp_path):
+    # a folder under the JSON's name: the two CSVs were written, then the JSON refused
+    from faceclean.channels import ARKIT52
+    from faceclean.errors import FacecleanError
+    from faceclean.synthetic import engine
+
+    (tmp_path / "p.json").mkdir()
+    anim = Animation(np.arange(5) / 30, np.zeros((5, 52)), ARKIT52)
+    with pytest.raises(FacecleanError, match="p.json"):
+        engine.write_pair(tmp_path, "p", anim, anim, {"format": "faceclean-pair/1"})
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["p.json"]

@@ -385,8 +385,10 @@ def rom_done(job: Job, out: Path) -> bool:
 def write_pair(out: Path, name: str, tracked: Animation, truth: Animation, meta: dict) -> dict:
     """The three files of one pair, each atomically, the JSON last (the pair's 'done' mark)."""
     from faceclean import io
-    from faceclean.io.atomic import atomic_write
+    from faceclean.io.atomic import atomic_write, check_writable
 
+    files = [out / f"{name}.{k}" for k in ("tracked.csv", "truth.csv", "json")]
+    check_writable(*files)  # all three or none (a folder under the JSON's name: none)
     io.save(tracked, out / f"{name}.tracked.csv", fmt="csv")
     io.save(truth, out / f"{name}.truth.csv", fmt="csv")
     atomic_write(out / f"{name}.json", json.dumps(meta, indent=1) + "\n")
