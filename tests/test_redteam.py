@@ -3192,8 +3192,8 @@ def test_eval_refuses_an_output_in_the_data_it_reads_before_any_fold(tmp_path):
 @pytest.mark.parametrize("argv, said", [
     (["bench", "--quick", "--streams", "3000000"], "--streams: counts from 1 to 65536"),
     (["bench", "--quick", "--streams", "1,99999999999"], "--streams: counts from 1 to 65536"),
-    (["eval", "--quick", "--seed", "-1"], "--seed must be in [0, 2**63), got -1"),
-    (["eval", "--quick", "--seed", str(2**64)], "--seed must be in [0, 2**63)"),
+    (["eval", "--quick", "--seed", "-1"], "--seed must be an integer in [0, 2**63), got -1"),
+    (["eval", "--quick", "--seed", str(2**64)], "--seed must be an integer in [0, 2**63)"),
 ])  # fmt: skip
 def test_a_count_or_seed_out_of_range_is_one_line_before_any_work(argv, said):
     # bench --streams 3000000 grew to 20 GB; eval --seed -1 ended on an internal error

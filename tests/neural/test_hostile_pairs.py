@@ -222,7 +222,7 @@ def test_train_says_the_model_it_replaces_and_refuses_a_seed_out_of_range(tmp_pa
     for seed in ("-1", str(2**63)):
         r, _ = train(tmp_path, folder, "--arch", "ridge", "--seed", seed)
         refused(r)
-        assert "--seed must be in [0, 2**63)" in r.stderr
+        assert "--seed must be an integer in [0, 2**63)" in r.stderr
 
 
 def test_a_broken_resume_file_is_said_without_a_word_about_the_pairs(tmp_path):

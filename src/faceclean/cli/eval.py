@@ -61,10 +61,10 @@ def run(args: argparse.Namespace) -> int:
         print(msg, file=sys.stderr, flush=True)
 
     check_writable(args.json, args.markdown)  # now, not after the evaluation
-    from faceclean.errors import FacecleanError
+    from faceclean.errors import FacecleanError, seed
 
-    if args.seed is not None and not 0 <= args.seed < 2**63:  # the simulator's seeds
-        raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
+    if args.seed is not None:  # the simulator's, checked before any fold
+        seed(args.seed, "--seed")
     for out in (args.json, args.markdown):  # a file of the data it reads: refused now
         folder = args.data or args.pairs
         if out and folder and Path(out).is_file() and Path(folder).resolve() in \

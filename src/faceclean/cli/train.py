@@ -113,10 +113,9 @@ def _check_numbers(args: argparse.Namespace) -> None:
     --epochs -1 ran none and said it wrote a model; --hidden 0 meant 128)."""
     import math
 
-    from faceclean.errors import FacecleanError
+    from faceclean.errors import FacecleanError, seed
 
-    if not 0 <= args.seed < 2**63:  # every generator takes such a seed, and no other
-        raise FacecleanError(f"--seed must be in [0, 2**63), got {args.seed}")
+    seed(args.seed, "--seed")  # every generator takes such a seed, and no other
     for flag, v in (("--epochs", args.epochs), ("--patience", args.patience),
                     ("--batch", args.batch), ("--hidden", args.hidden),
                     ("--layers", args.layers), ("--K", args.K)):  # fmt: skip
