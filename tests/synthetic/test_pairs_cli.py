@@ -122,3 +122,26 @@ def test_a_pair_whose_json_cannot_be_written_writes_none_of_its_files(tmp_path):
     with pytest.raises(FacecleanError, match="p.json"):
         engine.write_pair(tmp_path, "p", anim, anim, {"format": "faceclean-pair/1"})
     assert sorted(q.name for q in tmp_path.iterdir()) == ["p.json"]
+
+
+def test_a_pair_missing_one_of_its_files_is_made_again_not_counted_done(tmp_path):
+    out = tmp_path / "out"
+    first = run("--synthetic", 1, *FAST, "-o", out)
+    assert first.returncode == 0, first.stderr
+    (name,) = [m.name[: -len(".json")] for m in out.glob("*.json")]
+    (out / f"{name}.truth.csv").unlink()  # lost since: the JSON alone is no pair
+    again = run("--synthetic", 1, *FAST, "-o", out)
+    assert again.returncode == 0, again.stderr
+    assert "0 of 1 pairs already done" in again.stdout
+    assert (out / f"{name}.truth.csv").is_file() and (out / f"{name}.tracked.csv").is_file()
+
+
+def test_a_range_of_motion_clip_is_done_only_with_both_its_files(tmp_path):
+    from faceclean.synthetic import engine
+
+    job = engine.Job("synth:1", "synthetic", 0.0, 2.0, seed=7, setting="studio", rate=24.0,
+                     webcam=False)  # fmt: skip
+    engine.rom_path(tmp_path, job, "tracked").write_text("time\n0\n")
+    assert not engine.rom_done(job, tmp_path)  # its truth lost: made again
+    engine.rom_path(tmp_path, job, "truth").write_text("time\n0\n")
+    assert engine.rom_done(job, tmp_path)

@@ -163,7 +163,9 @@ def shard(jobs: list[Job], i: int, n: int) -> list[Job]:
 
 
 def done(job: Job, out: Path) -> bool:
-    return (out / f"{job.name}.json").is_file()
+    """A pair is done when all three of its files are there (a CSV lost since is made
+    again, not counted: a pair is written whole or not at all, ``write_pair``)."""
+    return all((out / f"{job.name}.{k}").is_file() for k in ("tracked.csv", "truth.csv", "json"))
 
 
 def performance(
@@ -379,7 +381,7 @@ def rom_path(out: Path, job: Job, kind: str) -> Path:
 
 
 def rom_done(job: Job, out: Path) -> bool:
-    return rom_path(out, job, "tracked").is_file()
+    return all(rom_path(out, job, k).is_file() for k in ("truth", "tracked"))
 
 
 def write_pair(out: Path, name: str, tracked: Animation, truth: Animation, meta: dict) -> dict:
