@@ -252,3 +252,23 @@ def test_eval_of_pairs_of_one_source_says_there_is_no_fold(tmp_path):
     r = fc("eval", "--pairs", write_pairs(tmp_path / "p", groups=("a",)), timeout=120.0)
     refused(r)
     assert "no fold to score" in r.stderr and "two sources or more" in r.stderr
+
+
+@pytest.mark.parametrize("arch", ["adaptive", "lstm"])
+def test_takes_that_leave_nothing_to_validate_on_are_refused_and_no_model_written(tmp_path, arch):
+    # one take of one source: early stopping kept the starting model, wrote it, exit 0
+    # (fc and gbt train a fixed budget with no validation, as SPEC section 3 has them)
+    pytest.importorskip("torch")
+    t = np.arange(90) / 30.0
+    v = 0.3 + 0.2 * np.sin(np.outer(t, np.arange(1, 5)))
+    (tmp_path / "data" / "me").mkdir(parents=True)
+    from faceclean import io
+    from faceclean.animation import Animation
+
+    io.save(Animation(t, v, ("jawOpen", "eyeBlinkLeft", "mouthSmileLeft", "browInnerUp")),
+            tmp_path / "data" / "me" / "take.csv")  # fmt: skip
+    out = tmp_path / "m.npz"
+    r = fc("train", "--data", tmp_path / "data", "--arch", arch, "--epochs", "1", "--out", out,
+           timeout=120.0)  # fmt: skip
+    refused(r)
+    assert "no take left to validate on" in r.stderr and not out.exists()

@@ -239,10 +239,7 @@ def _report(args: argparse.Namespace) -> str:
     path = model_file(args.report)
     method = formats.method_of(path)  # one line for a file that is not a model
     takes = dataset.load_takes(args.data)
-    if args.val_sources:
-        _, val = dataset.split(takes, val_sources=args.val_sources)
-    else:
-        _, val = dataset.split(takes, val_fraction=0.2, seed=args.seed)
+    _, val = dataset.holdout(takes, args.val_sources or (), args.seed)
     streams = harness.streams(val, list(harness.CONDITIONS))
     if method == "lstm":
         results = evaluate(checkpoint.load(path), streams, lag=True)

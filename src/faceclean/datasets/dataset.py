@@ -93,10 +93,18 @@ def holdout(
     takes: Sequence[Take], val_sources: Sequence[str] = (), seed: int = 0
 ) -> tuple[list[Take], list[Take]]:
     """A training run's (train, val): whole ``val_sources`` held out, or, with none
-    given, 20 % of every source's takes (the trainers' rule)."""
+    given, 20 % of every source's takes (the trainers' rule). No take left to validate
+    on (every source has one take) is refused: early stopping would keep the starting
+    model and say nothing of it."""
     if val_sources:
         return split(takes, val_sources=val_sources)
-    return split(takes, val_fraction=0.2, seed=seed)
+    train, val = split(takes, val_fraction=0.2, seed=seed)
+    if not val:
+        raise FacecleanError(
+            f"no take left to validate on ({len(train)} take(s), none from a source with two "
+            "or more): add takes, or hold a source out with --val-sources"
+        )
+    return train, val
 
 
 def split(
