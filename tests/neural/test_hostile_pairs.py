@@ -272,3 +272,13 @@ def test_takes_that_leave_nothing_to_validate_on_are_refused_and_no_model_writte
            timeout=120.0)  # fmt: skip
     refused(r)
     assert "no take left to validate on" in r.stderr and not out.exists()
+
+
+@pytest.mark.parametrize(
+    "flag, value",
+    [("--mesh", "x.npz"), ("--report", "default"), ("--data", "."), ("--synthetic-minutes", "2")],
+)
+def test_an_option_of_take_training_beside_pairs_is_refused_not_ignored(tmp_path, flag, value):
+    r, model = train(tmp_path, write_pairs(tmp_path / "p"), flag, value)
+    refused(r)
+    assert f"{flag} trains on takes, not with --pairs" in r.stderr and not model.exists()

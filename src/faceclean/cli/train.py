@@ -141,6 +141,11 @@ def run(args: argparse.Namespace) -> int:
     if args.pairs:
         from faceclean.cli import train_pairs
 
+        for flag, v in (("--data", args.data), ("--mesh", args.mesh), ("--report", args.report),
+                        ("--synthetic-minutes", args.synthetic_minutes)):  # fmt: skip
+            if v:  # a take folder's options: with pairs they were ignored in silence
+                raise FacecleanError(f"{flag} trains on takes, not with --pairs: drop one")
+
         if args.arch == "lstm" and args.out and args.out.endswith(".npz"):
             check_outputs(args)  # OUT and OUT.last.npz, which a resumed run rewrites
         return train_pairs.run(args)
