@@ -243,3 +243,20 @@ def test_a_bad_families_list_is_one_line(tmp_path, capsys, given, says):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0] and "groomed" in err[0]
     assert not (tmp_path / "p").exists()
+
+
+def test_a_folder_s_unreadable_image_is_skipped_in_one_line_and_the_others_read(tmp_path):
+    from faceclean.synthetic import portrait
+
+    Image.fromarray(np.full((8, 8, 3), 128, np.uint8)).save(tmp_path / "fine.png")
+    (tmp_path / "junk.png").write_text("hello")  # an image's name, no image
+    skipped: list[str] = []
+    got = portrait.load([str(tmp_path)], skipped)
+    assert [name for name, _ in got] == ["fine"]
+    assert len(skipped) == 1 and "junk.png: not a readable image" in skipped[0]
+    assert "skipped" in skipped[0] and "BytesIO" not in skipped[0]
+    with pytest.raises(FacecleanError, match="junk.png: not a readable image"):
+        portrait.load([str(tmp_path / "junk.png")], [])  # named itself: refused
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "astronaut.png")
+    with pytest.raises(FacecleanError, match="reserved"):
+        portrait.load([str(tmp_path)], [])  # a reserved face is refused, never skipped

@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         for line in skipped:
             print(f"faceclean: {line}", file=sys.stderr)
         if not ok:
-            raise FacecleanError("the photo family has no usable portrait (see above)")
+            raise FacecleanError("the photo family has no usable portrait (each is said above)")
         usable = tuple(ok)
     jobs = engine.shard(_plan(args, families, usable), *_shard(args.shard))
     out = Path(args.output)

@@ -264,6 +264,7 @@ class Worker:
         probe.close()
         self.portrait_sources = list(portraits or [])
         self._portraits: dict[str, np.ndarray] | None = None
+        self._unreadable: list[str] = []  # a folder's files no image reader opens: skipped
         self._fitter = None
 
     def portraits(self) -> dict[str, np.ndarray]:
@@ -271,7 +272,7 @@ class Worker:
         if self._portraits is None:
             from faceclean.synthetic import portrait
 
-            self._portraits = dict(portrait.load(self.portrait_sources))
+            self._portraits = dict(portrait.load(self.portrait_sources, self._unreadable))
         return self._portraits
 
     def skin(self, scene):
@@ -290,7 +291,7 @@ class Worker:
     def usable(self) -> tuple[list[str], list[str]]:
         """(portraits that fit, one line for each that does not: no face, too small)."""
         ok, skipped = [], []
-        for name in self.portraits():
+        for name in self.portraits():  # (read first: it fills _unreadable)
             from faceclean.synthetic.scene import Scene
 
             try:
@@ -298,7 +299,7 @@ class Worker:
                 ok.append(name)
             except FacecleanError as e:
                 skipped.append(str(e))
-        return ok, skipped
+        return ok, self._unreadable + skipped
 
     def scene(self, job: Job):
         from faceclean.synthetic.scene import Scene

@@ -65,24 +65,36 @@ Z_WEIGHT = 0.5  # MediaPipe's depth is a guess beside its x and y
 PULL_CM = 0.5  # cm over the head: how far a landmark's residual reaches (an eye is 3 wide)
 
 
-def load(sources: list[str]) -> list[tuple[str, np.ndarray]]:
-    """[(name, RGB image (H, W, 3) uint8)] from files, folders and sdist archives."""
+def load(sources: list[str], skipped: list[str] | None = None) -> list[tuple[str, np.ndarray]]:
+    """[(name, RGB image (H, W, 3) uint8)] from files, folders and sdist archives. A file
+    of a folder that is no readable image is one line in ``skipped`` where a list is given
+    (the job goes on without it); a file named itself is refused, as is a reserved one."""
     out: list[tuple[str, np.ndarray]] = []
     for src in sources:
         p = Path(src)
-        if p.is_dir():
-            files = sorted(f for f in p.iterdir() if f.suffix.lower() in EXTS + (".gz",))
-            out += load([str(f) for f in files])
-        elif p.name.endswith(".tar.gz"):
-            out += _from_archive(p)
-        elif p.suffix.lower() in EXTS:
-            out.append((p.stem, _decode(_read(p), str(p))))
-        else:
-            raise FacecleanError(f"{p}: not a portrait (an image, a folder or an sdist .tar.gz)")
+        if not p.is_dir():
+            out += _one(p)
+            continue
+        for f in sorted(f for f in p.iterdir() if f.suffix.lower() in EXTS + (".gz",)):
+            try:
+                out += _one(f)
+            except FacecleanError as e:
+                if skipped is None:
+                    raise
+                skipped.append(f"{e}; skipped")
     for name, _ in out:
         if any(r in name.lower() for r in RESERVED):
             raise FacecleanError(f"portrait {name!r} is reserved for independent evaluation")
     return out
+
+
+def _one(p: Path) -> list[tuple[str, np.ndarray]]:
+    """The portraits of one file: an image, or an sdist archive's known ones."""
+    if p.name.endswith(".tar.gz"):
+        return _from_archive(p)
+    if p.suffix.lower() in EXTS:
+        return [(p.stem, _decode(_read(p), str(p)))]
+    raise FacecleanError(f"{p}: not a portrait (an image, a folder or an sdist .tar.gz)")
 
 
 def _read(p: Path) -> bytes:
@@ -121,7 +133,9 @@ def _decode(data: bytes, label: str) -> np.ndarray:
             if im.size[0] * im.size[1] > MAX_PIXELS:
                 raise FacecleanError(f"{label}: image too large ({im.size[0]}x{im.size[1]})")
             return np.asarray(im.convert("RGB"))
-    except (UnidentifiedImageError, OSError, ValueError) as e:
+    except UnidentifiedImageError:  # its own words name a BytesIO object, not the file
+        raise FacecleanError(f"{label}: not a readable image (no image format known)") from None
+    except (OSError, ValueError) as e:
         raise FacecleanError(f"{label}: not a readable image ({e})") from None
 
 
