@@ -136,3 +136,19 @@ def test_two_faces_in_view_the_first_largest_is_kept_said_once_and_exit_1(two_fa
     assert sorted(os.listdir(outdir)) == ["face.csv", "two.csv"]
     for name in ("face.csv", "two.csv"):
         assert io.load(outdir / name).n_frames == N_FRAMES, name
+
+
+def test_track_shows_its_own_lines_not_the_native_libraries_logs(face_video, tmp_path):
+    # MediaPipe's graph (absl, TFLite) and OpenCV's ffmpeg wrote a page of lines no user
+    # can act on above faceclean's own, on every run and on a bad file
+    bad = tmp_path / "bad.mp4"
+    bad.write_bytes(np.random.default_rng(0).integers(0, 256, 20000, np.uint8).tobytes())
+    native = __import__("re").compile(r"\.(cc|cpp|hpp|h):\d+|@ 0x|^W\d{4} |^INFO: |^WARNING: ")
+    env = {k: v for k, v in os.environ.items() if k != "FACECLEAN_DEBUG"}
+    for video, code in ((face_video, 0), (str(bad), 2)):
+        r = subprocess.run([sys.executable, "-m", "faceclean", "track", video, "-o",
+                            str(tmp_path / "t.csv")], capture_output=True, text=True,
+                           env=env)  # fmt: skip
+        assert r.returncode == code, r.stderr[-800:]
+        lines = [p.strip() for ln in r.stderr.splitlines() for p in ln.split("\r")]
+        assert not [ln for ln in lines if native.search(ln)], r.stderr[-800:]

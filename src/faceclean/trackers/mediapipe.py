@@ -24,8 +24,10 @@ model that is not TFLite, before MediaPipe sees it (its own errors are C++ statu
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
+import sys
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -185,10 +187,30 @@ def landmarker(model_path: str | os.PathLike, video: bool, blendshapes: bool = F
         output_facial_transformation_matrixes=pose,
     )
     try:
-        return FaceLandmarker.create_from_options(options)
+        with _native_quiet():
+            return FaceLandmarker.create_from_options(options)
     except (RuntimeError, ValueError) as e:
         text = " ".join(str(e).split())[:160]
         raise FacecleanError(f"{path}: not a usable face landmarker model ({text})") from None
+
+
+@contextlib.contextmanager
+def _native_quiet():
+    """The process's stderr (fd 2) to /dev/null while MediaPipe builds its graph: its C++
+    logs a page of warnings there (absl, TFLite) that no setting turns off and no user can
+    act on; a failure still comes back as an exception. FACECLEAN_DEBUG keeps them."""
+    if os.environ.get("FACECLEAN_DEBUG"):
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def landmarks(model_path: str | os.PathLike, image: np.ndarray) -> np.ndarray | None:

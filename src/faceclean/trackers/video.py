@@ -39,6 +39,9 @@ FIRST_FRAME = 10.0  # s allowed for a camera's first frame
 
 
 def _cv2():
+    if not os.environ.get("FACECLEAN_DEBUG"):  # OpenCV's and ffmpeg's own log lines on a
+        os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")  # bad file: the one line says it
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
     try:
         import cv2
     except ImportError:
