@@ -23,7 +23,22 @@ def smiling(n: int = 240, fps: float = 30.0) -> Animation:
     return Animation(t, np.clip(x + rng.normal(0, 0.002, x.shape), 0, 1), NAMES)
 
 
-def test_an_output_read_as_its_own_rise_drops_the_map_s_habit_and_nothing_else():
+@pytest.fixture(params=["numpy", "compiled"])
+def path(request):
+    """The whole take stepped in numpy, or compiled (filters/compiled.py, as a long take
+    runs): the compiled take kept the map's rows it first ran with after set_own_rise."""
+    from faceclean.filters import compiled
+
+    was = compiled.enabled()
+    if request.param == "compiled" and not compiled.enable():
+        pytest.skip("numba not installed")
+    if request.param == "numpy":
+        compiled.disable()
+    yield request.param
+    (compiled.enable if was else compiled.disable)()
+
+
+def test_an_output_read_as_its_own_rise_drops_the_map_s_habit_and_nothing_else(path):
     anim = smiling()
     tm = TrackerMap(weights=weights(), names=NAMES)
     plain = tm.clean(anim).values

@@ -72,11 +72,10 @@ if TYPE_CHECKING:
 
 class TrackerMap(Stepper):
     """Tracker map cleaner (module docstring). ``min_cutoff``/``beta``/``d_cutoff`` (Hz)
-    replace the model's pre-filter settings (scalars, or one per model input); ``detail`` in
-    [0, 1] how much of the pre-filter's lag the map takes back (1: the fitted detail, all of
-    it), trading jitter for lag, and ``rest_drift`` how fast the rest climbs back (weight/s;
-    0: held expressions kept), each a scalar or one per column of ``names`` (the output
-    written there); ``noise_band`` how far the band widens over the stream's noise."""
+    replace the model's pre-filter settings (scalars, or one per model input); ``detail``
+    in [0, 1] how much of the pre-filter's lag the map takes back (1: all), ``rest_drift``
+    how fast the rest climbs back (weight/s; 0: held expressions kept), each a scalar or
+    one per column of ``names``; ``noise_band`` how far the band widens over the noise."""
 
     name = "tracker-map"
     PER_CHANNEL = ("detail", "rest_drift")
@@ -108,6 +107,7 @@ class TrackerMap(Stepper):
     def _build(self, w, min_cutoff, beta, d_cutoff, detail, rest_drift, noise_band, names):
         """The constants of ``w`` and the user's settings; no stream state (``reset``)."""
         self.weights = w
+        self.__dict__.pop("_kind", None)  # the compiled take's constants (map_take) go too
         self.names = tuple(names) if names is not None else w.inputs
         self._in = ChannelMap(w.inputs, self.names)  # model input j <- column src[j]
         self._out = ChannelMap(w.outputs, self.names)  # model output j -> column src[j]
