@@ -711,7 +711,9 @@ def test_a_rest_reading_given_to_a_cleaner_that_reads_none_is_said(tmp_path, cap
     assert "channels read as their own rise" in unread(own, make("one-euro"))
 
 
-def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not_at_all():
+def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not_at_all(
+    monkeypatch,
+):
     # A MediaPipe face whose closed eyes read at 0.7 of shut: after the fit its blinks
     # are lifted from half way between their rest and that top (fit.CLOSE_KNEE), so its
     # own closure reads 1 and a narrowing under the knee as it was; a face whose closed
@@ -719,13 +721,18 @@ def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not
     from faceclean.guided import fit as gf
     from faceclean.trackers.mediapipe import NAMES
 
+    # A blink comes out of the cleaner short of a held closure's level: the level read
+    # as shut is CLOSE_AIM of the way from the knee to the holds' top, so a blink that
+    # stops at 85 % of that way reads shut.
     tau, s = performed()
     blinks = [COL[n] for n in gf.BLINKS]
     found = {}
-    for read in (0.7, 0.15):
+    for read, aim in ((0.7, gf.CLOSE_AIM), (0.15, gf.CLOSE_AIM), ("holds", 1.0)):
         w = arkit_face(SCRIPT.weights(s))
-        w[:, blinks] *= read
-        fit = guided(Animation(tau, w[:, [COL[n] for n in NAMES]], NAMES), "mediapipe")
+        w[:, blinks] *= 0.7 if read == "holds" else read
+        with monkeypatch.context() as m:
+            m.setattr(gf, "CLOSE_AIM", aim)
+            fit = guided(Animation(tau, w[:, [COL[n] for n in NAMES]], NAMES), "mediapipe")
         found[read] = fit.adjust.adaptation
     ad = found[0.7]
     assert set(ad.closure) == set(gf.BLINKS) and not found[0.15].closure
@@ -733,7 +740,13 @@ def test_a_face_s_own_closure_lifts_its_blinks_from_half_way_and_a_steep_one_not
     for name, pair in ad.closure.items():
         assert back.closure[name] == pytest.approx(pair, abs=1e-6)
     for name, (knee, top) in ad.closure.items():
-        assert 0.0 <= knee < top < gf.CLOSED and 1 / (top - knee) <= gf.CLOSE_GAIN
+        held = found["holds"].closure[name][1]  # the holds' own top
+        assert gf.CLOSE_AIM < 1 and top == pytest.approx(knee + gf.CLOSE_AIM * (held - knee))
+        short = knee + 0.85 * (held - knee)  # a blink short of the holds' level
+        lifted = ad.apply(np.full((1, 52), short), ARKIT52)[0, COL[name]]
+        plain = Adaptation(ad.offset, ad.matrix).apply(np.full((1, 52), short), ARKIT52)
+        assert lifted > max(plain[0, COL[name]], 0.95)  # reads shut
+        assert 0.0 <= knee < top < gf.CLOSED and 1 / (held - knee) <= gf.CLOSE_GAIN
         rows = np.array([[0.0], [0.8 * knee], [top], [0.9 * top]])
         plain = Adaptation(ad.offset, ad.matrix).apply(np.repeat(rows, 52, 1), ARKIT52)
         got = ad.apply(np.repeat(rows, 52, 1), ARKIT52)

@@ -111,7 +111,14 @@ REST_INPUTS = GROUPS["mouth"] + GAZE
 # from 0.3 dressed 5's lids go over raw (1.02x), from 0.7 they close less; obama's closed
 # eyes read 0.3 (a slope of 6-7), and lifted its blinks overshot (closure 1.47, lids
 # 0.48 -> 0.74x raw), so a slope over CLOSE_GAIN lifts none.
+# A blink (100-300 ms) comes out of the cleaner short of the level a held closure reads
+# (the map's band smooths it), so the closure read as 1 is CLOSE_AIM of the way from the
+# knee to the holds' top. Chosen on the six faces chosen on (painted 7, 31, dressed 5, 37,
+# photo 47, 53) by the mean |log closure| of the four it lifts: 0.13 / 0.11 / 0.10 / 0.11
+# at 1 / 0.9 / 0.8 / 0.7, every face's MSE within 0.001 (docs/CALIBRATION.md, "The face's
+# own closure").
 BLINKS = ("eyeBlinkLeft", "eyeBlinkRight")
+CLOSE_AIM = 0.8
 CLOSE_KNEE = 0.5
 CLOSED = 0.95
 CLOSE_MIN = 0.1  # weight units: an eye whose closure rose less was not seen closing
@@ -313,11 +320,12 @@ def fit_adaptation(
 
 def fit_closure(y: np.ndarray, target: np.ndarray, alignment: al.Alignment, t: np.ndarray,
                 rest: np.ndarray) -> dict[str, tuple[float, float]]:  # fmt: skip
-    """{blink: (knee, top)} (module docstring, CLOSE_KNEE): top the median over the seen
-    prompts that close the eye of its HOLD_Q-th percentile over their holds, in y (N, 52)
-    as corrected; the rest its median over ``rest`` (N,) bool. None where the eye was never
-    seen closing, closes to CLOSED already, did not rise by CLOSE_MIN, or would need a
-    slope over CLOSE_GAIN."""
+    """{blink: (knee, top)} (module docstring, CLOSE_KNEE, CLOSE_AIM): the holds' top is
+    the median over the seen prompts that close the eye of its HOLD_Q-th percentile over
+    their holds, in y (N, 52) as corrected; the rest its median over ``rest`` (N,) bool;
+    ``top`` (read as 1) CLOSE_AIM of the way from the knee to it. None where the eye was
+    never seen closing, closes to CLOSED already, did not rise by CLOSE_MIN, or would need
+    a slope over CLOSE_GAIN (of the holds' top)."""
     out: dict[str, tuple[float, float]] = {}
     if not rest.any():
         return out
@@ -333,7 +341,7 @@ def fit_closure(y: np.ndarray, target: np.ndarray, alignment: al.Alignment, t: n
             continue
         knee = low + CLOSE_KNEE * (top - low)
         if 1.0 / (top - knee) <= CLOSE_GAIN:  # a steeper lift takes a narrowing for a blink
-            out[name] = (knee, top)
+            out[name] = (knee, knee + CLOSE_AIM * (top - knee))
     return out
 
 
