@@ -60,7 +60,8 @@ def test_a_take_of_ones_own_script_calibrates_with_it(tmp_path, capsys):
                                   "too long", "a folder", "a fifo", "keys of one",
                                   "keys of three", "keys a number", "keys text",
                                   "nothing aimed at", "a weight of 1e300",
-                                  "an escape code"])  # fmt: skip
+                                  "an escape code", "a prompt of 0 s", "an id twice",
+                                  "a title not text", "every target 0"])  # fmt: skip
 def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case):
     doc = copy.deepcopy(SHORT)
     path = tmp_path / "bad.json"
@@ -84,6 +85,15 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
         doc["prompts"][1]["text"] = "Smile\x1b[2J"
     elif case == "a weight of 1e300":
         doc["prompts"][1]["targets"] = {"jawOpen": 1e300}
+    elif case == "a prompt of 0 s":  # no frame of the alignment's grid: an internal error
+        doc["prompts"][1]["duration"] = 0.0
+    elif case == "an id twice":
+        doc["prompts"][2]["id"] = doc["prompts"][1]["id"]
+    elif case == "a title not text":
+        doc["title"] = {"x": 1}
+    elif case == "every target 0":  # aims at channels, at 0: nothing to align on
+        for p in doc["prompts"][1:]:
+            p["targets"] = {n: 0.0 for n in p.get("targets", {})}
     elif case == "a folder":
         path = tmp_path
     elif case == "a fifo":
@@ -92,16 +102,25 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
     if case not in ("not json", "a folder", "a fifo"):
         path.write_text(json.dumps(doc))
     take = tmp_path / "take.csv"
-    io.save(Animation(np.arange(60) / 30, np.zeros((60, 52)), ARKIT52), take)
+    io.save(Animation(np.arange(240) / 30, np.zeros((240, 52)), ARKIT52), take)  # 8 s
     out = tmp_path / "calib.json"
     guided = ["calibrate", "--guided", str(take), "-o", str(out)]
+    said = {
+        "a prompt of 0 s": "at least 0.3 s",
+        "an id twice": "given twice",
+        "a title not text": "title is a string",
+        "every target 0": "no channel above 0",
+    }
     for argv in (["calibrate", "--print-script"], guided):
+        if case == "every target 0" and argv[1] == "--print-script":
+            continue  # a script it can print: the take shows what it lacks
         assert main([*argv, "--script", str(path)]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "Traceback" not in err, err
         assert "internal error" not in err and not out.exists()
         if case == "a weight of 1e300":  # the limit said is the one broken
             assert "a weight from 0 to 1" in err, err
+        assert said.get(case, "") in err, err
 
 
 def test_script_goes_only_where_a_guided_script_is_used(tmp_path, capsys):

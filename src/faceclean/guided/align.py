@@ -152,6 +152,8 @@ def align(
     unread = reading.unread(tracker)
     shows = np.array([n not in unread for n in ARKIT52])  # (52,) the tracker reads it
     moved = np.flatnonzero(w.max(axis=0) > 0)
+    if not len(moved):  # every target 0: nothing to find the prompts by
+        raise FacecleanError("guided calibration: the script aims at no channel above 0")
     base, scale = _levels(r)
     rn = (r[:, moved] - base[moved]) / scale[moved]
     wn = w[:, moved] / w[:, moved].max(axis=0)

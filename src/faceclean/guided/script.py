@@ -40,6 +40,7 @@ MAX_PROMPTS = 200
 MAX_SECONDS = 600.0  # s a script may last (a live recording holds it whole)
 MAX_BYTES = 1 << 20  # a script file
 MAX_NUMBER = 1e4  # any time (s), weight or ramp a script gives: past it, a typo
+MIN_DURATION = 0.3  # s a prompt lasts at least: three steps of the alignment's 10 Hz grid
 _COL = {n: i for i, n in enumerate(ARKIT52)}
 
 
@@ -176,6 +177,16 @@ def from_dict(data: object, label: str = "guided script") -> Script:
                 weight=_number(p.get("weight", 1.0), f"{where} weight"),
             )
         )
+    ids = [p.id for p in prompts]
+    if len(set(ids)) < len(ids):  # a prompt is reported, and kept seen or not, by its id
+        twice = next(i for i in ids if ids.count(i) > 1)
+        raise FacecleanError(f"{label}: prompt id {twice!r} is given twice")
+    short = next((p for p in prompts if p.duration < MIN_DURATION), None)
+    if short is not None:
+        raise FacecleanError(
+            f"{label}: prompt {short.id!r} lasts {short.duration:g} s "
+            f"(at least {MIN_DURATION:g} s: a shorter one cannot be found)"
+        )
     if not prompts or not any(not p.channels for p in prompts[:1]):
         raise FacecleanError(f"{label}: needs prompts, the first a neutral hold (no targets)")
     if not any(p.channels and p.weight > 0 for p in prompts):
@@ -184,8 +195,9 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         raise FacecleanError(f"{label}: prompts overlap or are out of order")
     if prompts[-1].end > MAX_SECONDS:
         raise FacecleanError(f"{label}: lasts {prompts[-1].end:g} s (at most {MAX_SECONDS:g})")
-    if not str(data.get("title", "")).isprintable():
-        raise FacecleanError(f"{label}: its title is printable characters only")
+    title = data.get("title", "")
+    if not isinstance(title, str) or not title.isprintable():
+        raise FacecleanError(f"{label}: its title is a string of printable characters")
     return Script(tuple(prompts), str(data.get("title", "")))
 
 
