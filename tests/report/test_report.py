@@ -179,3 +179,28 @@ def test_a_users_npz_mesh_plays_too(browser, tmp_path):
     assert page.errors() == [] and a.std() > 0.03 and np.abs(a - b).mean() > 0.001
     assert "without a truth" in page.page.content()
     page.page.close()
+
+
+@pytest.mark.parametrize("truth", ["later", "all missing", "one frame"])
+def test_a_truth_with_nothing_to_score_against_is_one_line_for_report_and_plot(
+    tmp_path, capsys, truth
+):
+    # a truth 1000 s later or all missing: report ended on an internal error, plot wrote
+    # a plot with no truth and exit 0
+    noisy, clean = _clip()
+    save(noisy, tmp_path / "noisy.csv", fmt="csv")
+    if truth == "later":
+        clean = Animation(clean.times + 1000.0, clean.values, clean.names)
+    elif truth == "all missing":
+        clean = clean.with_values(np.full_like(clean.values, np.nan))
+    else:
+        clean = Animation(clean.times[:1], clean.values[:1], clean.names)
+    save(clean, tmp_path / "truth.csv", fmt="csv")
+    said = {"later": "no value within the input's times", "all missing": "the truth has",
+            "one frame": "fewer than 2 frames with values"}[truth]  # fmt: skip
+    for cmd, out in (("report", "r.html"), ("plot", "p.png")):
+        argv = [cmd, str(tmp_path / "noisy.csv"), "--truth", str(tmp_path / "truth.csv")]
+        assert main([*argv, "--method", "ema", "-o", str(tmp_path / out)]) == 2
+        err = capsys.readouterr().err
+        assert said in err and "internal error" not in err and len(err.splitlines()) == 1
+        assert not (tmp_path / out).exists()

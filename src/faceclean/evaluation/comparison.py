@@ -68,6 +68,8 @@ def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Anim
     times = np.asarray(times, dtype=np.float64)
     src = ChannelMap(names, anim.names).src
     out = np.full((len(times), len(names)), np.nan)
+    if not (src >= 0).any():
+        raise FacecleanError("the truth shares no channel with the input")
     found = False
     for i, j in enumerate(src):
         if j < 0:
@@ -83,7 +85,8 @@ def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Anim
         inside = (times >= t[0]) & (times <= t[-1])
         out[inside, i] = np.interp(times[inside], t, v)
     if not found:
-        raise FacecleanError("the truth shares no channel with the input")
+        raise FacecleanError("the truth has fewer than 2 frames with values in the channels "
+                             "it shares with the input")  # fmt: skip
     return Animation(times.copy(), out, tuple(names), {"format": "truth"})
 
 
@@ -106,6 +109,9 @@ def compare(
         names_match = [channel_key(n) for n in truth.names] == [channel_key(n) for n in noisy.names]
         if not (same and names_match):
             truth = at_times(truth, noisy.times, noisy.names)
+        if not np.isfinite(truth.values).any():  # nothing to score against
+            span = f"{noisy.times[0]:.6g}-{noisy.times[-1]:.6g} s"
+            raise FacecleanError(f"the truth has no value within the input's times ({span})")
     outputs = {label: clean_with(s, noisy, adjust) for label, s in specs.items()}
     if adjust is None or adjust.is_identity:
         return Comparison(noisy, truth, outputs)
