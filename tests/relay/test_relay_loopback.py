@@ -417,6 +417,27 @@ def test_an_empty_record_name_is_refused(capsys, record):
     assert capsys.readouterr().err.strip() == "faceclean: --record: give a file name (.csv or .npz)"
 
 
+@pytest.mark.parametrize("ui", [False, True])
+def test_a_record_over_a_file_the_relay_reads_is_refused_before_it_starts(tmp_path, ui):
+    # --record naming the relay's own --model: warned at the start, refused at the end,
+    # the whole session lost
+    import shutil
+
+    from faceclean.resolve import model_file
+
+    model = tmp_path / "mine.npz"
+    shutil.copy(model_file("default"), model)
+    args = ["relay", "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9",
+            "--model", str(model), "--record", str(model)]  # fmt: skip
+    args += ["--ui", "--no-browser"] if ui else []
+    # (a subprocess: the old relay ran on, and a timeout fails where main() would hang)
+    done = subprocess.run([sys.executable, "-m", "faceclean", *args], capture_output=True,
+                          text=True, timeout=60)  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert "is a file this command reads" in done.stderr and "will replace" not in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
 @pytest.mark.parametrize("host,loopback", [("127.0.0.1", True), ("127.0.0.2", True),
                                            ("localhost", True), ("::1", True), ("0.0.0.0", False),
                                            ("::", False), ("192.168.1.20", False),

@@ -593,3 +593,34 @@ def test_a_page_drawn_on_the_cpu_lets_its_browser_yield_to_the_relay(browser):
     r = main(["relay", "--listen", "vmc://127.0.0.1:9", "--send", "livelink://127.0.0.1:9",
               "--ui", "--ui-nice", "20"])  # fmt: skip
     assert r == 2
+
+
+def test_a_recording_the_page_started_is_saved_and_said_when_the_relay_is_stopped(tmp_path):
+    # Ctrl-C while the page recorded: the relay stopped, and the recording was lost unsaid
+    import json
+
+    from helpers import free_port
+    from websockets.sync.client import connect
+
+    port = free_port()
+    relay, url = start(["relay", "--listen", f"vmc://127.0.0.1:{port}", "--send",
+                        f"livelink://127.0.0.1:{free_port()}", "--method", "one-euro", "--ui",
+                        "--ui-nice", "0"], stderr=subprocess.DEVNULL)  # fmt: skip
+    replay = subprocess.Popen([sys.executable, "-m", "faceclean", "replay",
+                               str(first_take("neurosync")), "--loop", "--send",
+                               f"vmc://127.0.0.1:{port}"], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, env=ENV)  # fmt: skip
+    out = tmp_path / "page.csv"
+    ws_url = url.replace("http://", "ws://").replace("/?token=", "/live?token=")
+    with reaped(relay), reaped(replay):
+        with connect(ws_url, max_size=None) as ws:
+            ws.send(json.dumps({"type": "record", "action": "start", "path": str(out)}))
+            frames = 0
+            while frames < 20:  # pushed frames: the stream runs through the recorder
+                m = ws.recv(timeout=30)
+                frames += isinstance(m, str) and m.startswith('{"type":"frames"')
+        replay.kill()
+        said, _ = interrupt(relay)
+    assert "the page's recording:" in said and str(out) in said, said
+    take, cleaned = io.load(out), io.load(tmp_path / "page.clean.csv")
+    assert take.n_frames >= 5 and cleaned.n_frames == take.n_frames

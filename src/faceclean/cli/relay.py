@@ -139,14 +139,12 @@ def run(args: argparse.Namespace) -> int:
     ui.check_nice(args)
     script = ui.script(args, args.ui)  # checked before the relay binds
     recorder = Recorder(args.record) if args.record else None
-    if recorder is not None and (there := recorder.there()):
-        print(f"faceclean: warning: --record will replace {' and '.join(map(str, there))} "
-              "when the relay stops", file=sys.stderr, flush=True)  # fmt: skip
     if args.ui:
         return _with_page(args, listen, send, recorder, script)
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice)
     cleaner, levels = with_levels(args, choice, cleaner)
+    _check_record(recorder)
     what += f"; levels: {levels}" if levels else ""
     if args.tracker == "mediapipe":  # one warning line if the stream does not look raw
         from faceclean.channels import ARKIT52
@@ -202,6 +200,17 @@ def _loopback(host: str) -> bool:
         return False  # a name: it may resolve to any interface
 
 
+def _check_record(recorder: Any) -> None:
+    """--record's files again once the inputs are read (not over a --calibration take or a
+    --model: refused only at the end, the session was lost), and what they replace."""
+    if recorder is None:
+        return
+    recorder.check()
+    if there := recorder.there():
+        print(f"faceclean: warning: --record will replace {' and '.join(map(str, there))} "
+              "when the relay stops", file=sys.stderr, flush=True)  # fmt: skip
+
+
 def _done(stats: Any, send: Any, recorder: Any) -> int:
     print(f"stopped: {stats.line()}", flush=True)
     if recorder is not None and len(recorder):
@@ -226,6 +235,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any,
     from faceclean.ui.live import Live, Tap
 
     tuning = ui.tuning(args).with_choice()
+    _check_record(recorder)
     tap = Tap(recorder)
     pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
     with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:

@@ -63,10 +63,7 @@ class Recorder:
             raise FacecleanError(
                 f"--record {self.path.name}: give a .csv (Live Link) or .npz file name"
             )
-        try:  # now, not when the session ends: the -o policy for both files
-            check_writable(self.path, clean_path(self.path))
-        except FacecleanError as e:
-            raise FacecleanError(f"--record: {e}") from None
+        self.check()
         self._t: list[float] = []
         self._x: list[np.ndarray] = []  # (52,) float64 each
         self._y: list[np.ndarray] = []  # (52,) float32 each
@@ -80,6 +77,15 @@ class Recorder:
         self._shift = 0.0  # s added to the stream's times
         self._t0: float | None = None
         self._new_stream = False
+
+    def check(self) -> None:
+        """The -o policy for both files, now, not when the session ends; again once the
+        command has read its inputs (a --record naming its --calibration was refused only
+        at the end, the session lost)."""
+        try:
+            check_writable(self.path, clean_path(self.path))
+        except FacecleanError as e:
+            raise FacecleanError(f"--record: {e}") from None
 
     def __len__(self) -> int:
         return len(self._t)

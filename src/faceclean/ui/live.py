@@ -127,8 +127,22 @@ class Live(Base):
         return self
 
     def stop(self) -> None:
+        """Stop pushing; a recording the page started and never stopped is saved and said
+        (Ctrl-C lost it, in silence)."""
         self._stop.set()
         self._thread.join(5.0)
+        recorder, self.page_recorder = self.page_recorder, None
+        if recorder is None:
+            return
+        self.tap.leave(recorder)
+        if not len(recorder):
+            line = f"the page's recording to {recorder.path}: no frame came, no file written"
+        else:
+            there = recorder.there()
+            said = [f"{p}{' (replaced)' if p in there else ''}" for p in recorder.save()]
+            line = f"the page's recording: {len(recorder)} frames to {' and '.join(said)}"
+        if self.say is not None:
+            self.say(line)
 
     def hello(self) -> dict[str, Any]:
         return {**super().hello(), "relay": self.what}
