@@ -438,6 +438,20 @@ def test_a_record_over_a_file_the_relay_reads_is_refused_before_it_starts(tmp_pa
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
 
 
+@pytest.mark.parametrize("extra, said", [
+    (["--calibrate-seconds", "1e400"], "--calibrate-seconds must be over 0 and at most 3600"),
+    (["--calibrate-seconds", "100", "--ui", "--no-browser"], "at most 60 (got 100)"),
+    (["--ui", "--no-browser", "--ui-port", "70000"], "--ui-port must be in 0..65535"),
+])  # fmt: skip
+def test_a_hold_that_never_ends_and_a_page_port_out_of_range_are_one_line(extra, said):
+    # --calibrate-seconds 1e400 (inf) calibrated forever; --ui-port's message said --port
+    args = ["relay", "--listen", "vmc://127.0.0.1:0", "--send", "vmc://127.0.0.1:9", *extra]
+    done = subprocess.run([sys.executable, "-m", "faceclean", *args], capture_output=True,
+                          text=True, timeout=60)  # fmt: skip
+    assert done.returncode == 2 and said in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
 @pytest.mark.parametrize("host,loopback", [("127.0.0.1", True), ("127.0.0.2", True),
                                            ("localhost", True), ("::1", True), ("0.0.0.0", False),
                                            ("::", False), ("192.168.1.20", False),
@@ -508,6 +522,14 @@ def test_replay_command_streams_a_recording_as_livelink(capsys):
     # the packets' own timecode, not one restarted at frame 0
     np.testing.assert_array_equal([f.timecode[0] for f in frames], ref["frame_number"])
     np.testing.assert_array_equal([f.timecode[1] for f in frames], ref["sub_frame"])
+
+
+def test_replay_to_an_address_it_cannot_send_to_is_one_line(capsys):
+    # a broadcast address: "[Errno 13] Permission denied", exit 1
+    path = str(shared("raw_streams", "llv_dao.gesichter"))
+    assert main(["replay", path, "--send", "livelink://255.255.255.255:5"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot send to 255.255.255.255 port 5" in err and "Errno" not in err, err
 
 
 def test_relay_passes_every_frame_from_its_first_packet_on():

@@ -143,12 +143,16 @@ def test_track_shows_its_own_lines_not_the_native_libraries_logs(face_video, tmp
     # can act on above faceclean's own, on every run and on a bad file
     bad = tmp_path / "bad.mp4"
     bad.write_bytes(np.random.default_rng(0).integers(0, 256, 20000, np.uint8).tobytes())
-    native = __import__("re").compile(r"\.(cc|cpp|hpp|h):\d+|@ 0x|^W\d{4} |^INFO: |^WARNING: ")
+    native = __import__("re").compile(
+        r"\.(cc|cpp|hpp|h):\d+|@ 0x|^W\d{4} |^INFO: |^WARNING: |^\[ ?(WARN|ERROR)"
+    )
     env = {k: v for k, v in os.environ.items() if k != "FACECLEAN_DEBUG"}
-    for video, code in ((face_video, 0), (str(bad), 2)):
-        r = subprocess.run([sys.executable, "-m", "faceclean", "track", video, "-o",
-                            str(tmp_path / "t.csv")], capture_output=True, text=True,
-                           env=env)  # fmt: skip
+    runs = [([face_video, "-o", str(tmp_path / "t.csv")], 0),
+            ([str(bad), "-o", str(tmp_path / "t.csv")], 2),
+            (["--camera", "99", "--send", "vmc://127.0.0.1:9"], 2)]  # no such camera  # fmt: skip
+    for argv, code in runs:
+        r = subprocess.run([sys.executable, "-m", "faceclean", "track", *argv],
+                           capture_output=True, text=True, env=env)  # fmt: skip
         assert r.returncode == code, r.stderr[-800:]
         lines = [p.strip() for ln in r.stderr.splitlines() for p in ln.split("\r")]
         assert not [ln for ln in lines if native.search(ln)], r.stderr[-800:]

@@ -132,6 +132,14 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(
             f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} seconds (got {args.stats})"
         )
+    if args.calibrate_seconds is not None:  # inf: a hold that never ends
+        from faceclean.calibration import MAX_NEUTRAL_S as most
+
+        if args.ui:  # the page's own bound
+            from faceclean.ui.live import MAX_NEUTRAL as most
+        if not 0 < args.calibrate_seconds <= most:
+            raise FacecleanError(f"--calibrate-seconds must be over 0 and at most {most:g} "
+                                 f"(got {args.calibrate_seconds:g})")  # fmt: skip
     if args.record is not None and not args.record.strip():
         raise FacecleanError("--record: give a file name (.csv or .npz)")
     from faceclean.cli import ui
@@ -243,7 +251,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any,
         session = Live(tuning, relay, tap, what, nice=args.ui_nice, say=ui.say, script=script)
         session.mesh()  # the face built before the page asks
         session.start()
-        server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser)
+        server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser, "--ui-port")
         try:
             if args.calibrate_seconds is not None:
                 session.handle(None, {"type": "calibrate", "seconds": args.calibrate_seconds})

@@ -99,13 +99,13 @@ def tuning(args: argparse.Namespace):
     return Tuning(words, tuple(args.params), calibration, args.calibration, tracker)
 
 
-def serve(session, host: str, port: int, no_browser: bool):
+def serve(session, host: str, port: int, no_browser: bool, flag: str = "--port"):
     """The started server, its URL printed (and opened in a browser unless told not to)."""
     from faceclean.errors import FacecleanError
     from faceclean.ui.server import Server
 
     if not 0 <= port <= 65535:
-        raise FacecleanError(f"--port must be in 0..65535 (got {port})")
+        raise FacecleanError(f"{flag} must be in 0..65535 (got {port})")
     server = Server(session, host, port).start()
     print(f"tuning page: {server.url}", flush=True)
     if host not in ("127.0.0.1", "localhost", "::1"):

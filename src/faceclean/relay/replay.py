@@ -152,7 +152,12 @@ def replay(
     cycle = float(times[-1] - times[0]) + period  # s, one pass
     sent = 0
     with socket.socket(family, socket.SOCK_DGRAM) as sock:
-        sock.connect(addr)
+        try:
+            sock.connect(addr)
+        except OSError as e:  # a broadcast address (no SO_BROADCAST), no route
+            why = e.strerror or e
+            raise FacecleanError(f"cannot send to {addr[0]} port {addr[1]}: {why} "
+                                 "(give a host's address)") from None  # fmt: skip
         start = clock()
         k = 0
         while not stop.is_set():

@@ -39,6 +39,7 @@ from faceclean.channel_map import ChannelMap
 from faceclean.channels import ARKIT52, MEDIAPIPE
 from faceclean.errors import FacecleanError
 from faceclean.io.source import read_bytes
+from faceclean.trackers import quiet
 from faceclean.tracking import Reading
 
 NAMES = tuple(n for n in ARKIT52 if n != "tongueOut")  # what the tracker gives, canonical
@@ -168,7 +169,7 @@ def landmarker(model_path: str | os.PathLike, video: bool, blendshapes: bool = F
     path = Path(model_path)
     bundle = read_bytes(path, MAX_MODEL, "tracker model file")  # regular, bounded, once
     check_bundle(bundle, path)
-    os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ log lines
+    quiet()  # MediaPipe's (and the OpenCV it loads) native log lines
     try:
         from mediapipe.tasks.python import BaseOptions
         from mediapipe.tasks.python.vision import (

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from faceclean.errors import FacecleanError
+from faceclean.trackers import quiet
 
 NOMINAL_FPS = 30.0  # Hz, when a container states no rate
 TRUNCATED = 0.9  # a file that yields under this share of its stated frame count is truncated
@@ -39,9 +40,7 @@ FIRST_FRAME = 10.0  # s allowed for a camera's first frame
 
 
 def _cv2():
-    if not os.environ.get("FACECLEAN_DEBUG"):  # OpenCV's and ffmpeg's own log lines on a
-        os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")  # bad file: the one line says it
-        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
+    quiet()
     try:
         import cv2
     except ImportError:
