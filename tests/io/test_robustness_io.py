@@ -103,6 +103,18 @@ BAD_FILES = {
     ),
     "deeply nested json": ("d.json", b"[" * 100_000 + b"]" * 100_000, "nested too deep"),
     "time column only": ("c.csv", b"time\n0\n0.1\n", "no channels"),
+    # a channel twice: clean kept both, info counted one, a glb kept one (fourth red team)
+    "a channel twice, plain": (
+        "d.csv",
+        b"time,jawOpen,JawOpen\n0,0.1,0.2\n0.1,0.2,0.3\n",
+        "channel 'jawOpen' is given twice",
+    ),
+    "a channel twice, json": (
+        "d.json",
+        b'{"format": "faceclean-animation/1", "channels": ["jawOpen", "jawOpen"], '
+        b'"times": [0, 0.1], "values": [[0.1, 0.2], [0.2, 0.3]]}',
+        "is given twice",
+    ),
 }
 
 

@@ -21,7 +21,7 @@ from typing import BinaryIO
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import pose_name
+from faceclean.channels import channel_key, pose_name
 from faceclean.errors import FacecleanError
 from faceclean.io import source
 
@@ -56,7 +56,7 @@ def read(path: str | os.PathLike) -> Animation:
         head = header_line(next(lines, b""))
         if not head or not sniff(head):
             raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
-        t_col, names = parse_header(head)
+        t_col, names = parse_header(head, p.name)
         parts: list[tuple[np.ndarray, np.ndarray]] = []  # (times (R,), values (R, M))
         done, block = 0, []
         for line in lines:
@@ -86,13 +86,19 @@ def angle_columns(names: tuple[str, ...]) -> np.ndarray:
     return angles if len(angles) < len(names) else np.zeros(0, int)
 
 
-def parse_header(line: bytes) -> tuple[int, tuple[str, ...]]:
-    """The header line (no BOM) -> (index of the time column, channel names)."""
+def parse_header(line: bytes, label: str) -> tuple[int, tuple[str, ...]]:
+    """The header line (no BOM) of file ``label`` -> (index of the time column, channel
+    names); a channel named twice (a case apart: one ARKit channel) is refused."""
     cells = line.split(b",")
-    source.check_cells(cells, "header", source.MAX_NAME)
+    source.check_cells(cells, f"{label}: header", source.MAX_NAME)
     header = [c.strip().strip(b'"').decode("utf-8") for c in cells]
     t_col = [h.lower() for h in header].index("time")
-    return t_col, tuple(h for j, h in enumerate(header) if j != t_col)
+    names = tuple(h for j, h in enumerate(header) if j != t_col)
+    keys = [channel_key(n) for n in names]
+    if len(set(keys)) < len(keys):
+        twice = next(n for n, k in zip(names, keys, strict=True) if keys.count(k) > 1)
+        raise FacecleanError(f"{label}: channel {twice!r} is given twice: name each once")
+    return t_col, names
 
 
 def parse_rows(

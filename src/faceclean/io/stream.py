@@ -62,7 +62,7 @@ def channel_names(path: str | os.PathLike, fmt: str) -> tuple[str, ...]:
         head = plain_csv.header_line(first)
         if not plain_csv.sniff(head):
             raise FacecleanError(f"{p.name}: not a plain CSV (no 'time' column in the header)")
-        names = plain_csv.parse_header(head)[1]
+        names = plain_csv.parse_header(head, p.name)[1]
         angles = set(plain_csv.angle_columns(names).tolist())
         return tuple(n for j, n in enumerate(names) if j not in angles)
     except UnicodeDecodeError as e:
@@ -75,7 +75,7 @@ def angle_names(path: str | os.PathLike, fmt: str = "livelink") -> tuple[str, ..
     with source.open_binary(p) as f:
         first = next(source.iter_lines(f), b"")
     if fmt == "csv":
-        names = plain_csv.parse_header(plain_csv.header_line(first))[1]
+        names = plain_csv.parse_header(plain_csv.header_line(first), p.name)[1]
         return tuple(pose_name(names[j]) for j in plain_csv.angle_columns(names))
     head = livelink_csv.parse_header(first, p.name)
     return tuple(n for j in head.pose_cols if (n := pose_name(head.fields[j])) is not None)
@@ -249,7 +249,7 @@ def _plain(
     head = plain_csv.header_line(first[0]) if first else b""
     if not first or not plain_csv.sniff(head):
         raise FacecleanError(f"{name}: not a plain CSV (no 'time' column in the header)")
-    t_col, names = plain_csv.parse_header(head)
+    t_col, names = plain_csv.parse_header(head, name)
     angles = plain_csv.angle_columns(names)  # written after the channels, as io.save does
     cols = np.array([j for j in range(len(names)) if j not in set(angles.tolist())], int)
     order = (*(names[j] for j in cols), *(pose_name(names[j]) for j in angles))
