@@ -323,6 +323,13 @@ def test_a_take_in_percent_is_refused_with_the_fix_then_cleaned_with_scale(tmp_p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "reach 1e+300 in 6240 cells: add --scale 1e-300" in err[0], err
     assert not out.exists()
+    # ... and with --scale 1 (clean them as they are): it came out as zeros, exit 0
+    assert main(["clean", str(path), "-o", str(out), *ONE_EURO, "--scale", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "with --scale 1 in 6240 cells: use --scale 1e-300" in err[0], err
+    assert not out.exists()
+    assert main(["clean", str(path), "-o", str(out), *ONE_EURO, "--scale", "1e-300"]) == 0
+    np.testing.assert_allclose(io.load(out).arkit()[0], 1.0, atol=1e-6)
 
 
 @pytest.mark.parametrize("seconds", ["inf", "1e400", "nan", "0", "-1", "4000"])

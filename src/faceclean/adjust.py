@@ -93,14 +93,12 @@ class Adjust:
         for pattern, key, value in items:
             where = f"{pattern}.{key}"
             if key not in MAP_KEYS:
-                raise FacecleanError(
-                    f"{where}: unknown level key {key!r}; valid: {', '.join(MAP_KEYS)}"
-                )
+                raise FacecleanError(f"{where}: unknown level key {key!r}; valid: "
+                                     f"{', '.join(MAP_KEYS)}")  # fmt: skip
             if not any(matches(pattern, n) for n in known):
-                raise FacecleanError(
-                    f"{where}: {pattern!r} names no channel (a channel name, a glob such as "
-                    f"'eyeBlink*', or a group: {', '.join(GROUPS)})"
-                )
+                raise FacecleanError(f"{where}: {pattern!r} names no channel (a channel name, "
+                                     f"a glob such as 'eyeBlink*', or a group: "
+                                     f"{', '.join(GROUPS)})")  # fmt: skip
             rules.append((str(pattern), key, _checked(key, value, where)))
         return cls(tuple(rules))
 
@@ -251,31 +249,33 @@ class Adjust:
         return lines or ["identity (no level mapping)"]
 
 
-def check_range(values: np.ndarray, names: Sequence[str], where: str) -> None:
-    """FacecleanError (one line, with the fix) when ``values`` (N, M) of ARKit-named
-    columns are far outside [0, 1] as a whole: their 99th percentile of |value| beyond
-    FAR (a take in percent reads 7.5, not 0.075), or most of them past MAX_ABS (fewer are
-    glitches, read as missing); the caller skips this when the user gave ``--scale``."""
+def check_range(values: np.ndarray, names: Sequence[str], where: str,
+                scale: float | None = None) -> None:  # fmt: skip
+    """FacecleanError (one line, with the fix) when ``values`` (N, M) of ARKit-named columns
+    are far outside [0, 1]: their 99th percentile of |value| beyond FAR (a take in percent),
+    or most past MAX_ABS (fewer: glitches); with the user's ``--scale``, the latter scaled."""
     cols = [j for j, n in enumerate(names) if canonical(n) is not None]
     x = np.abs(np.asarray(values, dtype=np.float64))
     x = x if len(cols) == x.shape[-1] else x[..., cols]  # (every column ARKit's: no copy)
+    x = x if scale is None else x * abs(scale)
     # The 99th percentile of the n values within MAX_ABS lies between the sorted values at
     # floor(p) and ceil(p), p = 0.99 (n - 1): when ceil(p)'s is within FAR, so is it.
     n, huge = np.count_nonzero(x <= MAX_ABS), np.count_nonzero(np.isfinite(x) & (x > MAX_ABS))
     if huge > n:  # the take itself, a unit a million times off
         top = float(np.max(x, where=np.isfinite(x), initial=0.0))
-        raise FacecleanError(f"{where}: blendshape values reach {top:.3g} in {huge} cells: "
-                             f"add --scale {10.0 ** -math.ceil(math.log10(top)):g}")  # fmt: skip
-    if not n or math.ceil(0.99 * (n - 1)) < n - np.count_nonzero((x > FAR) & (x <= MAX_ABS)):
+        fix = 10.0 ** -math.ceil(math.log10(top)) * abs(scale or 1.0)  # the user's, further
+        said = "" if scale is None else f" with --scale {scale:g}"
+        raise FacecleanError(f"{where}: blendshape values reach {top:.3g}{said} in {huge} "
+                             f"cells: {'use' if said else 'add'} --scale {fix:g}")  # fmt: skip
+    far = np.count_nonzero((x > FAR) & (x <= MAX_ABS))
+    if scale is not None or not n or math.ceil(0.99 * (n - 1)) < n - far:
         return
     high = float(np.percentile(x[x <= MAX_ABS], 99))
     if high > FAR:
         guess = 0.01 if high <= 100.0 * FAR else 10.0 ** -math.ceil(math.log10(high))
-        raise FacecleanError(
-            f"{where}: blendshape values reach {high:.3g} (99th percentile), far outside "
-            f"ARKit's [0, 1] (percentages?): add --scale {guess:g}, or --scale 1 to clean "
-            "them as they are"
-        )
+        raise FacecleanError(f"{where}: blendshape values reach {high:.3g} (99th percentile), "
+                             f"far outside ARKit's [0, 1] (percentages?): add --scale {guess:g}, "
+                             "or --scale 1 to clean them as they are")  # fmt: skip
 
 
 def is_level_file(path: str | os.PathLike) -> bool:

@@ -53,7 +53,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
             _unread(args, adjust, cleaner, what)
             if not adjust.is_identity:
                 cleaner = Adjusted(cleaner, adjust, names)
-            guard = None if args.scale is not None else (names, input)
+            guard = (names, input, args.scale)
             cleaner = _watched(args, cleaner, names, input)
             pose = None
             if angles := stream.angle_names(src, fmt_in):
@@ -63,9 +63,8 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
             return _line(done, output, frames, missing, names, what, adjust, choice, pose)
     anim = io.load(src)
     Restarts(src.name).see(anim.times[anim.valid])  # as the stream's: never held still
-    if args.scale is None:  # the same judgement as the stream's, block by block
-        for a in range(0, max(anim.n_frames, 1), stream.BLOCK):
-            check_range(anim.values[a : a + stream.BLOCK], anim.names, input)
+    for a in range(0, max(anim.n_frames, 1), stream.BLOCK):  # as the stream's, by block
+        check_range(anim.values[a : a + stream.BLOCK], anim.names, input, args.scale)
     _signature(args, anim, input)
     cleaner, what = build_cleaner(choice, anim.names)
     adjust = build_levels(args, choice, anim.names)
@@ -159,16 +158,16 @@ def _stream(
     cleaner: Stepper,
     fmt: str,
     progress: bool = True,
-    guard: tuple[tuple[str, ...], str] | None = None,
+    guard: tuple[tuple[str, ...], str, float | None] | None = None,
     pose=None,
     channels: int = 1,
 ) -> tuple[int, int]:
     """``stream.clean_file`` with a progress bar (bytes) on stderr for big files;
-    ``guard`` (names, label): refuse a block of values far outside [0, 1]; ``pose``: the
-    head/eye angles' cleaner, or None (its output gets the finite check only). A file of
-    ``channels`` channels long enough for the whole-take path (filters/compiled.py
-    ``for_take``) goes through ``cleaner.steps`` a block at a time: runs of frames
-    compiled, the same numbers."""
+    ``guard`` (names, label, --scale): refuse a block of values far outside [0, 1];
+    ``pose``: the head/eye angles' cleaner, or None (its output gets the finite check
+    only). A file of ``channels`` channels long enough for the whole-take path
+    (filters/compiled.py ``for_take``) goes through ``cleaner.steps`` a block at a time:
+    runs of frames compiled, the same numbers."""
     import functools
 
     from tqdm import tqdm
