@@ -13,6 +13,7 @@ from faceclean.channels import ARKIT52, canonical, channel_key
 
 MIN_DT = 1e-12  # s; a step this small or smaller is a duplicate (the cleaners' rule 4)
 MAX_ABS = 1e6  # |value| above this is no value: non-finite to the cleaners (rule 2)
+MAX_MADE = 4_000_000  # frames a made take (synth, corrupt) has at most: 18 h at 60 Hz, 1.7 GB
 
 
 @dataclass(eq=False)

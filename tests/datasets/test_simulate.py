@@ -76,6 +76,20 @@ def test_cli_refuses_bad_input_with_one_line(tmp_path, capsys):
     assert not (tmp_path / "o.csv").exists()
 
 
+def test_a_take_whose_times_span_years_is_refused_before_any_memory_is_asked(tmp_path, capsys):
+    # times a million times off (or one 1e7 s gap): numpy asked 116 GiB, its own words
+    t = np.arange(301) / 60.0 * 1e6
+    take = tmp_path / "far.csv"
+    io.save(Animation(t, np.full((301, 2), 0.2), ("jawOpen", "eyeBlinkLeft")), take)
+    assert main(["corrupt", str(take), "-o", str(tmp_path / "o.csv"), "--seed", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "frames at 60 Hz (at most 4,000,000; are its times in s?)" in err, err
+    assert not (tmp_path / "o.csv").exists()
+    assert main(["synth", "-o", str(tmp_path / "s.npz"), "--seconds", "86400", "--fps",
+                 "1000"]) == 2  # fmt: skip
+    assert "8.64e+07 frames (at most 4,000,000)" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("preset", sorted(simulate.PRESETS))
 def test_values_stay_in_the_channel_range_and_truth_at_noisy_times(clean, preset):
     noisy, truth = simulate.corrupt(clean, seed=2, preset=preset, strength=2.0)

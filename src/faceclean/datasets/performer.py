@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceclean.animation import Animation
+from faceclean.animation import MAX_MADE, Animation
 from faceclean.channels import INDEX
 from faceclean.errors import FacecleanError
 from faceclean.errors import seed as check_seed
@@ -45,6 +45,9 @@ def perform(seconds: float, seed: int, fps: float = 60.0, full_range: bool = Fal
         raise FacecleanError(f"seconds must be in (0, 86400], got {seconds}")
     if not (np.isfinite(fps) and 1.0 <= fps <= 1000.0):
         raise FacecleanError(f"fps must be in [1, 1000], got {fps}")
+    if seconds * fps > MAX_MADE:  # a day at 1000 Hz asked 33 GB
+        raise FacecleanError(f"{seconds:g} s at {fps:g} Hz is {seconds * fps:.3g} frames "
+                             f"(at most {MAX_MADE:,}): fewer seconds, or a lower rate")  # fmt: skip
     rng = np.random.default_rng(check_seed(seed))
     t = np.arange(max(int(round(seconds * fps)), 1) + 1) / fps  # (N,) s, 0..seconds
     x = np.zeros((len(t), 52))

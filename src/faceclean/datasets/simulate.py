@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.signal import butter, lfilter
 
-from faceclean.animation import Animation
+from faceclean.animation import MAX_MADE, Animation
 from faceclean.channels import ARKIT52, INDEX
 from faceclean.errors import FacecleanError, within
 from faceclean.errors import seed as check_seed
@@ -180,6 +180,11 @@ def apply(
         raise FacecleanError("simulator needs at least 2 valid frames with increasing times")
     if not 1.0 <= params.fps <= 1000.0:
         raise FacecleanError(f"simulator rate must be 1-1000 Hz, got {params.fps}")
+    span = float(times[ok][-1] - times[ok][0])  # s: times a million times off asked 116 GiB
+    if span * params.fps > MAX_MADE:
+        n = span * params.fps
+        raise FacecleanError(f"the take spans {span:.6g} s: {n:.3g} frames at {params.fps:g} "
+                             f"Hz (at most {MAX_MADE:,}; are its times in s?)")  # fmt: skip
     t = stream_times(times[ok][0], times[ok][-1], params.fps, params.timing_irregularity, rng)
     truth = resample(times[np.isfinite(times)], x[np.isfinite(times)], t)  # (N, 52)
     seen = ~np.isnan(truth).all(1)  # (N,) the source has this instant
