@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from helpers import arkit_weights
@@ -137,6 +139,20 @@ def test_bad_mesh_files_are_one_line_errors(tmp_path):
     np.savez(tmp_path / "empty.npz", x=np.zeros(3))
     with pytest.raises(FacecleanError, match="empty.npz"):
         facemesh.load(tmp_path / "empty.npz")
+
+
+@pytest.mark.parametrize("faces, said", [
+    (lambda f: f[:, :2], "triangles are (F, 3)"),  # pairs: read as scrambled triangles
+    (lambda f: np.c_[f, f[:, :1]][: len(f) // 4 * 3], "triangles are (F, 3)"),  # quads
+    (lambda f: f.reshape(-1), "triangles are (F, 3)"),  # flat
+    (lambda f: f + 5000, "vertex index is outside 0..1219"),
+])  # fmt: skip
+def test_a_mesh_whose_faces_are_not_triangles_of_its_vertices_is_refused(tmp_path, faces, said):
+    z = dict(np.load(MESHES / "arkit_reference_mesh.npz", allow_pickle=False))
+    z["faces"] = faces(z["faces"])
+    np.savez(tmp_path / "odd.npz", **z)
+    with pytest.raises(FacecleanError, match=f"odd.npz: not a face mesh npz.*{re.escape(said)}"):
+        facemesh.load(tmp_path / "odd.npz")
 
 
 def test_cli_face_mesh(tmp_path, capsys):

@@ -112,7 +112,11 @@ def _read_npz(path: Path) -> FaceMesh:
             raise ValueError(f"vertices {vertices.shape}, deltas {deltas.shape}")
         if faces.dtype.kind not in "iu" or names.ndim != 1:
             raise ValueError("faces must be integers and names a list")
-        faces = np.asarray(faces).reshape(-1, 3).astype(np.uint32)
+        if faces.ndim != 2 or faces.shape[1] != 3:  # quads or pairs read as triangles: scrambled
+            raise ValueError(f"faces {faces.shape}: triangles are (F, 3) vertex indices")
+        if faces.size and not 0 <= faces.min() <= faces.max() < len(vertices):
+            raise ValueError(f"a face's vertex index is outside 0..{len(vertices) - 1}")
+        faces = np.asarray(faces).astype(np.uint32)
     except (KeyError, ValueError, TypeError) as e:
         raise FacecleanError(f"{path.name}: not a face mesh npz ({e})") from None
     out = _arkit_deltas(path.name, vertices, deltas, list(names))
