@@ -288,6 +288,13 @@ def test_bad_checkpoints(tmp_path, weights):
             **arrays,
             "config": np.array(json.dumps({**weights.config, "output": "multiplicative"})),
         },
+        # one name for every channel: it cleaned nothing and said it cleaned (red team)
+        "twice.npz": {
+            **arrays,
+            "config": np.array(
+                json.dumps({**weights.config, "channels": ["x"] * len(weights.channels)})
+            ),
+        },
     }
     for name, content in cases.items():
         p = tmp_path / name
@@ -298,6 +305,7 @@ def test_bad_checkpoints(tmp_path, weights):
         with pytest.raises(FacecleanError) as e:
             Learned(p)
         assert "\n" not in str(e.value)
+        assert name != "twice.npz" or "channel 'x' is listed twice" in str(e.value)
     with pytest.raises(FacecleanError):
         Learned(tmp_path / "absent.npz")
 
