@@ -121,10 +121,15 @@ class Restarts:
         if len(over):
             i = int(over[0])
             raise FacecleanError(
-                f"{self.label}: the times go back to {start[i]:.3f} s after {before[i]:.3f} s "
-                f"and stay behind ({STALE_RUN} frames): the take restarts there (a recording "
+                f"{self.label}: the times go back to {_s(start[i])} s after {_s(before[i])} s "
+                f"and stay behind ({STALE_RUN} frames on): the take restarts there (a recording "
                 "restarted, takes joined?), and a cleaner holds such frames still; split the "
                 "take there, or give it increasing times"
             )
         self.run, self.since = int(run[-1]), float(start[-1])
         self.newest = max(self.newest, float(t.max()))
+
+
+def _s(t: float) -> str:
+    """A time in s as a message shows it: ms where that reads, else 4 digits (1e308 s)."""
+    return f"{t:.3f}" if abs(t) < 1e7 else f"{t:.4g}"

@@ -564,6 +564,10 @@ def test_a_take_whose_times_restart_is_refused_not_held_still(tmp_path, capsys, 
     assert main(["clean", str(joined), "-o", str(out)]) == 2
     one_line(capsys, "the times go back to 0.000 s after 3.983 s")
     assert not out.exists()
+    far = np.concatenate([t[:10], [1e308], t[10:]])  # a time of 1e308: 300 digits were said
+    io.save(Animation(far, np.concatenate([x[:11], x[10:]]), ARKIT52), joined)
+    assert main(["clean", str(joined), "-o", str(out)]) == 2
+    one_line(capsys, "the times go back to 0.167 s after 1e+308 s")
     late = np.concatenate([t[:100], t[80:85], t[100:]])  # five late frames: a tracker's jitter
     io.save(Animation(late, np.concatenate([x, x[:5]]), ARKIT52), joined)
     assert main(["clean", str(joined), "-o", str(out)]) == 0
