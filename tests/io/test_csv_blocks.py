@@ -120,8 +120,9 @@ def test_the_plain_reader_and_writer_in_blocks_are_the_whole_file(tmp_path, monk
     assert again.read_bytes() == first.read_bytes()
     bad = tmp_path / "bad.csv"
     bad.write_bytes(b"time,a\n" + b"".join(f"{k},0.5\n".encode() for k in range(7)) + b"8,x\n")
-    with pytest.raises(FacecleanError, match="a value is not a number"):
-        io.load(bad)
+    with pytest.raises(FacecleanError, match="row 8, field 2: 'x' is not a number") as e:
+        io.load(bad)  # (numpy's own words named np.bytes_, not the cell)
+    assert "np.bytes" not in str(e.value)
     short = tmp_path / "short.csv"
     short.write_bytes(b"time,a,b\n0,1,2\n1,2,3\n2,3,4\n3,4\n")
     with pytest.raises(FacecleanError, match="row 4 has 2 fields, the header has 3"):

@@ -84,7 +84,7 @@ BAD_FILES = {
         _ll("00:00:00:00.000,3,0.1,abc,0"),
         "a value is not a number",
     ),
-    "text in a number, plain": ("t.csv", b"time,jawOpen\n0,0.5\n0.1,x\n", "not a number"),
+    "text in a number, plain": ("t.csv", b"time,jawOpen\n0,0.5\n0.1,x\n", "row 2, field 2: 'x'"),
     "text as time, plain": ("t.csv", b"time,jawOpen\nnow,0.5\n", "not a number"),
     "bad timecode": ("t.csv", _ll("noon,3,0.1,0.2,0"), "line 2: bad timecode"),
     "ragged row, live link": ("r.csv", _ll("00:00:00:00.000,3,0.1,0.2"), "line 2: 4 fields"),

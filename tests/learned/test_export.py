@@ -96,9 +96,11 @@ def test_export_refuses_bad_input(tmp_path, files, capsys):
     assert main(["export", str(bad), "-o", str(out)]) == 2
     assert main(["export", str(tmp_path / "none.npz"), "-o", str(out)]) == 2
     assert main(["export", str(npz), "-o", str(tmp_path / "no" / "dir.onnx")]) == 2
+    assert main(["export", str(npz), "-o", str(tmp_path / "model.txt")]) == 2  # was written
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 3 and all(e.startswith("faceclean: ") for e in err)
-    assert not out.exists()
+    assert len(err) == 4 and all(e.startswith("faceclean: ") for e in err)
+    assert "an ONNX graph is a .onnx file" in err[-1]
+    assert not out.exists() and not (tmp_path / "model.txt").exists()
     from faceclean.learned.onnx import OnnxLearned
 
     with pytest.raises(FacecleanError, match="not a loadable ONNX model"):

@@ -30,6 +30,8 @@ def run(args: argparse.Namespace) -> int:
 
     if Path(args.model).resolve() == Path(args.output).resolve():
         raise FacecleanError("OUT must not be the model file")
+    if Path(args.output).suffix.lower() != ".onnx":  # every reader of ONNX looks for it
+        raise FacecleanError(f"-o {Path(args.output).name}: an ONNX graph is a .onnx file")
     check_writable(args.output)
     done = verb(args.output)
     facts = export(args.model, args.output)

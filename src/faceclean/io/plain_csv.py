@@ -114,10 +114,11 @@ def parse_rows(
                 f"{label}: row {k + 1} has {len(row)} fields, the header has {n_fields}"
             )
     table = np.array(rows, dtype=bytes).reshape(len(rows), n_fields)
+    cells = np.where(np.char.strip(table) == b"", b"nan", table)
     try:
-        numbers = np.where(np.char.strip(table) == b"", b"nan", table).astype(np.float64)
-    except ValueError as e:
-        raise FacecleanError(f"{label}: a value is not a number ({e})") from None
+        numbers = cells.astype(np.float64)
+    except ValueError:  # numpy's words name its own types: say the cell
+        raise FacecleanError(f"{label}: {_not_a_number(cells, done)}") from None
     times = numbers[:, t_col]
     source.check_times(times, label, first=done)
     keep = [j for j in range(n_fields) if j != t_col]
@@ -155,3 +156,15 @@ def rows_text(times: np.ndarray, values: np.ndarray) -> bytes:
         cells = ["" if v != v else repr(v) for v in row]  # v != v: NaN
         out.append(",".join([repr(t), *cells]) + "\n")
     return "".join(out).encode("utf-8")
+
+
+def _not_a_number(cells: np.ndarray, done: int) -> str:
+    """Where the first cell of ``cells`` (R, F) bytes that is not a number is."""
+    for k, row in enumerate(cells):
+        for j, c in enumerate(row):
+            try:
+                float(c)
+            except ValueError:
+                text = c.decode("utf-8", "backslashreplace")[:40]
+                return f"row {done + k + 1}, field {j + 1}: {text!r} is not a number"
+    return "a value is not a number"
