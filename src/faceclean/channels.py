@@ -82,6 +82,17 @@ def channel_key(name: str) -> str:
     return canonical(name) or name.strip()
 
 
+def repeated(names: Sequence[str]) -> str | None:
+    """The first of ``names`` whose channel another of them names too (``jawOpen`` and
+    ``JawOpen``: one channel), or None: a take, a header or a model names each once."""
+    first: dict[str, str] = {}
+    for n in names:
+        if (k := channel_key(n)) in first:
+            return first[k]
+        first[k] = n
+    return None
+
+
 def pose_name(name: str) -> str | None:
     """The Live Link spelling (``HeadYaw``) of a head/eye angle name in any case, or None."""
     return _POSE_LOWER.get(name.strip().lower())

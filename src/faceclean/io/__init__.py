@@ -17,7 +17,7 @@ from types import ModuleType
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import channel_key
+from faceclean.channels import repeated
 from faceclean.errors import FacecleanError
 from faceclean.io import paths, source  # noqa: F401 (io.paths: the output policy)
 from faceclean.io.atomic import atomic_open, writable
@@ -112,9 +112,7 @@ def checked(anim: Animation, label: str) -> Animation:
         raise FacecleanError(f"{label}: frame {bad[0]} has no finite time")
     if anim.values.dtype != np.float64 or anim.values.ndim != 2:
         raise FacecleanError(f"{label}: values are not a (frames, channels) table")
-    keys = [channel_key(n) for n in anim.names]  # what every command matches channels by
-    if len(set(keys)) < len(keys):
-        twice = next(n for n, k in zip(anim.names, keys, strict=True) if keys.count(k) > 1)
+    if (twice := repeated(anim.names)) is not None:  # every command matches by channel
         raise FacecleanError(f"{label}: channel {twice!r} is given twice: name each once")
     pose, pose_names = anim.meta.get("pose"), tuple(anim.meta.get("pose_names", ()))
     if pose is not None:  # passthrough columns: (N, P), one name per column

@@ -21,7 +21,7 @@ from typing import BinaryIO
 import numpy as np
 
 from faceclean.animation import Animation
-from faceclean.channels import channel_key, pose_name
+from faceclean.channels import pose_name, repeated
 from faceclean.errors import FacecleanError
 from faceclean.io import source
 
@@ -94,9 +94,7 @@ def parse_header(line: bytes, label: str) -> tuple[int, tuple[str, ...]]:
     header = [c.strip().strip(b'"').decode("utf-8") for c in cells]
     t_col = [h.lower() for h in header].index("time")
     names = tuple(h for j, h in enumerate(header) if j != t_col)
-    keys = [channel_key(n) for n in names]
-    if len(set(keys)) < len(keys):
-        twice = next(n for n, k in zip(names, keys, strict=True) if keys.count(k) > 1)
+    if (twice := repeated(names)) is not None:
         raise FacecleanError(f"{label}: channel {twice!r} is given twice: name each once")
     return t_col, names
 

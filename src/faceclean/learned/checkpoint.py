@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import channel_key
+from faceclean.channels import repeated
 from faceclean.errors import FacecleanError
 from faceclean.learned import formats
 from faceclean.learned.formats import LSTM as FORMAT
@@ -282,9 +282,7 @@ def read_config(
     for n in names:
         if not isinstance(n, str) or not n.isprintable():
             raise FacecleanError(f"{label}: config channel {str(n)[:40]!r} is not a name")
-    keys = [channel_key(n) for n in names]  # one name 52 times cleaned nothing, unsaid
-    if len(set(keys)) < len(keys):
-        twice = next(n for n, k in zip(names, keys, strict=True) if keys.count(k) > 1)
+    if (twice := repeated(names)) is not None:  # one name 52 times cleaned nothing, unsaid
         raise FacecleanError(f"{label}: config channel {twice[:40]!r} is listed twice")
     for key in ints:
         v, (lo, hi) = config.get(key), _INTS[key]
