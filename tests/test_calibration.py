@@ -332,6 +332,31 @@ def test_a_take_in_percent_is_refused_with_the_fix_then_cleaned_with_scale(tmp_p
     np.testing.assert_allclose(io.load(out).arkit()[0], 1.0, atol=1e-6)
 
 
+def test_calibrate_refuses_a_take_in_percent_and_takes_it_with_scale(tmp_path, capsys):
+    # calibrate wrote offsets of 3.6 and gains of 0.04 for a take in percent, unsaid
+    rng = np.random.default_rng(3)
+    t = np.arange(300) / 60.0
+    x = np.clip(0.05 + 0.5 * np.abs(np.sin(np.outer(t, 1 + rng.random(52)))), 0, 1)
+    take, pct = tmp_path / "take.csv", tmp_path / "pct.csv"
+    io.save(Animation(t, x, ARKIT52), take)
+    io.save(Animation(t, 100.0 * x, ARKIT52), pct)
+    out = tmp_path / "c.json"
+    assert main(["calibrate", str(pct), "-o", str(out), "--rom"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "add --scale 0.01" in err[0] and not out.exists(), err
+    assert main(["calibrate", str(pct), "-o", str(out), "--rom", "--scale", "0.01"]) == 0
+    assert main(["calibrate", str(take), "-o", str(tmp_path / "plain.json"), "--rom"]) == 0
+    got, want = (
+        Adjust.load(out).levels(ARKIT52),
+        Adjust.load(tmp_path / "plain.json").levels(ARKIT52),
+    )
+    for key in ("gain", "offset", "curve"):
+        np.testing.assert_allclose(getattr(got, key), getattr(want, key), rtol=1e-9, atol=1e-12)
+    capsys.readouterr()
+    assert main(["calibrate", "--guided", str(pct), "-o", str(out), "--scale", "0.01"]) == 2
+    assert "--scale is the plain calibration's" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("seconds", ["inf", "1e400", "nan", "0", "-1", "4000"])
 def test_a_neutral_hold_out_of_range_is_refused_in_one_line(tmp_path, capsys, seconds):
     # third red team: --neutral inf ran, taking the whole take as the neutral, unsaid

@@ -90,6 +90,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"length of the neutral hold at the start of the take (default {NEUTRAL_S:g})",
     )
     p.add_argument(
+        "--scale",
+        type=float,
+        metavar="FACTOR",
+        help="multiply the blendshape values by FACTOR first (0.01: a take in percent), as "
+        "clean --scale does: clean with the same --scale; without it a take far outside "
+        "[0, 1] is refused",
+    )
+    p.add_argument(
         "--rom",
         action="store_true",
         help="after the neutral hold the take is a range of motion (every expression as far "
@@ -105,16 +113,18 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from faceclean import io
+    from faceclean.adjust import Adjust, check_range
     from faceclean.calibration import MAX_GAIN, REPORT_GAIN, calibrate, high_gains
     from faceclean.errors import FacecleanError
 
     given = [o for o, on in (("-o", args.output), ("--guided", args.guided),
                              ("--partial", args.partial), ("--rom", args.rom),
-                             ("--neutral", args.neutral is not None)) if on]  # fmt: skip
+                             ("--neutral", args.neutral is not None),
+                             ("--scale", args.scale is not None)) if on]  # fmt: skip
     if args.print_script and given:  # an option that does nothing here is said, not ignored
         raise FacecleanError(f"--print-script prints the script to the screen: give it without "
                              f"{given[0]}")  # fmt: skip
-    plain = [o for o in ("--rom", "--neutral") if args.guided and o in given]
+    plain = [o for o in ("--rom", "--neutral", "--scale") if args.guided and o in given]
     if plain:
         raise FacecleanError(f"{plain[0]} is the plain calibration's: --guided finds the "
                              "script's own neutral hold and tops")  # fmt: skip
@@ -146,6 +156,9 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
     io.atomic.check_writable(out)
     anim = io.load(args.take)
+    check_range(anim.values, anim.names, Path(args.take).name, args.scale)  # as clean's
+    if args.scale is not None:  # the levels of the values as clean --scale gives them
+        anim = anim.with_values(Adjust().scaled(args.scale).apply(anim.values, anim.names))
     done = io.paths.verb(out)  # "replaced": said, as the file goes
     neutral = NEUTRAL_S if args.neutral is None else args.neutral
     adjust = calibrate(anim, neutral, take=Path(args.take).name, rom=args.rom, tracker=args.tracker)
