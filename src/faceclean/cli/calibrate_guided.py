@@ -46,10 +46,12 @@ def run_guided(args: argparse.Namespace) -> int:
     for line in report(result):
         print(line)
     why = result.alignment.shortfall()
+    fits = ("the prompts seen" if result.alignment.follows
+            else "its neutral holds alone (the face's rest reading)")  # fmt: skip
     if why is not None and not args.partial:
-        raise FacecleanError(f"{why}; nothing written (--partial writes from the prompts seen)")
+        raise FacecleanError(f"{why}; nothing written (--partial writes from {fits})")
     if why is not None:
-        print(f"warning: {why}; written from the prompts seen (--partial)")
+        print(f"warning: {why}; written from {fits} (--partial)")
     done = io.paths.verb(out)
     result.adjust.save(out)
     print(f"{done} {out} (tracker {result.tracker}; use it with --calibration {out.name}"

@@ -95,6 +95,12 @@ class Alignment:
     def placed(self) -> int:
         return sum(s.placed for s in self.segments)
 
+    def rests_only(self) -> Alignment:
+        """This alignment with only its neutral holds seen (a fit on the face's rests)."""
+        keep = tuple(g if not g.prompt.channels else replace(g, seen=False)
+                     for g in self.segments)  # fmt: skip
+        return replace(self, segments=keep)
+
     @property
     def follows(self) -> bool:
         """At least FOLLOW of the prompts the tracker can show were seen."""
