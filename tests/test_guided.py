@@ -875,7 +875,7 @@ def test_brows_that_read_as_they_are_are_taken_from_their_own_rise(tmp_path, cap
 def test_a_take_that_does_not_follow_writes_its_rests_alone_with_partial(tmp_path, capsys):
     # A MediaPipe take performed at random: some prompts are "seen" by chance. --partial
     # writes the face's rest reading alone, no prompt's level: fitted on the prompts seen
-    # by chance, two faces of ten came out 1.08x / 1.18x worse than uncalibrated
+    # by chance, three faces of fifteen came out 1.07-1.18x worse than uncalibrated
     # (docs/CALIBRATION.md, "A take that does not follow: its rests alone").
     from faceclean import io
     from faceclean.datasets.performer import perform

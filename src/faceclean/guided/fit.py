@@ -235,8 +235,8 @@ def guided(
     y, present, label, cleaner = response(anim, tracker)
     found = al.align(anim.times, x, script, tracker)  # on what the tracker itself read
     # A take that does not follow the script (--partial) is fitted on its rests alone: a
-    # random take's prompts "seen" by chance fitted D and lifted blinks that made two
-    # faces of ten 1.08x / 1.18x worse than uncalibrated; their rests alone, 0.83-0.85x
+    # random take's prompts "seen" by chance fitted a D that made three faces of fifteen
+    # 1.07-1.18x worse than uncalibrated; their rests alone, 0.76-0.85x
     # (docs/CALIBRATION.md, "A take that does not follow: its rests alone").
     alignment = found if found.follows else found.rests_only()
     t = anim.times
