@@ -352,9 +352,6 @@ def test_calibrate_refuses_a_take_in_percent_and_takes_it_with_scale(tmp_path, c
     )
     for key in ("gain", "offset", "curve"):
         np.testing.assert_allclose(getattr(got, key), getattr(want, key), rtol=1e-9, atol=1e-12)
-    capsys.readouterr()
-    assert main(["calibrate", "--guided", str(pct), "-o", str(out), "--scale", "0.01"]) == 2
-    assert "--scale is the plain calibration's" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("seconds", ["inf", "1e400", "nan", "0", "-1", "4000"])

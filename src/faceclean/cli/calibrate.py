@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     if args.print_script and given:  # an option that does nothing here is said, not ignored
         raise FacecleanError(f"--print-script prints the script to the screen: give it without "
                              f"{given[0]}")  # fmt: skip
-    plain = [o for o in ("--rom", "--neutral", "--scale") if args.guided and o in given]
+    plain = [o for o in ("--rom", "--neutral") if args.guided and o in given]
     if plain:
         raise FacecleanError(f"{plain[0]} is the plain calibration's: --guided finds the "
                              "script's own neutral hold and tops")  # fmt: skip

@@ -20,6 +20,7 @@ TOP_CHANGES = 6  # the adaptation's largest changes printed
 
 def run_guided(args: argparse.Namespace) -> int:
     from faceclean import io
+    from faceclean.adjust import Adjust, check_range
     from faceclean.errors import FacecleanError
     from faceclean.guided.fit import guided
     from faceclean.guided.script import load
@@ -42,12 +43,14 @@ def run_guided(args: argparse.Namespace) -> int:
             raise FacecleanError(f"-o {out.name} is the take itself: give another file name")
         io.atomic.check_writable(out)
         anim, label = io.load(args.take), Path(args.take).name
+    check_range(anim.values, anim.names, label, args.scale)  # as clean's and the plain one's
+    if args.scale is not None:  # fitted on the values clean --scale then hands the cleaner
+        anim = anim.with_values(Adjust().scaled(args.scale).apply(anim.values, anim.names))
     result = guided(anim, args.tracker, script, take=label)
     for line in report(result):
         print(line)
     why = result.alignment.shortfall()
-    fits = ("the prompts seen" if result.alignment.follows
-            else "its neutral holds alone (the face's rest reading)")  # fmt: skip
+    fits = "the prompts seen" if result.alignment.follows else "its neutral holds alone"
     if why is not None and not args.partial:
         raise FacecleanError(f"{why}; nothing written (--partial writes from {fits})")
     if why is not None:

@@ -83,7 +83,7 @@ def calibration(args: argparse.Namespace):
     if not path:
         return None
     adjust = Adjust.load(path)
-    made_for = getattr(adjust.adaptation, "tracker", None)
+    made_for = getattr(adjust.adaptation, "tracker", None) or adjust.facts.get("tracker")
     tracker = getattr(args, "tracker", None)
     if made_for is not None and tracker is not None and tracker != made_for:
         from faceclean.errors import FacecleanError

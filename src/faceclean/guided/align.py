@@ -57,6 +57,7 @@ MIN_HOLD = 5  # grid points of the neutral hold needed to measure its rest and n
 CORR = 0.5
 FOLLOW = 0.6  # fraction of prompts seen for the take to follow the script
 MIN_SPEED, MAX_SPEED = 1 / 3, 2.0  # the take's speed against the script's (the steps')
+SHORT = 0.9  # a take with less face than this of the script's length is said to be short
 MAX_LOST = 0.3  # a prompt whose segment lost more of its frames than this is "face lost"
 _MOUTH = tuple(ARKIT52.index(n) for n in (*GROUPS["mouth"], *GROUPS["jaw"]))
 
@@ -86,6 +87,7 @@ class Alignment:
     segments: tuple[Segment, ...]
     cost: float  # mean C along the path
     tracker: str = "arkit"  # whose readings (guided/reading.py)
+    short: tuple[float, float] | None = None  # s: the take's face and the script, if SHORT
 
     @property
     def seen(self) -> int:
@@ -103,24 +105,30 @@ class Alignment:
 
     @property
     def follows(self) -> bool:
-        """At least FOLLOW of the prompts the tracker can show were seen."""
+        """At least FOLLOW of the prompts the tracker can show were seen, one of them more
+        than a neutral hold."""
         shown = [g for g in self.segments if g.readable]
-        return sum(g.seen for g in shown) >= FOLLOW * len(shown)
+        asked = any(g.seen and g.prompt.channels for g in shown)  # not its neutral holds alone
+        return asked and sum(g.seen for g in shown) >= FOLLOW * len(shown)
 
     def shortfall(self) -> str | None:
         """Why the take falls short of the script, in one line (None: every prompt seen or
         placed by timing)."""
         missing = [g for g in self.segments if not g.seen and not g.placed]
+        said = None
         if not self.follows:
             shown = [g for g in self.segments if g.readable]
             hidden = len(self.segments) - len(shown)
             aside = f"; {hidden} more that {reading.label(self.tracker)} does not read"
-            return (f"the take did not follow the script ({sum(g.seen for g in shown)} of "
+            said = (f"the take did not follow the script ({sum(g.seen for g in shown)} of "
                     f"{len(shown)} prompts seen{aside if hidden else ''})")  # fmt: skip
-        if missing:
+        elif missing:
             names = ", ".join(f"{g.prompt.id} ({g.why})" for g in missing)
-            return f"{len(missing)} prompt{'s' * (len(missing) > 1)} not seen: {names}"
-        return None
+            said = f"{len(missing)} prompt{'s' * (len(missing) > 1)} not seen: {names}"
+        if said and self.short:  # the likelier reason first
+            said = (f"the take ({self.short[0]:.1f} s of face) is shorter than the script "
+                    f"({self.short[1]:.1f} s): {said}")  # fmt: skip
+        return said
 
     def script_time(self, t: np.ndarray) -> np.ndarray:
         """Script time (s) of take times ``t`` (NaN outside the aligned span)."""
@@ -144,10 +152,10 @@ def align(
     if np.any(np.diff(times[np.isfinite(times)]) <= 0):
         raise FacecleanError("guided calibration: the take's times do not increase")
     span = times[ok][-1] - times[ok][0]
-    if span < 0.9 * script.seconds:
+    if span < script.seconds / MAX_SPEED:  # no path fits the script in it
         raise FacecleanError(
             f"guided calibration: the take ({span:.1f} s of face) is shorter than the script "
-            f"({script.seconds:.1f} s): record the whole script"
+            f"({script.seconds:.1f} s) at twice its pace: record the whole script"
         )
     grid = np.arange(times[ok][0], times[ok][-1] + 1e-9, 1.0 / RATE)  # (J,) s
     x = np.nan_to_num(readings[ok])
@@ -186,7 +194,9 @@ def align(
     take_s, segs = _place(script_s, take_s, segs, reading.label(tracker))
     keep = np.r_[True, np.diff(take_s) > 0]  # one script time per take time: increasing
     cost_mean = float(cost[path_i, path_j].mean())
-    return Alignment(script_s[keep], take_s[keep], tuple(segs), cost_mean, tracker)
+    short = span < SHORT * script.seconds
+    return Alignment(script_s[keep], take_s[keep], tuple(segs), cost_mean, tracker,
+                     (span, script.seconds) if short else None)  # fmt: skip
 
 
 def _place(

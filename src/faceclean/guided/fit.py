@@ -242,9 +242,7 @@ def guided(
     t = anim.times
     s = alignment.script_time(t)  # (N,) s, NaN outside the aligned span
     target = script.weights(np.nan_to_num(s))  # (N, 52)
-    weight = _frame_weights(alignment, t, s) * np.isfinite(y).all(axis=1, where=present)
-    if not found.follows:  # a frame between two segments can map inside a prompt
-        weight *= target.max(axis=1) == 0
+    weight = _frame_weights(alignment, t, s, target) * np.isfinite(y).all(axis=1, where=present)
     facts = {
         "take": take or "take",
         "frames": int(anim.valid.sum()),
@@ -281,10 +279,12 @@ def guided(
     return Guided(adjust, found, before, after, aims, tracker)
 
 
-def _frame_weights(alignment: al.Alignment, t: np.ndarray, s: np.ndarray) -> np.ndarray:
+def _frame_weights(alignment: al.Alignment, t: np.ndarray, s: np.ndarray,
+                   target: np.ndarray) -> np.ndarray:  # fmt: skip
     """(N,) each frame's weight in the fit: its prompt's weight if seen, else 0; a rest
-    between two seen prompts counts 1."""
-    w = np.where(np.isfinite(s), 1.0, 0.0)
+    between two segments counts 1 (a frame there whose script time falls in a prompt, 0:
+    it would fit a prompt not seen)."""
+    w = np.where(np.isfinite(s) & (target.max(axis=1) == 0), 1.0, 0.0)
     for g in alignment.segments:
         inside = (t >= g.t0) & (t <= g.t1)
         w[inside] = g.prompt.weight if g.seen else 0.0
