@@ -189,6 +189,7 @@ def test_a_take_that_ignored_the_script_is_shown_and_applied_only_when_asked(bro
         tab.until("window.faceclean.guided || window.faceclean.errors.length")
         done = tab.js("window.faceclean.guided")
         assert not done["applied"] and "did not follow the script" in done["problem"]
+        assert done["problem"].endswith("apply anyway fits its neutral holds alone")
         assert tab.js("window.faceclean.state.calibration") is None
         assert "did not follow the script" in tab.page.inner_text("#fc-guided-summary")
         tab.page.click("#fc-guided-apply")  # --partial's rule: only when asked

@@ -257,10 +257,14 @@ class Panel:
                 "why": g.why, "before": r.before.get(pid), "after": r.after.get(pid),
                 "aim": r.target.get(pid),
             })  # fmt: skip
+        problem = a.shortfall()
+        if problem is not None:  # what *apply anyway* applies, as --partial says it
+            fits = "the prompts seen" if a.follows else "its neutral holds alone"
+            problem += f"; apply anyway fits {fits}"
         return {
             "phase": "done", "take": self.label, "tracker": r.tracker,
             "frames": int(r.adjust.facts.get("frames", 0)), "seen": a.seen,
-            "prompts": prompts, "channels": changes(r.adjust), "problem": a.shortfall(),
+            "prompts": prompts, "channels": changes(r.adjust), "problem": problem,
             "applied": self.applied, "undo": self.before is not None,
         }  # fmt: skip
 
