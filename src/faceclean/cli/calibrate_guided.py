@@ -50,7 +50,7 @@ def run_guided(args: argparse.Namespace) -> int:
     for line in report(result):
         print(line)
     why = result.alignment.shortfall()
-    fits = "the prompts seen" if result.alignment.follows else "its neutral holds alone"
+    fits = result.alignment.fitted_from
     if why is not None and not args.partial:
         raise FacecleanError(f"{why}; nothing written (--partial writes from {fits})")
     if why is not None:

@@ -111,6 +111,11 @@ class Alignment:
         asked = any(g.seen and g.prompt.channels for g in shown)  # not its neutral holds alone
         return asked and sum(g.seen for g in shown) >= FOLLOW * len(shown)
 
+    @property
+    def fitted_from(self) -> str:
+        """What a calibration from this take is fitted on (guided/fit.py ``guided``)."""
+        return "the prompts seen" if self.follows else "its neutral holds alone"
+
     def shortfall(self) -> str | None:
         """Why the take falls short of the script, in one line (None: every prompt seen or
         placed by timing)."""

@@ -259,8 +259,7 @@ class Panel:
             })  # fmt: skip
         problem = a.shortfall()
         if problem is not None:  # what *apply anyway* applies, as --partial says it
-            fits = "the prompts seen" if a.follows else "its neutral holds alone"
-            problem += f"; apply anyway fits {fits}"
+            problem += f"; apply anyway fits {a.fitted_from}"
         return {
             "phase": "done", "take": self.label, "tracker": r.tracker,
             "frames": int(r.adjust.facts.get("frames", 0)), "seen": a.seen,
