@@ -244,6 +244,18 @@ def check_cleaner(adaptation: Adaptation | None, words: str | None, where: str) 
         )
 
 
+def check_tracker(adjust: Any, tracker: str | None, where: str) -> None:
+    """Refuses a calibration (``adjust``) made for another tracker than ``tracker``: its
+    adaptation's, else its levels' recorded one (a file from before either was recorded
+    is taken as it is)."""
+    made_for = getattr(adjust.adaptation, "tracker", None) or adjust.facts.get("tracker")
+    if made_for is not None and tracker is not None and tracker != made_for:
+        raise FacecleanError(
+            f"{where}: a calibration for tracker {made_for}, not {tracker}: give --tracker "
+            f"{made_for}, or calibrate again with --tracker {tracker}"
+        )
+
+
 def unread(adjust: Any, cleaner: Any) -> str:
     """What a calibration (``adjust``) that holds nothing but a rest reading would change
     for ``cleaner`` when the cleaner reads none: "" where it changes something, else why

@@ -330,3 +330,18 @@ def test_a_file_the_page_writes_over_is_said_replaced(server, tmp_path):
             ws.send(json.dumps({"type": "export", "path": str(tmp_path / name), "seq": 50 + k}))
             done = _said(ws, 50 + k)
             assert done["type"] == "exported" and done["replaced"] == (k > 0), done
+
+
+def test_levels_made_for_another_tracker_are_refused_on_load(server, tmp_path):
+    """The page's load of levels checks the file's tracker as ``--calibration`` does: a
+    MediaPipe calibration on this ARKit page is one line, the state kept (fifth red team:
+    only the command line checked it)."""
+    from faceclean.adjust import Adjust
+
+    made = tmp_path / "mp.json"
+    Adjust((), {"tracker": "mediapipe"}).save(made)
+    with _open(server) as ws:
+        ws.send(json.dumps({"type": "load", "what": "levels", "path": str(made), "seq": 61}))
+        got = _said(ws, 61)
+    assert got["type"] == "error" and got["for"] == "load", got
+    assert "a calibration for tracker mediapipe, not arkit" in got["message"]

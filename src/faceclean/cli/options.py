@@ -82,18 +82,10 @@ def calibration(args: argparse.Namespace):
     path = getattr(args, "calibration", None)
     if not path:
         return None
+    from faceclean.adaptation import check_cleaner, check_tracker
+
     adjust = Adjust.load(path)
-    made_for = getattr(adjust.adaptation, "tracker", None) or adjust.facts.get("tracker")
-    tracker = getattr(args, "tracker", None)
-    if made_for is not None and tracker is not None and tracker != made_for:
-        from faceclean.errors import FacecleanError
-
-        raise FacecleanError(
-            f"--calibration {path}: a calibration for tracker {made_for}, not "
-            f"{tracker}: give --tracker {made_for}, or calibrate again with --tracker {tracker}"
-        )
-    from faceclean.adaptation import check_cleaner
-
+    check_tracker(adjust, getattr(args, "tracker", None), f"--calibration {path}")
     check_cleaner(adjust.adaptation, words(args), f"--calibration {path}")  # its cleaner's own
     return adjust
 

@@ -19,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from faceclean.adaptation import check_tracker
 from faceclean.adjust import Adjust
-from faceclean.channels import ARKIT52, GROUPS, TRACKERS
+from faceclean.channels import ARKIT52, DEFAULT_TRACKER, GROUPS, TRACKERS
 from faceclean.errors import FacecleanError
 from faceclean.io.paths import verb
 from faceclean.ui.server import Client
@@ -143,6 +144,7 @@ class Base:
             self.use(self.tuning.changed(path, [], self.tuning.tracker), seq(m), "load")
         else:
             adjust = Adjust.load(path)
+            check_tracker(adjust, self.tuning.tracker or DEFAULT_TRACKER, path)  # as --calibration
             self.use(self.tuning.calibrated(adjust, path).with_choice(), seq(m), "load")
 
     def on_uncalibrate(self, client: Client, m: dict[str, Any]) -> None:
