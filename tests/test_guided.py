@@ -981,3 +981,24 @@ def test_a_take_in_percent_is_refused_and_calibrates_with_scale(tmp_path, capsys
         assert a.matrix.keys() == b.matrix.keys() and a.rest.keys() == b.rest.keys()
         np.testing.assert_allclose([a.rest[k] for k in a.rest], [b.rest[k] for k in a.rest],
                                    atol=1e-6)  # fmt: skip
+
+
+def test_a_take_without_the_eyes_columns_places_their_prompts_and_calibrates_the_rest(
+    tmp_path, capsys
+):
+    # fifth red team: a take with no eye columns at all had its nine eye prompts "not
+    # performed"; a prompt whose channels the take has none of is placed by timing, as one
+    # the tracker cannot read, and says so
+    from faceclean import io
+
+    tau, s = performed()
+    x = arkit_face(SCRIPT.weights(s))
+    keep = [n for n in ARKIT52 if not n.startswith("eye")]
+    take, out = tmp_path / "noeyes.csv", tmp_path / "c.json"
+    io.save(Animation(tau, x[:, [COL[n] for n in keep]], keep), take, fmt="csv")
+    assert main(["calibrate", "--guided", str(take), "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "placed by timing (the take has no eyeBlinkLeft, eyeBlinkRight)" in printed
+    assert "not performed" not in printed
+    rules = json.loads(out.read_text())["calibration"]["channels"]
+    assert rules["jawOpen"]["gain"] > 1.0  # the rest of the face calibrated

@@ -88,6 +88,7 @@ class Alignment:
     cost: float  # mean C along the path
     tracker: str = "arkit"  # whose readings (guided/reading.py)
     short: tuple[float, float] | None = None  # s: the take's face and the script, if SHORT
+    absent: tuple[str, ...] = ()  # channels the take has no value of (as if unread)
 
     @property
     def seen(self) -> int:
@@ -125,6 +126,7 @@ class Alignment:
             shown = [g for g in self.segments if g.readable]
             hidden = len(self.segments) - len(shown)
             aside = f"; {hidden} more that {reading.label(self.tracker)} does not read"
+            aside += " or the take has no channels of" if self.absent else ""
             said = (f"the take did not follow the script ({sum(g.seen for g in shown)} of "
                     f"{len(shown)} prompts seen{aside if hidden else ''})")  # fmt: skip
         elif missing:
@@ -168,7 +170,9 @@ def align(
     lost = _lost(grid, times[ok])  # (J,) bool: no face within a frame's reach
     st = np.arange(int(script.seconds * RATE) + 1) / RATE  # (I,) s
     w = script.weights(st)
-    unread = reading.unread(tracker)
+    have = np.isfinite(readings[ok]).any(axis=0)  # (52,) the take has a value of it
+    absent = {n for n, c in zip(ARKIT52, have, strict=True) if not c}  # as if not read
+    unread = set(reading.unread(tracker)) | absent
     shows = np.array([n not in unread for n in ARKIT52])  # (52,) the tracker reads it
     moved = np.flatnonzero(w.max(axis=0) > 0)
     if not len(moved):  # every target 0: nothing to find the prompts by
@@ -196,19 +200,21 @@ def align(
         g = _judge(p, float(t0), float(t1), grid, r, rest, hold, lost, shows, (lo, hi))
         readable = not p.channels or bool(p.keys) or not set(p.channels) <= unread
         segs.append(replace(g, readable=readable))
-    take_s, segs = _place(script_s, take_s, segs, reading.label(tracker))
+    take_s, segs = _place(script_s, take_s, segs, reading.label(tracker), absent)
     keep = np.r_[True, np.diff(take_s) > 0]  # one script time per take time: increasing
     cost_mean = float(cost[path_i, path_j].mean())
     short = span < SHORT * script.seconds
     return Alignment(script_s[keep], take_s[keep], tuple(segs), cost_mean, tracker,
-                     (span, script.seconds) if short else None)  # fmt: skip
+                     (span, script.seconds) if short else None, tuple(sorted(absent)))  # fmt: skip
 
 
 def _place(
-    script_s: np.ndarray, take_s: np.ndarray, segs: list[Segment], tracker: str
-) -> tuple[np.ndarray, list[Segment]]:
+    script_s: np.ndarray, take_s: np.ndarray, segs: list[Segment], tracker: str,
+    absent: set[str],
+) -> tuple[np.ndarray, list[Segment]]:  # fmt: skip
     """The path (take times of ``script_s``) and segments with each prompt the tracker
-    cannot show, and did not, placed at an even pace between its neighbours."""
+    cannot show (or whose channels the take has none of: ``absent``), and did not, placed
+    at an even pace between its neighbours."""
     placed = [g.placed for g in segs]
     span = np.zeros(len(script_s), bool)  # (P,) path points to place by timing
     for k in np.flatnonzero(placed):
@@ -224,7 +230,10 @@ def _place(
     for g in segs:
         if g.placed:
             t0, t1 = np.interp([g.prompt.start, g.prompt.end], script_s, take_s)
-            why = f"placed by timing ({tracker} does not read {', '.join(g.prompt.channels)})"
+            names = ", ".join(g.prompt.channels)
+            why = (f"placed by timing (the take has no {names})"
+                   if set(g.prompt.channels) <= absent
+                   else f"placed by timing ({tracker} does not read {names})")  # fmt: skip
             g = replace(g, t0=float(t0), t1=float(t1), why=why)
         out.append(g)
     return take_s, out

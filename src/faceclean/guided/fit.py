@@ -233,7 +233,7 @@ def guided(
     if not present.any():
         raise FacecleanError("guided calibration: the take has no ARKit blendshape channels")
     y, present, label, cleaner = response(anim, tracker)
-    found = al.align(anim.times, x, script, tracker)  # on what the tracker itself read
+    found = al.align(anim.times, np.where(present, x, np.nan), script, tracker)  # as read
     # A take that does not follow the script (--partial) is fitted on its rests alone: a
     # random take's prompts "seen" by chance fitted a D that made three faces of fifteen
     # 1.07-1.18x worse than uncalibrated; their rests alone, 0.76-0.85x
