@@ -1002,3 +1002,34 @@ def test_a_take_without_the_eyes_columns_places_their_prompts_and_calibrates_the
     assert "not performed" not in printed
     rules = json.loads(out.read_text())["calibration"]["channels"]
     assert rules["jawOpen"]["gain"] > 1.0  # the rest of the face calibrated
+
+
+def test_plot_and_report_clean_with_a_guided_calibration_as_clean_does(tmp_path):
+    # second red team of this session: plot and report handed the map a MediaPipe
+    # calibration's levels but neither its rest reading nor its correction, and said
+    # "levels calibrated"; a --compare cleaner the correction was not fitted after gets none
+    from faceclean import io
+    from faceclean.cli import parser
+    from faceclean.cli.plot import comparison_from
+    from faceclean.trackers.mediapipe import NAMES
+
+    tau, s = performed()
+    x = arkit_face(SCRIPT.weights(s))[:, [COL[n] for n in NAMES]]
+    take, calib, out = tmp_path / "take.csv", tmp_path / "c.json", tmp_path / "out.csv"
+    io.save(Animation(tau, x, NAMES), take, fmt="csv")
+    assert main(["calibrate", "--guided", str(take), "-o", str(calib), "--tracker",
+                 "mediapipe"]) == 0  # fmt: skip
+    assert Adjust.load(calib).adaptation.matrix  # a correction to apply
+    assert main(["clean", str(take), "-o", str(out), "--tracker", "mediapipe",
+                 "--calibration", str(calib)]) == 0  # fmt: skip
+    args = parser().parse_args(["plot", str(take), "-o", str(tmp_path / "p.svg"), "--tracker",
+                                "mediapipe", "--calibration", str(calib), "--compare",
+                                "one-euro"])  # fmt: skip
+    got = comparison_from(args)
+    main_out = got.outputs[got.main]
+    np.testing.assert_allclose(main_out.values, io.load(out).arkit(NAMES)[0], atol=1e-9)
+    plain = comparison_from(parser().parse_args(["plot", str(take), "-o", "p.svg",
+                                                 "--compare", "one-euro"]))  # fmt: skip
+    # one-euro: no levels in a guided MediaPipe file, and no correction after it
+    np.testing.assert_array_equal(got.outputs["one-euro"].values,
+                                  plain.outputs["one-euro"].values)  # fmt: skip

@@ -49,17 +49,41 @@ class Comparison:
         return self.input.times - self.input.times[0]
 
 
-def clean_with(spec: str | Choice, anim: Animation, adjust: Adjust | None = None) -> Animation:
+def clean_with(spec: str | Choice, anim: Animation, adjust: Adjust | None = None,
+               correct: bool = True) -> Animation:  # fmt: skip
     """The output on ``anim`` of the cleaner ``spec`` names (faceclean.resolve: words, and
     settings inline as ``WORDS:KEY=VALUE,KEY=VALUE``), after the level mapping ``adjust``
-    with the spec's own level settings on top; its head/eye angles (``meta["pose"]``) by the
-    rotation filter."""
+    with the spec's own level settings on top, as ``clean --calibration`` gives it: the
+    calibration's rest reading handed to the cleaner and, if ``correct``, its correction
+    after it (faceclean.adaptation); its head/eye angles (``meta["pose"]``) by the rotation
+    filter."""
+    from faceclean.adaptation import attach
+
     choice = resolve(spec) if isinstance(spec, str) else spec
+    adaptation = adjust.adaptation if adjust is not None else None
     if choice.levels:
         adjust = (adjust or Adjust()).merged(choice.adjust(anim.names))
     if adjust is not None and not adjust.is_identity:
         anim = anim.with_values(adjust.apply(anim.values, anim.names))
-    return clean_pose(choice.build(anim.names).clean(anim), choice.build_pose)
+    cleaner = choice.build(anim.names)
+    attach(cleaner, adaptation)
+    out = cleaner.clean(anim)
+    if adaptation is not None and correct:
+        out = out.with_values(adaptation.apply(out.values, out.names))
+    return clean_pose(out, choice.build_pose)
+
+
+def _corrects(adjust: Adjust | None, spec: str | Choice) -> bool:
+    """Whether ``adjust``'s correction belongs after the cleaner ``spec`` names (one
+    fitted after another cleaner is left off that one: ``clean`` refuses the pair)."""
+    from faceclean.adaptation import check_cleaner
+
+    words = spec if isinstance(spec, str) else spec.source
+    try:
+        check_cleaner(adjust.adaptation if adjust is not None else None, words, "")
+    except FacecleanError:
+        return False
+    return True
 
 
 def at_times(anim: Animation, times: np.ndarray, names: tuple[str, ...]) -> Animation:
@@ -112,7 +136,8 @@ def compare(
         if not np.isfinite(truth.values).any():  # nothing to score against
             span = f"{noisy.times[0]:.6g}-{noisy.times[-1]:.6g} s"
             raise FacecleanError(f"the truth has no value within the input's times ({span})")
-    outputs = {label: clean_with(s, noisy, adjust) for label, s in specs.items()}
+    outputs = {label: clean_with(s, noisy, adjust, k == 0 or _corrects(adjust, s))
+               for k, (label, s) in enumerate(specs.items())}  # fmt: skip
     if adjust is None or adjust.is_identity:
         return Comparison(noisy, truth, outputs)
     return Comparison(noisy, truth, outputs, adjust.describe(noisy.names))
