@@ -46,6 +46,7 @@ MAY_IMPORT: dict[str, set[str]] = {
         "trackers",  # ... and tracked by MediaPipe
         "calibration",  # the tracker table's calibration row (a pair's own clip)
         "ui",  # the fuzz of the tuning page's messages (fuzz_surfaces.py, inside functions)
+        "adaptation",  # plot and report hand a calibration's rest reading to the cleaner
     },
     "synthetic": {"io", "datasets", "trackers"},  # takes, pairs; the performer; MediaPipe
     # training and evaluation data: pair folders check values as the filters bound them

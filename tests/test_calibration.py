@@ -366,6 +366,21 @@ def test_a_neutral_hold_out_of_range_is_refused_in_one_line(tmp_path, capsys, se
     assert not out.exists()
 
 
+@pytest.mark.parametrize("rom", [False, True])
+def test_a_take_whose_times_run_backwards_is_refused_and_nothing_is_replaced(tmp_path, capsys, rom):
+    # red team: calibrate took a take whose times ran backwards, wrote "neutral from the
+    # first -2.97 s" and replaced the file there; clean and --guided refuse such a take
+    take = _iphone_take()
+    path = tmp_path / "rev.csv"
+    io.save(Animation(take.times[::-1].copy(), take.values, take.names), path)
+    out = tmp_path / "c.json"
+    out.write_text("{}")
+    assert main(["calibrate", str(path), "-o", str(out), *(["--rom"] if rom else [])]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "faceclean: calibration: the take's times do not increase"
+    assert out.read_text() == "{}"
+
+
 def test_a_take_all_lost_says_so(tmp_path, capsys):
     # third red team: it said "no ARKit blendshape channels", where it has one
     path = tmp_path / "lost.csv"

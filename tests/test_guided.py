@@ -1033,3 +1033,49 @@ def test_plot_and_report_clean_with_a_guided_calibration_as_clean_does(tmp_path)
     # one-euro: no levels in a guided MediaPipe file, and no correction after it
     np.testing.assert_array_equal(got.outputs["one-euro"].values,
                                   plain.outputs["one-euro"].values)  # fmt: skip
+
+
+@pytest.mark.parametrize("what", ["calibration", "script"])
+def test_a_key_given_twice_is_refused_in_one_line(tmp_path, capsys, what):
+    # second red team of this session: "tracker" twice was read as the last one, a
+    # channel's rules twice lost the first, a script's title twice kept the last
+    from faceclean import io
+
+    take = tmp_path / "t.csv"
+    io.save(Animation(np.arange(90) / 30, np.full((90, 52), 0.1), ARKIT52), take, fmt="csv")
+    bad = tmp_path / "bad.json"
+    if what == "calibration":
+        bad.write_text('{"format": "faceclean-adjust/1", "channels": {"jawOpen": {"gain": 2,'
+                       ' "gain": 1}}, "calibration": {"tracker": "arkit"}}')  # fmt: skip
+        argv = ["clean", str(take), "-o", str(tmp_path / "o.csv"), "--calibration", str(bad)]
+        said = "key 'gain' given twice"
+    else:
+        doc = json.dumps(SHORT).replace('"title": "a short one"',
+                                        '"title": "a", "title": "b"')  # fmt: skip
+        bad.write_text(doc)
+        argv = ["calibrate", "--print-script", "--script", str(bad)]
+        said = "key 'title' given twice"
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert said in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_a_calibration_naming_an_unknown_tracker_is_refused_on_load(tmp_path, capsys):
+    # second red team of this session: "tracker": "kinect" was taken, and clean's refusal
+    # then said "give --tracker kinect", which no command takes
+    from faceclean import io
+
+    take = tmp_path / "t.csv"
+    io.save(Animation(np.arange(90) / 30, np.full((90, 52), 0.1), ARKIT52), take, fmt="csv")
+    bad = tmp_path / "k.json"
+    bad.write_text(json.dumps({"format": "faceclean-adjust/1", "channels": {},
+                               "calibration": {"tracker": "kinect"}}))  # fmt: skip
+    for argv in (
+        ["info", str(bad)],
+        ["clean", str(take), "-o", str(tmp_path / "o.csv"), "--calibration", str(bad)],
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "calibration fact 'tracker' must be one of arkit, mediapipe" in err, err
+        assert "--tracker kinect" not in err and len(err.splitlines()) == 1

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from faceclean.channels import ARKIT52, GROUPS, canonical, channel_key
+from faceclean.channels import ARKIT52, GROUPS, TRACKERS, canonical, channel_key
 from faceclean.errors import FacecleanError
 from faceclean.filters.base import MAX_ABS, Stepper
 
@@ -400,7 +400,7 @@ def _facts(facts: Any, label: str) -> dict[str, Any]:
         "take": (lambda v: isinstance(v, str), "a file name"),
         "frames": (lambda v: number(v) and v >= 0, "a frame count"),
         "neutral_s": (lambda v: number(v) and v >= 0, "seconds"),
-        "tracker": (lambda v: v is None or isinstance(v, str), "a tracker name"),
+        "tracker": (lambda v: v is None or v in TRACKERS, f"one of {', '.join(TRACKERS)}"),
         "rom": (lambda v: isinstance(v, bool), "true or false"),
         "moved": (names, "a list of channel names"),
         "lifted": (names, "a list of channel names"),

@@ -98,6 +98,8 @@ def calibrate(
     if valid.sum() < MIN_FRAMES:
         raise FacecleanError(f"calibration: the take has fewer than {MIN_FRAMES} valid frames")
     t, x = anim.times[valid], values[valid]
+    if np.any(~(np.diff(t) > 0)):  # the neutral hold is "the first N s": times must run on
+        raise FacecleanError("calibration: the take's times do not increase")
     hold = x[t <= t[0] + neutral_s]
     if len(hold) < MIN_FRAMES:
         raise FacecleanError(

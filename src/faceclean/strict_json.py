@@ -1,7 +1,8 @@
 """Strict JSON, both ways: what faceclean reads from a user and what it prints or writes.
 
-Read (``loads``): RFC 8259 only. ``NaN``/``Infinity`` are refused (animation files:
-read as they are, see ``loads``), a number must be a finite float64 (``1e400`` and a
+Read (``loads``): RFC 8259 only, an object's keys distinct (a key given twice is
+refused: which one was meant?). ``NaN``/``Infinity`` are refused (animation files: read
+as they are, see ``loads``), a number must be a finite float64 (``1e400`` and a
 400-digit integer are refused, not overflowed), nesting deeper than the parser's
 recursion limit is refused; every refusal is one line (FacecleanError). Used for
 ``--set`` values, presets, model configs, JSON animations and glTF documents.
@@ -38,6 +39,16 @@ def _int(text: str) -> int | float:
     return int(text) if len(digits) <= MAX_INT_DIGITS else _float(text)
 
 
+def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object whose keys are distinct (a key given twice is ambiguous: which one?)."""
+    out = dict(pairs)
+    if len(out) < len(pairs):
+        seen: set[str] = set()
+        twice = next(k for k, _ in pairs if k in seen or seen.add(k))
+        raise ValueError(f"key {twice[:40]!r} given twice")
+    return out
+
+
 def loads(
     text: str | bytes, label: str, *, numbers: bool = True, max_depth: int | None = None
 ) -> Any:
@@ -50,6 +61,7 @@ def loads(
     that code walking the value recursively never meets a RecursionError).
     """
     hooks: dict[str, Any] = {"parse_float": _float, "parse_int": _int} if numbers else {}
+    hooks["object_pairs_hook"] = _object
     if numbers:
         hooks["parse_constant"] = _constant
     try:

@@ -61,7 +61,8 @@ def test_a_take_of_ones_own_script_calibrates_with_it(tmp_path, capsys):
                                   "keys of three", "keys a number", "keys text",
                                   "nothing aimed at", "a weight of 1e300",
                                   "an escape code", "a prompt of 0 s", "an id twice",
-                                  "a title not text", "every target 0"])  # fmt: skip
+                                  "a title not text", "every target 0", "a text not text",
+                                  "a key after its prompt"])  # fmt: skip
 def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case):
     doc = copy.deepcopy(SHORT)
     path = tmp_path / "bad.json"
@@ -94,6 +95,10 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
     elif case == "every target 0":  # aims at channels, at 0: nothing to align on
         for p in doc["prompts"][1:]:
             p["targets"] = {n: 0.0 for n in p.get("targets", {})}
+    elif case == "a text not text":  # second red team: null was shown as the prompt "None"
+        doc["prompts"][1]["text"] = None
+    elif case == "a key after its prompt":  # ... and a key at 99 s of a 1.1 s prompt taken
+        doc["prompts"][2]["keys"] = [[0.0, {"jawOpen": 0.2}], [99.0, {"jawOpen": 0.5}]]
     elif case == "a folder":
         path = tmp_path
     elif case == "a fifo":
@@ -109,11 +114,11 @@ def test_a_bad_script_is_one_line_and_nothing_is_written(tmp_path, capsys, case)
         "a prompt of 0 s": "at least 0.3 s",
         "an id twice": "given twice",
         "a title not text": "title is a string",
-        "every target 0": "no channel above 0",
+        "every target 0": "aims at a channel above 0",
+        "a text not text": "its text is a string",
+        "a key after its prompt": "has a key after its 1.1 s",
     }
     for argv in (["calibrate", "--print-script"], guided):
-        if case == "every target 0" and argv[1] == "--print-script":
-            continue  # a script it can print: the take shows what it lacks
         assert main([*argv, "--script", str(path)]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "Traceback" not in err, err

@@ -158,6 +158,8 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         where = f"{label}: prompt {k + 1}"
         if not isinstance(p, dict) or not isinstance(p.get("id"), str):
             raise FacecleanError(f"{where}: an object with an id")
+        if not isinstance(p.get("text", ""), str):
+            raise FacecleanError(f"{where}: its text is a string")
         if not all(str(p.get(k, "")).isprintable() for k in ("id", "text")):  # shown as is
             raise FacecleanError(f"{where}: its id and text are printable characters only")
         given_keys = p.get("keys", [])
@@ -189,8 +191,14 @@ def from_dict(data: object, label: str = "guided script") -> Script:
         )
     if not prompts or not any(not p.channels for p in prompts[:1]):
         raise FacecleanError(f"{label}: needs prompts, the first a neutral hold (no targets)")
-    if not any(p.channels and p.weight > 0 for p in prompts):
-        raise FacecleanError(f"{label}: no prompt aims at a channel (targets, weight over 0)")
+    aimed = [p for p in prompts if p.weight > 0 and max(p.targets.values(), default=0) > 0]
+    if not aimed:  # nothing to align on, nothing to fit
+        raise FacecleanError(f"{label}: no prompt aims at a channel above 0 (targets, weight "
+                             "over 0)")  # fmt: skip
+    late = next((p for p in prompts if any(u > p.duration for u, _ in p.keys)), None)
+    if late is not None:
+        raise FacecleanError(f"{label}: prompt {late.id!r} has a key after its "
+                             f"{late.duration:g} s")  # fmt: skip
     if any(b.start < a.end for a, b in zip(prompts, prompts[1:], strict=False)):
         raise FacecleanError(f"{label}: prompts overlap or are out of order")
     if prompts[-1].end > MAX_SECONDS:
