@@ -216,6 +216,20 @@ def attach(cleaner: Any, adaptation: Adaptation | None) -> None:
         take(adaptation.rest, adaptation.rest_outputs)
 
 
+def clean_calibrated(cleaner: Any, anim: Any, adjust: Any, run: Any = None,
+                     correct: bool = True) -> Any:  # fmt: skip
+    """``anim`` (an Animation) cleaned as ``clean --calibration`` cleans it: ``adjust``'s
+    levels on the values (none: the take itself, not a copy), its adaptation's rest reading
+    handed to ``cleaner`` (``attach``), the cleaner run (``run(mapped)``; its ``clean`` by
+    default), and, if ``correct``, the adaptation's correction after it."""
+    mapped = anim if adjust.is_identity else anim.with_values(adjust.apply(anim.values, anim.names))
+    attach(cleaner, adjust.adaptation)
+    cleaned = (run or cleaner.clean)(mapped)
+    if adjust.adaptation is None or not correct:
+        return cleaned
+    return cleaned.with_values(adjust.adaptation.apply(cleaned.values, cleaned.names))
+
+
 def fitted_after(words: str | None) -> str | None:
     """The label of a cleaner an adaptation corrects, as the file records it (``cleaner``): a
     model file's name and the first 12 hex digits of its sha256; None where ``words`` name

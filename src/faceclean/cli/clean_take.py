@@ -30,7 +30,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     from pathlib import Path
 
     from faceclean import io
-    from faceclean.adaptation import attach
+    from faceclean.adaptation import clean_calibrated
     from faceclean.adjust import Adjusted, check_range
     from faceclean.filters import rotation
     from faceclean.io import stream
@@ -70,12 +70,8 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     adjust = build_levels(args, choice, anim.names)
     _unread(args, adjust, cleaner, what)
     # no level mapping: the take itself, not a copy (an hour is 92 MB; issue 38)
-    mapped = anim if adjust.is_identity else anim.with_values(adjust.apply(anim.values, anim.names))
-    attach(cleaner, adjust.adaptation)  # a guided calibration's rest reading, if any
-    cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
-    if adjust.adaptation is not None:  # a guided calibration's correction, after the cleaner
-        cleaned = cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
-    cleaned = rotation.clean_pose(cleaned, choice.build_pose)
+    run = (lambda mapped: clean_with_progress(cleaner, mapped)) if progress else None
+    cleaned = rotation.clean_pose(clean_calibrated(cleaner, anim, adjust, run), choice.build_pose)
     io.save(cleaned, output, fmt=args.fmt, compress=getattr(args, "compress", False))
     angles = rotation.pose_columns(anim)[1]
     missing = int((~anim.valid).sum())

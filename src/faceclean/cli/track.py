@@ -127,7 +127,7 @@ def track_one(
     import time
 
     from faceclean import io
-    from faceclean.adaptation import attach
+    from faceclean.adaptation import clean_calibrated
     from faceclean.cli.clean_take import build_cleaner, build_levels, clean_with_progress
     from faceclean.filters import rotation
     from faceclean.trackers import face
@@ -161,12 +161,8 @@ def track_one(
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice, anim.names)
     adjust = build_levels(args, choice, anim.names)
-    mapped = anim.with_values(adjust.apply(anim.values, anim.names))
-    attach(cleaner, adjust.adaptation)  # a guided calibration's rest reading, if any
-    cleaned = clean_with_progress(cleaner, mapped) if progress else cleaner.clean(mapped)
-    if adjust.adaptation is not None:  # a guided calibration's correction, after the cleaner
-        cleaned = cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
-    cleaned = rotation.clean_pose(cleaned, choice.build_pose)
+    run = (lambda mapped: clean_with_progress(cleaner, mapped)) if progress else None
+    cleaned = rotation.clean_pose(clean_calibrated(cleaner, anim, adjust, run), choice.build_pose)
     done = io.paths.verb(out)
     io.save(cleaned, out, fmt=fmt)
     if raw is not None:

@@ -57,19 +57,11 @@ def clean_with(spec: str | Choice, anim: Animation, adjust: Adjust | None = None
     calibration's rest reading handed to the cleaner and, if ``correct``, its correction
     after it (faceclean.adaptation); its head/eye angles (``meta["pose"]``) by the rotation
     filter."""
-    from faceclean.adaptation import attach
+    from faceclean.adaptation import clean_calibrated
 
     choice = resolve(spec) if isinstance(spec, str) else spec
-    adaptation = adjust.adaptation if adjust is not None else None
-    if choice.levels:
-        adjust = (adjust or Adjust()).merged(choice.adjust(anim.names))
-    if adjust is not None and not adjust.is_identity:
-        anim = anim.with_values(adjust.apply(anim.values, anim.names))
-    cleaner = choice.build(anim.names)
-    attach(cleaner, adaptation)
-    out = cleaner.clean(anim)
-    if adaptation is not None and correct:
-        out = out.with_values(adaptation.apply(out.values, out.names))
+    adjust = (adjust or Adjust()).merged(choice.adjust(anim.names)) if choice.levels else adjust
+    out = clean_calibrated(choice.build(anim.names), anim, adjust or Adjust(), correct=correct)
     return clean_pose(out, choice.build_pose)
 
 

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from faceclean import filters
-from faceclean.adaptation import attach
+from faceclean.adaptation import clean_calibrated
 from faceclean.adjust import MAP_KEYS, Adjust, Adjusted, apply_levels
 from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, GROUPS
@@ -115,14 +115,7 @@ class Tuning:
     def clean(self, anim: Animation) -> Animation:
         """``anim`` cleaned as ``faceclean clean`` does: levels on the values, then the
         cleaner's ``clean``."""
-        adjust = self.levels(anim.names)
-        mapped = anim.with_values(adjust.apply(anim.values, anim.names))
-        cleaner = self.choice.build(anim.names)
-        attach(cleaner, adjust.adaptation)  # a guided calibration's rest reading, if any
-        cleaned = cleaner.clean(mapped)
-        if adjust.adaptation is None:
-            return cleaned
-        return cleaned.with_values(adjust.adapt(cleaned.values, cleaned.names))
+        return clean_calibrated(self.choice.build(anim.names), anim, self.levels(anim.names))
 
     def map_levels(self, values: np.ndarray, names: Sequence[str]) -> np.ndarray:
         return apply_levels(self.levels(names).levels(names), np.asarray(values, np.float64))
