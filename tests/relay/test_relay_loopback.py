@@ -700,3 +700,34 @@ def test_replay_stopped_by_a_signal_says_so_not_refused(tmp_path):
             out, err = interrupt(proc, timeout=30)
     assert proc.returncode == 0, err
     assert "not sent)" in out and "stopped;" in out and "refused" not in out
+
+
+def test_a_second_signal_while_the_recording_is_saved_loses_nothing(tmp_path):
+    # red team: under `timeout` (which signals the relay and its group: twice) or two
+    # Ctrl-C, the second signal arrived while --record was being saved: "faceclean:
+    # terminated", no file, the session lost unsaid. Now the first stops the relay and
+    # every later one waits for the save.
+    record = tmp_path / "rec.csv"
+    with raw_receiver() as rx:
+        proc = _start(["--listen", "vmc://127.0.0.1:0", "--send",
+                       f"vmc://127.0.0.1:{rx.getsockname()[1]}", "--method", "ema",
+                       "--record", str(record)])  # fmt: skip
+        with reaped(proc):
+            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+            assert ready, "relay did not start"
+            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            sender = UDPClient("127.0.0.1", port)
+            for k in range(300):
+                sender.send(vmc_bundle(["jawOpen"], [k / 300]))
+                rx.recv(65536)  # each frame through before the next
+            proc.send_signal(signal.SIGTERM)
+            while not (line := proc.stdout.readline()).startswith("stopped:"):
+                assert line, "the relay ended before it said it stopped"
+            proc.send_signal(signal.SIGTERM)  # as timeout's second, while it saves
+            out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert "recorded 300 frames" in out and "terminated" not in err
+    from faceclean import io
+
+    assert io.load(record).n_frames == 300
+    assert io.load(tmp_path / "rec.clean.csv").n_frames == 300

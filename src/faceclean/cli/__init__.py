@@ -17,7 +17,7 @@ import signal
 import sys
 import threading
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 from faceclean.errors import FacecleanError
 
@@ -83,6 +83,31 @@ def _deadline() -> None:
     default action ends the process ``EXIT_GRACE_S`` s later, without needing the GIL."""
     if hasattr(signal, "alarm") and signal.getsignal(signal.SIGALRM) == signal.SIG_DFL:
         signal.alarm(EXIT_GRACE_S)
+
+
+@contextlib.contextmanager
+def stopping(stop: Callable[[], None]) -> Iterator[None]:
+    """A live command's scope: its first SIGINT or SIGTERM calls ``stop`` (the loop ends
+    and the command goes on to save and say what it has); a later one only bounds that by
+    ``_deadline``, never aborts it (``timeout`` signals the process and its group: the
+    second signal lost the relay's recording while it was saved)."""
+    told = []
+
+    def on_signal(signum: int, frame: object) -> None:
+        if told:
+            _deadline()
+        else:
+            told.append(signum)
+            stop()
+
+    on_main = threading.current_thread() is threading.main_thread()
+    caught = (signal.SIGINT, signal.SIGTERM)
+    old = {s: signal.signal(s, on_signal) for s in caught} if on_main else {}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 @contextlib.contextmanager

@@ -21,11 +21,10 @@ head.min_cutoff=...``); a Live Link stream keeps the tracker's timecode.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
-from faceclean.cli import options
+from faceclean.cli import options, stopping
 
 if TYPE_CHECKING:
     from faceclean.resolve import Choice
@@ -166,18 +165,15 @@ def run(args: argparse.Namespace) -> int:
 
     pose = choice.build_pose(POSE)  # head/eye angles: the rotation filter
     what += f"; head/eye angles: {choice.pose_source}"
-    with Relay(listen, send, cleaner, recorder=recorder, pose=pose) as relay:
-        stats = _serve(args, relay, send, what)
-    return _done(stats, send, recorder)
+    relay = Relay(listen, send, cleaner, recorder=recorder, pose=pose)
+    with stopping(relay.stop):  # until the recording is saved: a second signal loses nothing
+        with relay:
+            stats = _serve(args, relay, send, what)
+        return _done(stats, send, recorder)
 
 
 def _serve(args: argparse.Namespace, relay: Any, send: Any, what: str) -> Any:
-    """Run the relay until Ctrl-C or SIGTERM; its stats."""
-
-    def stop(signum: int, frame: object) -> None:
-        relay.stop()
-
-    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    """Run the relay until Ctrl-C or SIGTERM (``stopping``, around it); its stats."""
     listen = relay.listen
     if not _loopback(listen.host):  # said once it listens (a refused start says only why)
         print(
@@ -187,13 +183,8 @@ def _serve(args: argparse.Namespace, relay: Any, send: Any, what: str) -> Any:
             file=sys.stderr,
             flush=True,
         )
-    try:
-        print(f"relay {relay.address} -> {send} ({what}); Ctrl-C stops", flush=True)
-        stats = relay.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
-    finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
-    return stats
+    print(f"relay {relay.address} -> {send} ({what}); Ctrl-C stops", flush=True)
+    return relay.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
 
 
 def _loopback(host: str) -> bool:
@@ -246,17 +237,21 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any,
     _check_record(recorder)
     tap = Tap(recorder)
     pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
-    with Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose) as relay:
-        what = f"{relay.address} -> {send}"
-        session = Live(tuning, relay, tap, what, nice=args.ui_nice, say=ui.say, script=script)
-        session.mesh()  # the face built before the page asks
-        session.start()
-        server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser, "--ui-port")
-        try:
-            if args.calibrate_seconds is not None:
-                session.handle(None, {"type": "calibrate", "seconds": args.calibrate_seconds})
-            stats = _serve(args, relay, send, f"{tuning.choice.source}; tuning page on")
-        finally:
-            server.close()
-            session.stop()
-    return _done(stats, send, recorder)
+    relay = Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose)
+    with stopping(relay.stop):  # until the recordings are saved (the page's, then --record)
+        with relay:
+            what = f"{relay.address} -> {send}"
+            session = Live(tuning, relay, tap, what, nice=args.ui_nice, say=ui.say,
+                           script=script)  # fmt: skip
+            session.mesh()  # the face built before the page asks
+            session.start()
+            server = ui.serve(session, args.ui_host, args.ui_port, args.no_browser, "--ui-port")
+            try:
+                if args.calibrate_seconds is not None:
+                    session.handle(None, {"type": "calibrate",
+                                          "seconds": args.calibrate_seconds})  # fmt: skip
+                stats = _serve(args, relay, send, f"{tuning.choice.source}; tuning page on")
+            finally:
+                server.close()
+                session.stop()
+        return _done(stats, send, recorder)

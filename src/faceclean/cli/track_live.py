@@ -17,10 +17,9 @@ says what stopped and what to do.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 
-from faceclean.cli import options
+from faceclean.cli import options, stopping
 from faceclean.errors import FacecleanError
 
 MIN_STATS, MAX_STATS = 0.001, 86400.0  # s, the --stats period
@@ -60,30 +59,25 @@ def run(args: argparse.Namespace) -> int:
     model = model_path(args.tracker_model)
     tap = Tap(recorder) if args.ui else None  # --ui: the page sees every frame (ui/live.py)
     sink = recorder if tap is None else tap
-    with (
-        FaceTracker(model, lambda line: print(line, flush=True)) as tracker,
-        Camera(source) as camera,
-        Live(camera, tracker, cleaner, send, pose=pose, recorder=sink) as live,
-        ui.camera_page(args, live, camera, tap, script),
-    ):
-
-        def stop(signum: int, frame: object) -> None:
-            live.stop()
-
-        old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
+    live = None
+    # until the recording is saved: a second signal (``timeout``'s) loses nothing
+    with stopping(lambda: live.stop() if live is not None else None):
+        with (
+            FaceTracker(model, lambda line: print(line, flush=True)) as tracker,
+            Camera(source) as camera,
+            Live(camera, tracker, cleaner, send, pose=pose, recorder=sink) as live,
+            ui.camera_page(args, live, camera, tap, script),
+        ):
             print(f"track camera {args.camera} -> {send} ({what}); Ctrl-C stops", flush=True)
             camera.start()
             stats = live.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
-        finally:
-            for s, handler in old.items():
-                signal.signal(s, handler)
-    print(f"stopped: {stats.line()}", flush=True)
-    if recorder is not None and len(recorder):
-        take, cleaned = recorder.save()
-        print(f"recorded {len(recorder)} frames: {take} (raw), {cleaned} (cleaned)", flush=True)
-    elif recorder is not None:
-        print("recorded nothing: no face was sent, so no file was written", flush=True)
+        print(f"stopped: {stats.line()}", flush=True)
+        if recorder is not None and len(recorder):
+            take, cleaned = recorder.save()
+            print(f"recorded {len(recorder)} frames: {take} (raw), {cleaned} (cleaned)",
+                  flush=True)  # fmt: skip
+        elif recorder is not None:
+            print("recorded nothing: no face was sent, so no file was written", flush=True)
     if stats.send_errors:
         print(f"faceclean: {stats.send_errors} sends refused by {send}", file=sys.stderr)
     if camera.lost is not None and not live.stopped:  # unplugged, stalled, a failed file
