@@ -1079,3 +1079,18 @@ def test_a_calibration_naming_an_unknown_tracker_is_refused_on_load(tmp_path, ca
         err = capsys.readouterr().err.strip()
         assert "calibration fact 'tracker' must be one of arkit, mediapipe" in err, err
         assert "--tracker kinect" not in err and len(err.splitlines()) == 1
+
+
+def test_a_mediapipe_neutral_of_a_take_with_pascalcase_names_reads_as_camelcase(tmp_path):
+    # red team: a Live Link CSV's PascalCase names ("JawOpen") were refused as "no mouth
+    # or gaze channel to read at rest" by calibrate --tracker mediapipe alone
+    readings = {}
+    for fmt in ("livelink", "csv"):
+        take, out = tmp_path / f"{fmt}.csv", tmp_path / f"{fmt}.json"
+        assert main(["synth", "-o", str(take), "--seconds", "4", "--seed", "1",
+                     "--format", fmt]) == 0  # fmt: skip
+        assert main(["calibrate", str(take), "-o", str(out), "--tracker", "mediapipe"]) == 0
+        readings[fmt] = Adjust.load(out).adaptation.rest
+    assert readings["livelink"] and readings["livelink"].keys() == readings["csv"].keys()
+    for name, v in readings["csv"].items():
+        assert readings["livelink"][name] == pytest.approx(v, abs=1e-6), name

@@ -183,14 +183,13 @@ def rest_reading(anim: Animation, cleaner: Any, at_rest: np.ndarray) -> dict[str
     import copy
 
     pre, w = copy.deepcopy(getattr(cleaner, "pre", None)), getattr(cleaner, "weights", None)
-    names = [n for n in REST_INPUTS if w is not None and n in w.inputs and n in anim.names]
-    keep = at_rest & anim.valid
-    if pre is None or not names or not keep.any():
+    if pre is None or w is None:
         return {}
-    x = np.zeros((anim.n_frames, len(w.inputs)))  # (N, K): absent inputs read 0, as fed
-    for j, n in enumerate(w.inputs):
-        if n in anim.names:
-            x[:, j] = anim.values[:, anim.names.index(n)]
+    x, have = anim.arkit(w.inputs)  # (N, K) by canonical name (PascalCase too); absent: 0
+    names = [n for n in REST_INPUTS if n in w.inputs and have[w.inputs.index(n)]]
+    keep = at_rest & anim.valid
+    if not names or not keep.any():
+        return {}
     pre.reset()
     u = pre.clean(Animation(anim.times, x, tuple(w.inputs))).values
     return {n: float(np.median(u[keep, w.inputs.index(n)])) for n in names}
