@@ -381,6 +381,22 @@ def test_a_take_whose_times_run_backwards_is_refused_and_nothing_is_replaced(tmp
     assert out.read_text() == "{}"
 
 
+def test_a_range_of_motion_inside_its_neutral_hold_is_refused(tmp_path, capsys):
+    # red team: --rom --neutral 10 on a 6 s take read the whole range of motion as the
+    # neutral and said "52 moved, 50 lifted"
+    path = tmp_path / "take.csv"
+    take = _iphone_take()
+    io.save(take, path)
+    span = float(take.times[-1] - take.times[0])
+    out = tmp_path / "c.json"
+    argv = ["calibrate", str(path), "-o", str(out), "--rom", "--neutral", f"{span + 1:g}"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "the take ends within its neutral hold" in err and "\n" not in err
+    assert not out.exists()
+    assert main(argv[:-2] + ["--neutral", f"{span / 4:g}"]) == 0  # a hold, then the motion
+
+
 def test_a_take_all_lost_says_so(tmp_path, capsys):
     # third red team: it said "no ARKit blendshape channels", where it has one
     path = tmp_path / "lost.csv"

@@ -105,6 +105,11 @@ def calibrate(
         raise FacecleanError(
             f"calibration: fewer than {MIN_FRAMES} frames in the first {neutral_s:g} s"
         )
+    if rom and len(hold) == len(x):  # its tops would be the hold's: nothing was moved
+        raise FacecleanError(
+            f"calibration: the take ends within its neutral hold ({neutral_s:g} s): a range "
+            "of motion (--rom) follows the hold (a shorter --neutral, or the whole take)"
+        )
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: absent channels
         neutral = np.nanmedian(hold, axis=0)  # (52,)
