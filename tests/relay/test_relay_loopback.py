@@ -342,6 +342,13 @@ def test_relay_survives_a_flood_of_random_and_truncated_datagrams(scheme):
         assert stats.malformed >= 0.8 * sent
 
 
+def _listening(proc: subprocess.Popen, timeout: float = 30.0) -> int:
+    """The port a relay started by ``_start`` listens on, once its banner is out."""
+    ready, _, _ = select.select([proc.stdout], [], [], timeout)
+    assert ready, "relay did not start"
+    return int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+
+
 def _start(sig_args: list[str]) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "faceclean", "relay", *sig_args]
     return subprocess.Popen(
@@ -357,10 +364,7 @@ def test_relay_process_stops_cleanly_on_signals(sig):
             + ["--method", "ema", "--stats", "60"]
         )
         try:
-            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
-            assert ready, "relay did not start"
-            line = proc.stdout.readline()
-            port = int(line.split()[1].rsplit(":", 1)[1])
+            port = _listening(proc)
             UDPClient("127.0.0.1", port).send(vmc_bundle(["jawOpen"], [0.25]))
             frame = OscPacket(rx.recv(65536)).messages
             proc.send_signal(sig)
@@ -383,9 +387,7 @@ def _idle(host: str, *more: str) -> tuple[str, str]:
             + ["--method", "ema", *more]
         )
         with reaped(proc):
-            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
-            assert ready, "relay did not start"
-            proc.stdout.readline()  # the banner: it listens
+            _listening(proc)  # the banner: it listens
             out, err = interrupt(proc)
     assert proc.returncode == 0, err
     return out, err
@@ -546,9 +548,7 @@ def test_relay_passes_every_frame_from_its_first_packet_on():
         send = f"vmc://127.0.0.1:{peer.port}"
         proc = _start(["--listen", "vmc://127.0.0.1:0", "--send", send, "--method", "lstm"])
         with reaped(proc):
-            ready, _, _ = select.select([proc.stdout], [], [], 120.0)
-            assert ready, "relay did not start"
-            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            port = _listening(proc, 120.0)  # the LSTM loads first
             client = UDPClient("127.0.0.1", port)
             for i, row in enumerate(take):  # the pace of a stream, not a wait for the relay:
                 client.send(vmc_bundle(ARKIT52, row, t=i / 60.0))
@@ -660,9 +660,7 @@ def test_relay_command_records_a_session_with_levels(tmp_path, capsys):
             + ["--record", str(session)]
         )
         with reaped(proc):
-            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
-            assert ready, "relay did not start"
-            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            port = _listening(proc)
             client = UDPClient("127.0.0.1", port)
             for i in range(30):
                 client.send(vmc_bundle(["jawOpen", "eyeBlinkLeft"], [0.25, 0.1], t=i / 60.0))
@@ -713,9 +711,7 @@ def test_a_second_signal_while_the_recording_is_saved_loses_nothing(tmp_path):
                        f"vmc://127.0.0.1:{rx.getsockname()[1]}", "--method", "ema",
                        "--record", str(record)])  # fmt: skip
         with reaped(proc):
-            ready, _, _ = select.select([proc.stdout], [], [], 30.0)
-            assert ready, "relay did not start"
-            port = int(proc.stdout.readline().split()[1].rsplit(":", 1)[1])
+            port = _listening(proc)
             sender = UDPClient("127.0.0.1", port)
             for k in range(300):
                 sender.send(vmc_bundle(["jawOpen"], [k / 300]))
