@@ -4,6 +4,8 @@
 ``faceclean.io`` reads (hidden files and folders, and the output folder when it lies
 inside the input, are skipped); each keeps its path relative to that folder. A file input
 goes to ``outdir / name``. Two inputs that would write one output are refused up front.
+``refuse_links(outdir, outputs)``: a symbolic link planted in the output folder would
+take a batch's file elsewhere (over a file outside it): refused before any work.
 """
 
 from __future__ import annotations
@@ -61,6 +63,31 @@ def plan(inputs: list[str], outdir: str | os.PathLike) -> list[Job]:
             raise FacecleanError(f"{seen[key]} and {job.src} would both write {job.dst}")
         seen[key] = job.src
     return jobs
+
+
+def through_link(root: str | os.PathLike, dst: str | os.PathLike) -> Path | None:
+    """The first symbolic link on the way from the output folder ``root`` to ``dst``."""
+    try:
+        parts = Path(dst).relative_to(root).parts
+    except ValueError:
+        return None
+    at = Path(root)
+    for part in parts:
+        at = at / part
+        if at.is_symlink():
+            return at
+    return None
+
+
+def refuse_links(root: str | os.PathLike, outputs) -> None:
+    """Refuse, in one line, a batch whose ``outputs`` (paths under the output folder
+    ``root``) go through a symbolic link: a batch writes only inside its folder."""
+    linked = [link for dst in outputs if (link := through_link(root, dst))]
+    if linked:
+        raise FacecleanError(
+            f"{linked[0]} is a symbolic link: a batch writes only inside {os.fspath(root)} "
+            "(remove it, or give another -o folder)"
+        )
 
 
 def _walk(root: Path, out: Path):

@@ -15,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from faceclean.batch import Job, is_batch, plan
+from faceclean.batch import Job, is_batch, plan, refuse_links
 from faceclean.cli.tasks import Failure, done, summary
 from faceclean.errors import FacecleanError
 
@@ -56,10 +56,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{onto[0].dst} is the input {onto[0].src}{more}: a batch into the input "
                 "folder would overwrite raw takes; give another -o folder, or --in-place"
             )
-    linked = [link for job in jobs if (link := _through_link(Path(args.output), job.dst))]
-    if linked:  # a link planted in the output folder would take a cleaned file elsewhere
-        raise FacecleanError(f"{linked[0]} is a symbolic link: a batch writes only inside "
-                             f"{args.output} (remove it, or give another -o folder)")  # fmt: skip
+    refuse_links(args.output, [job.dst for job in jobs])  # a link planted in the folder
     n, note = workers.count(args.jobs, len(jobs), "files" if len(jobs) != 1 else "file")
     if note:
         print(note, file=sys.stderr)
@@ -150,20 +147,6 @@ def _clean(args: argparse.Namespace, job: Job) -> tuple[bool, str]:
             raise
         why = f"internal error: {type(e).__name__}: {e}"
     return False, why
-
-
-def _through_link(root: Path, dst: Path) -> Path | None:
-    """The first symbolic link on the way from the output folder ``root`` to ``dst``."""
-    try:
-        parts = Path(dst).relative_to(root).parts
-    except ValueError:
-        return None
-    at = root
-    for part in parts:
-        at = at / part
-        if at.is_symlink():
-            return at
-    return None
 
 
 def _new_folders(jobs) -> list[Path]:

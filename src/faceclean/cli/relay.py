@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     choice = options.choice(args)
     cleaner, what = build_cleaner(choice)
     cleaner, levels = with_levels(args, choice, cleaner)
-    _check_record(recorder)
+    check_record(recorder)
     what += f"; levels: {levels}" if levels else ""
     if args.tracker == "mediapipe":  # one warning line if the stream does not look raw
         from faceclean.channels import ARKIT52
@@ -199,25 +199,32 @@ def _loopback(host: str) -> bool:
         return False  # a name: it may resolve to any interface
 
 
-def _check_record(recorder: Any) -> None:
+def check_record(recorder: Any, who: str = "the relay") -> None:
     """--record's files again once the inputs are read (not over a --calibration take or a
-    --model: refused only at the end, the session was lost), and what they replace."""
+    --model: refused only at the end, the session was lost), and what they replace (said
+    now: "will replace X when ``who`` stops"). ``track --camera`` calls it too."""
     if recorder is None:
         return
     recorder.check()
     if there := recorder.there():
         print(f"faceclean: warning: --record will replace {' and '.join(map(str, there))} "
-              "when the relay stops", file=sys.stderr, flush=True)  # fmt: skip
+              f"when {who} stops", file=sys.stderr, flush=True)  # fmt: skip
+
+
+def save_record(recorder: Any, first: str = "input") -> str:
+    """Save ``recorder``'s two files; the line saying so, each file replaced said so
+    (``first``: what the first file holds). ``track --camera`` calls it too."""
+    there = recorder.there()
+    take, cleaned = recorder.save()
+    said = [f"{p} ({what}{', replaced' if p in there else ''})"
+            for p, what in ((take, first), (cleaned, "cleaned"))]  # fmt: skip
+    return f"recorded {len(recorder)} frames: {', '.join(said)}"
 
 
 def _done(stats: Any, send: Any, recorder: Any) -> int:
     print(f"stopped: {stats.line()}", flush=True)
     if recorder is not None and len(recorder):
-        there = recorder.there()
-        take, cleaned = recorder.save()
-        said = [f"{p} ({what}{', replaced' if p in there else ''})"
-                for p, what in ((take, "input"), (cleaned, "cleaned"))]  # fmt: skip
-        print(f"recorded {len(recorder)} frames: {', '.join(said)}", flush=True)
+        print(save_record(recorder), flush=True)
     elif recorder is not None:
         print("recorded nothing: no frame was sent, so no file was written", flush=True)
     if stats.send_errors:
@@ -234,7 +241,7 @@ def _with_page(args: argparse.Namespace, listen: Any, send: Any, recorder: Any,
     from faceclean.ui.live import Live, Tap
 
     tuning = ui.tuning(args).with_choice()
-    _check_record(recorder)
+    check_record(recorder)
     tap = Tap(recorder)
     pose = tuning.choice.build_pose(POSE)  # head/eye angles: the rotation filter
     relay = Relay(listen, send, tuning.build(ARKIT52), recorder=tap, pose=pose)

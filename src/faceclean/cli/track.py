@@ -67,7 +67,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--camera", metavar="N|FILE", help="camera index, or a video file played as a camera"
     )
     live.add_argument("--send", metavar="URL", help="vmc://HOST:PORT or livelink://HOST:PORT")
-    live.add_argument("--record", metavar="FILE", help="save raw to FILE, cleaned to FILE.clean")
+    live.add_argument("--record", metavar="FILE", help="save the raw scores to FILE (.csv or "
+                      ".npz), the cleaned ones beside it: take.csv -> take.clean.csv")  # fmt: skip
     live.add_argument("--stats", type=float, metavar="SECONDS", help="print counters this often")
     live.add_argument("--ui", action="store_true", help="serve the tuning page: the camera "
                       "image beside the two faces, drops counted")  # fmt: skip
@@ -163,10 +164,11 @@ def track_one(
     adjust = build_levels(args, choice, anim.names)
     run = (lambda mapped: clean_with_progress(cleaner, mapped)) if progress else None
     cleaned = rotation.clean_pose(clean_calibrated(cleaner, anim, adjust, run), choice.build_pose)
-    done = io.paths.verb(out)
-    io.save(cleaned, out, fmt=fmt)
-    if raw is not None:
-        io.save(anim, raw, fmt="livelink")
+    done, raw_done = io.paths.verb(out), raw is not None and io.paths.verb(raw)
+    with io.atomic.together():  # both written, then both renamed: never one new, one old
+        io.save(cleaned, out, fmt=fmt)
+        if raw is not None:
+            io.save(anim, raw, fmt="livelink")
     lost = int((~anim.valid).sum())
     ms = 1000.0 * tracked / max(anim.n_frames, 1)
     text = "".join(f"{video}: {line}\n" for line in said) + (
@@ -174,17 +176,23 @@ def track_one(
         + (f" ({lost} without a face: missing)" if lost else "")
         + f", {len(anim.names)} channels + head yaw/pitch/roll, cleaned with {what}"
         + f"; tracked in {tracked:.1f} s ({ms:.1f} ms/frame)"
-        + (f"; raw scores in {raw}" if raw else "")
+        + (
+            f"; raw scores in {raw}" + (" (replaced)" if raw_done == "replaced" else "")
+            if raw
+            else ""
+        )
     )
     return text, bool(said)
 
 
 def _batch(args: argparse.Namespace) -> int:
+    import os
     from concurrent.futures import as_completed
 
     from tqdm import tqdm
 
     from faceclean import workers
+    from faceclean.batch import refuse_links
 
     workers.count(args.jobs, None)  # --jobs 0: refused before anything is read
     outdir = Path(args.output)
@@ -192,11 +200,19 @@ def _batch(args: argparse.Namespace) -> int:
         raise FacecleanError(f"-o {outdir}: several videos go into a folder (OUTDIR/)")
     ext = EXTENSIONS[args.fmt or "livelink"]
     jobs = [(v, str(outdir / f"{Path(v).stem}{ext}")) for v in args.input]
-    seen: dict[str, str] = {}
+    seen: dict[str, str] = {}  # every file the batch writes (takes, raw scores): its video
+    written: list[str] = []
     for v, o in jobs:
-        if o in seen:
-            raise FacecleanError(f"{seen[o]} and {v} would both write {o}: rename one")
-        seen[o] = v
+        for path, whose in zip(outputs(args, v, o), (v, f"{v} (its raw scores)"), strict=True):
+            if path is None:
+                continue
+            written.append(path)
+            key = os.path.abspath(path)
+            if key in seen:
+                raise FacecleanError(f"{seen[key]} and {whose} would both write {path}: "
+                                     "rename one")  # fmt: skip
+            seen[key] = whose
+    refuse_links(args.output, written)  # a link planted in the folder would take a file elsewhere
     n, note = workers.count(args.jobs, len(jobs), "videos" if len(jobs) != 1 else "video")
     if note:
         print(note, file=sys.stderr)

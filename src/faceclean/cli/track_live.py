@@ -29,13 +29,13 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.adjust import Adjust, Adjusted
     from faceclean.channels import ARKIT52, POSE
     from faceclean.cli import ui
-    from faceclean.cli.relay import build_cleaner
+    from faceclean.cli.relay import build_cleaner, check_record, save_record
     from faceclean.relay import parse
     from faceclean.relay.loop import probe, warm_up
     from faceclean.relay.recorder import Recorder
     from faceclean.trackers.face import FaceTracker, model_path
     from faceclean.trackers.live import Live
-    from faceclean.trackers.video import Camera
+    from faceclean.trackers.video import Camera, check_video_file
     from faceclean.ui.live import Tap
 
     if not args.send:
@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         raise FacecleanError("--jobs, --keep-raw and --format are for videos, not --camera")
     if args.stats is not None and not MIN_STATS <= args.stats <= MAX_STATS:
         raise FacecleanError(f"--stats must be between {MIN_STATS:g} and {MAX_STATS:g} s")
+    source = camera_source(args.camera)  # an index out of range: refused before any work
     send = parse(args.send, "send")
     script = ui.script(args, args.ui)  # a bad --script fails before the camera opens
     choice = options.choice(args)
@@ -54,8 +55,10 @@ def run(args: argparse.Namespace) -> int:
     warm_up(cleaner)
     probe(cleaner)
     pose = choice.build_pose(POSE)
+    if isinstance(source, str):  # noted as an input: a --record naming it is refused now
+        check_video_file(source)
     recorder = Recorder(args.record) if args.record else None
-    source = int(args.camera) if args.camera.strip().isdigit() else args.camera
+    check_record(recorder, "the tracking")  # "will replace X": said now, not at the end
     model = model_path(args.tracker_model)
     tap = Tap(recorder) if args.ui else None  # --ui: the page sees every frame (ui/live.py)
     sink = recorder if tap is None else tap
@@ -73,9 +76,7 @@ def run(args: argparse.Namespace) -> int:
             stats = live.run(args.stats, lambda s: print(f"stats: {s.line()}", flush=True))
         print(f"stopped: {stats.line()}", flush=True)
         if recorder is not None and len(recorder):
-            take, cleaned = recorder.save()
-            print(f"recorded {len(recorder)} frames: {take} (raw), {cleaned} (cleaned)",
-                  flush=True)  # fmt: skip
+            print(save_record(recorder, "raw"), flush=True)
         elif recorder is not None:
             print("recorded nothing: no face was sent, so no file was written", flush=True)
     if stats.send_errors:
@@ -89,3 +90,21 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)  # fmt: skip
         return 1
     return 0
+
+
+MAX_CAMERA = 99  # OpenCV reads an index of 100 or more as a backend's number plus an index
+
+
+def camera_source(text: str) -> int | str:
+    """``--camera``'s value: a camera index (digits, 0..MAX_CAMERA), else a video path; an
+    index out of range is one line (OpenCV failed on one past a C int, and "-1" was
+    looked for as a file)."""
+    import re
+
+    if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
+        return text
+    index = int(text)
+    if not 0 <= index <= MAX_CAMERA:
+        raise FacecleanError(f"--camera {text.strip()}: a camera index is 0 to {MAX_CAMERA} "
+                             "(0 is the first camera), or give a video file's path")  # fmt: skip
+    return index
