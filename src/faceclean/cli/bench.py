@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from faceclean.evaluation import bench
-    from faceclean.io.atomic import atomic_write, check_writable
+    from faceclean.io.atomic import atomic_write, check_writable, together
 
     check_writable(args.json, args.markdown)  # now, not after the measurements
 
@@ -92,10 +92,11 @@ def run(args: argparse.Namespace) -> int:
     from faceclean.io.paths import verb
 
     said = {p: verb(p) for p in (args.json, args.markdown) if p}  # never in silence
-    if args.json:
-        atomic_write(args.json, json.dumps(result, indent=2) + "\n")
-    if args.markdown:
-        atomic_write(args.markdown, _spliced(args.markdown, table))
+    with together():  # both written, then both renamed
+        if args.json:
+            atomic_write(args.json, json.dumps(result, indent=2) + "\n")
+        if args.markdown:
+            atomic_write(args.markdown, _spliced(args.markdown, table))
     for path, done in said.items():
         print(f"{done} {path}")
     return 0

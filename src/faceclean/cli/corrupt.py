@@ -20,18 +20,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from faceclean import io
     from faceclean.datasets import simulate
+    from faceclean.io.atomic import together
+    from faceclean.timing import Restarts
 
     io.paths.distinct(args.output, args.truth_out)
     clean = io.load(args.input)
+    Restarts(Path(args.input).name).see(clean.times[clean.valid])  # as clean refuses them
     for out in filter(None, (args.output, args.truth_out)):  # both, before writing one
         io.check_output(out, args.fmt, clean.meta.get("format"))
     noisy, truth = simulate.corrupt(clean, args.seed, args.preset, args.strength)
     done = [io.paths.verb(out) for out in (args.output, args.truth_out) if out]
-    io.save(noisy, args.output, fmt=args.fmt)
-    if args.truth_out:
-        io.save(truth, args.truth_out, fmt=args.fmt)
+    with together():  # both written, then both renamed: never one new beside one old
+        io.save(noisy, args.output, fmt=args.fmt)
+        if args.truth_out:
+            io.save(truth, args.truth_out, fmt=args.fmt)
     lost = int((~noisy.valid).sum())
     print(
         f"{done[0]} {args.output}: {noisy.n_frames} frames at {noisy.rate:.1f} Hz "

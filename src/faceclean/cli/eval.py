@@ -54,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from faceclean.evaluation import evaluate
     from faceclean.evaluation import results as results_md
-    from faceclean.io.atomic import atomic_write, check_writable
+    from faceclean.io.atomic import atomic_write, check_writable, together
     from faceclean.io.paths import verb
 
     def progress(msg: str) -> None:
@@ -82,10 +82,11 @@ def run(args: argparse.Namespace) -> int:
     text = results_md.markdown(results)
     text = _keep_tracker_section(args.markdown, text)
     said = {p: verb(p) for p in (args.json, args.markdown) if p}  # "replaced": said, never
-    if args.json:  # in silence (the markdown keeps the sections it does not write)
-        atomic_write(args.json, evaluate.dumps(results))
-    if args.markdown:
-        atomic_write(args.markdown, text)
+    with together():  # in silence (the markdown keeps the sections it does not write);
+        if args.json:  # both written, then both renamed
+            atomic_write(args.json, evaluate.dumps(results))
+        if args.markdown:
+            atomic_write(args.markdown, text)
     # The verdict and the table that decide: the second artefact model at 60 fps.
     for head in ("## Never ship worse", "## degrade 60 fps"):
         section = text.split(head, 1)[-1].split("\n## ", 1)[0]
@@ -122,7 +123,7 @@ def _families(args: argparse.Namespace, progress) -> int:
 
     from faceclean import settings, workers
     from faceclean.evaluation import family_eval, tracker_results
-    from faceclean.io.atomic import atomic_write
+    from faceclean.io.atomic import atomic_write, together
 
     before = Path(args.shipped) if args.shipped else (BEFORE if BEFORE.is_file() else None)
     jobs, _ = workers.count(args.jobs, 64, "folds")
@@ -142,13 +143,14 @@ def _families(args: argparse.Namespace, progress) -> int:
         for v in result["still"].values():
             v["change_ratio"] = v["change"] / result["still"]["raw"]["change"]
     section = family_eval.markdown(result)
-    if args.json:
-        atomic_write(args.json, json.dumps(result, indent=1))
-    if args.markdown:
-        page = Path(args.markdown)
-        old = page.read_text(encoding="utf-8") if page.is_file() else ""
-        atomic_write(args.markdown, tracker_results.insert(
-            old, section, family_eval.BEGIN, family_eval.END))  # fmt: skip
+    with together():  # both written, then both renamed
+        if args.json:
+            atomic_write(args.json, json.dumps(result, indent=1))
+        if args.markdown:
+            page = Path(args.markdown)
+            old = page.read_text(encoding="utf-8") if page.is_file() else ""
+            atomic_write(args.markdown, tracker_results.insert(
+                old, section, family_eval.BEGIN, family_eval.END))  # fmt: skip
     print(section)
     return 0
 
@@ -161,7 +163,7 @@ def _pairs(args: argparse.Namespace, progress) -> int:
     from faceclean import resolve, settings
     from faceclean.evaluation import still, tracker_eval, tracker_results
     from faceclean.filters.one_euro import OneEuro
-    from faceclean.io.atomic import atomic_write
+    from faceclean.io.atomic import atomic_write, together
     from faceclean.learned.tracker_map import TrackerMap
 
     result = tracker_eval.evaluate(args.pairs, lstm=args.lstm, report=progress)
@@ -189,11 +191,12 @@ def _pairs(args: argparse.Namespace, progress) -> int:
         for v in still_rows.values():
             v["change_ratio"] = v["change"] / still_rows["raw"]["change"]
     section = tracker_results.markdown(result, still_rows)
-    if args.json:
-        atomic_write(args.json, json.dumps({"pairs": result, "still": still_rows}, indent=1))
-    if args.markdown:
-        page = Path(args.markdown)
-        old = page.read_text(encoding="utf-8") if page.is_file() else ""
-        atomic_write(args.markdown, tracker_results.insert(old, section))
+    with together():  # both written, then both renamed
+        if args.json:
+            atomic_write(args.json, json.dumps({"pairs": result, "still": still_rows}, indent=1))
+        if args.markdown:
+            page = Path(args.markdown)
+            old = page.read_text(encoding="utf-8") if page.is_file() else ""
+            atomic_write(args.markdown, tracker_results.insert(old, section))
     print(section)
     return 0

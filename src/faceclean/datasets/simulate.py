@@ -176,7 +176,8 @@ def apply(
     x, present = clean.arkit()
     times = clean.times
     ok = clean.valid & np.isfinite(times)
-    if ok.sum() < 2 or np.any(np.diff(times[np.isfinite(times)]) < 0):
+    back = np.any(np.diff(times[np.isfinite(times)]) < 0)
+    if ok.sum() < 2 or back or times[ok][-1] <= times[ok][0]:  # all at one time: no span
         raise FacecleanError("simulator needs at least 2 valid frames with increasing times")
     if not 1.0 <= params.fps <= 1000.0:
         raise FacecleanError(f"simulator rate must be 1-1000 Hz, got {params.fps}")
@@ -186,6 +187,11 @@ def apply(
         raise FacecleanError(f"the take spans {span:.6g} s: {n:.3g} frames at {params.fps:g} "
                              f"Hz (at most {MAX_MADE:,}; are its times in s?)")  # fmt: skip
     t = stream_times(times[ok][0], times[ok][-1], params.fps, params.timing_irregularity, rng)
+    if np.any(np.diff(t) <= 0.0):  # times near 1e15 s: a frame step below float64's step there
+        raise FacecleanError(
+            f"the take's times (from {times[ok][0]:.6g} s) are too large to step by "
+            f"{1.0 / params.fps:.3g} s frames in float64; give it times from 0"
+        )
     truth = resample(times[np.isfinite(times)], x[np.isfinite(times)], t)  # (N, 52)
     seen = ~np.isnan(truth).all(1)  # (N,) the source has this instant
     y = np.where(seen[:, None], truth, 0.0)

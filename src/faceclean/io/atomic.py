@@ -9,6 +9,7 @@ is decided by ``io.paths.target`` (no FIFO, device or folder; not another input)
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import secrets
 from collections.abc import Iterator
@@ -100,14 +101,58 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
             yield f
             f.flush()
             os.fsync(f.fileno())
-        if target.exists():
-            os.chmod(tmp, target.stat().st_mode & 0o777)
-        else:
-            os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-        paths.written(target)
+        pending = _pending.get()
+        if pending is not None:  # in ``together``: renamed when all its files are written
+            pending.append((tmp, target))
+            return
+        _commit(tmp, target)
     except BaseException:
         if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise
+
+
+def _commit(tmp: Path, target: Path) -> None:
+    """The written temporary ``tmp`` replaces ``target`` (with its permissions)."""
+    if target.exists():
+        os.chmod(tmp, target.stat().st_mode & 0o777)
+    else:
+        os.chmod(tmp, 0o644)
+    os.replace(tmp, target)
+    paths.written(target)
+
+
+# the (temporary, target) pairs written inside ``together``, waiting; None outside it
+_pending: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.ContextVar(
+    "faceclean_atomic_pending", default=None
+)
+
+
+@contextlib.contextmanager
+def together() -> Iterator[None]:
+    """Every ``atomic_open`` (``io.save``, ``atomic_write``) in the block writes its
+    temporary file, and none replaces its target until the block ends well: then all do,
+    one rename after another. A block that fails (a full disk at the second file, a
+    refusal, Ctrl-C) replaces none of them, and leaves no temporary file: a command that
+    writes two files (``corrupt --truth-out``) never leaves one new beside one old."""
+    pending: list[tuple[Path, Path]] = []
+    token = _pending.set(pending)
+    try:
+        yield
+    except BaseException:
+        for tmp, _ in pending:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise
+    finally:
+        _pending.reset(token)
+    try:
+        while pending:
+            _commit(*pending[0])
+            pending.pop(0)
+    except BaseException:
+        for tmp, _ in pending:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(tmp)
         raise

@@ -75,9 +75,9 @@ def write(anim: Animation, f: BinaryIO) -> None:
     pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
     pose_names = list(anim.meta.get("pose_names", ()))
     has_pose = pose.ndim == 2 and pose.shape[0] == anim.n_frames and pose.shape[1] > 0
-    _refuse_infinite(anim.values, list(anim.names), "channel")
+    refuse_infinite(anim.values, list(anim.names), "channel")
     if has_pose:
-        _refuse_infinite(pose, pose_names, "pose column")
+        refuse_infinite(pose, pose_names, "pose column")
         extra["pose_names"] = pose_names
         extra["pose"] = _rows(pose)
     if not np.isfinite(anim.times).all():
@@ -101,14 +101,15 @@ def write(anim: Animation, f: BinaryIO) -> None:
     f.write("".join(parts).encode("utf-8"))
 
 
-def _refuse_infinite(a: np.ndarray, names: list[str], what: str) -> None:
-    """FacecleanError naming the first infinite cell of ``a`` (N, M), if any."""
+def refuse_infinite(a: np.ndarray, names: list[str], what: str, fmt: str = "JSON") -> None:
+    """FacecleanError naming the first infinite cell of ``a`` (N, M), if any: ``fmt``, a
+    format with no spelling for one (JSON; Live Link CSV, whose readers take numbers)."""
     bad = np.argwhere(np.isinf(a))
     if len(bad):
         row, col = (int(v) for v in bad[0])
         name = names[col] if col < len(names) else str(col)
         raise FacecleanError(
-            f"JSON cannot hold infinite values: {what} {name!r} is {a[row, col]:+g} at frame "
+            f"{fmt} cannot hold infinite values: {what} {name!r} is {a[row, col]:+g} at frame "
             f"{row + 1} ({len(bad)} such cells); write another format (CSV, NPZ) or fix them"
         )
 

@@ -44,6 +44,7 @@ from faceclean.animation import Animation
 from faceclean.channels import ARKIT52, canonical, pascal
 from faceclean.errors import FacecleanError
 from faceclean.io import source as bounded
+from faceclean.io.json_format import refuse_infinite
 
 FPS = 60.0  # the timecode's frame rate, Hz
 DAY = 86400.0  # s
@@ -230,7 +231,13 @@ def relative_times(
 
 
 def write(anim: Animation, f: BinaryIO) -> None:
-    """Write back into the source's text when there is one, else a fresh Live Link CSV."""
+    """Write back into the source's text when there is one, else a fresh Live Link CSV.
+    An infinite value has no cell a reader takes back: refused, before anything is written
+    (a NaN cell of a frame is written empty, and read back as missing)."""
+    refuse_infinite(anim.values, list(anim.names), "channel", "Live Link CSV")
+    pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
+    if pose.ndim == 2 and pose.shape[0] == anim.n_frames:
+        refuse_infinite(pose, list(anim.meta.get("pose_names", ())), "pose column", "Live Link CSV")
     src = anim.meta.get("livelink")
     if isinstance(src, Source) and _fits(src, anim):
         f.write(_patched(src, anim))
@@ -312,17 +319,17 @@ def _fresh(anim: Animation) -> bytes:
     """A new file in the app's layout (non-ARKit channels cannot be carried)."""
     arkit, _ = anim.arkit()
     order = [ARKIT52.index(canonical(n)) for n in ORDER]
-    values = np.nan_to_num(arkit[:, order], nan=0.0)  # (N, 52) app order
+    values = arkit[:, order]  # (N, 52) app order; a NaN cell is written empty (missing)
     pose = np.asarray(anim.meta.get("pose", np.zeros((0, 0))), dtype=np.float64)
     pose_names = tuple(anim.meta.get("pose_names", ()))
     fits = pose.ndim == 2 and pose.shape[0] == anim.n_frames
     plain = [n for n in pose_names if not set(n) & set(',\r\n"')]  # fits in a CSV header
     extra = tuple(n for n in plain if n not in ANGLES and fits)  # passthrough columns
-    angles = np.zeros((anim.n_frames, len(ANGLES) + len(extra)))
+    angles = np.zeros((anim.n_frames, len(ANGLES) + len(extra)))  # absent angles: 0
     if fits:
         for a, name in enumerate(ANGLES + extra):
             if name in pose_names:
-                angles[:, a] = np.nan_to_num(pose[:, pose_names.index(name)], nan=0.0)
+                angles[:, a] = pose[:, pose_names.index(name)]
     start = float(anim.meta.get("timecode_start", 0.0))
     out = [",".join(("Timecode", "BlendshapeCount") + ORDER + ANGLES + extra).encode() + b"\n"]
     valid = anim.valid
@@ -332,8 +339,6 @@ def _fresh(anim: Animation) -> bytes:
         if not valid[i]:
             out.append(tc + b",0\n")
             continue
-        cells = [_number(v, DECIMALS) for v in values[i]] + [
-            _number(v, DECIMALS) for v in angles[i]
-        ]
+        cells = [b"" if np.isnan(v) else _number(v, DECIMALS) for v in (*values[i], *angles[i])]
         out.append(b",".join([tc, count, *cells]) + b"\n")
     return b"".join(out)

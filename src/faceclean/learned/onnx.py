@@ -8,6 +8,7 @@ is interchangeable with the numpy runtime (``learned.lstm.Learned``).
 from __future__ import annotations
 
 import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -22,21 +23,56 @@ from faceclean.filters.base import MAX_GAP, State, StreamCleaner, gap_seconds
 from faceclean.learned.formats import STEP as STEP_FORMAT
 
 
-def _session(model: bytes, threads: int) -> Any:
+def _session(model: bytes, threads: int, label: str) -> Any:
     try:
         import onnxruntime as ort
     except ImportError:
         raise FacecleanError(
             "the ONNX backend needs onnxruntime (pip install onnxruntime)"
         ) from None
+    _no_external_data(model, label)
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = threads
     opts.inter_op_num_threads = 1
     opts.log_severity_level = 3  # errors only
+    with tempfile.TemporaryDirectory(prefix="faceclean-onnx-") as empty:
+        # A graph from bytes finds external data in the current folder: look in an empty
+        # one instead, so that a tensor stored outside the .onnx is never read from disk
+        # (onnxruntime >= 1.21; _no_external_data refuses it first where onnx is installed)
+        opts.add_session_config_entry(_DATA_FOLDER, empty)
+        try:
+            return ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises its own types for a bad graph
+            if "external data" in str(e).lower():
+                raise FacecleanError(f"{label}: {EXTERNAL_DATA}") from None
+            first = str(e).splitlines()[0]
+            raise FacecleanError(f"not a loadable ONNX model ({first})") from None
+
+
+_DATA_FOLDER = "session.model_external_initializers_file_folder_path"
+EXTERNAL_DATA = (
+    "its tensors are in external data files, which faceclean does not read (they could be "
+    "anywhere); give a self-contained .onnx (faceclean export writes one; or "
+    "onnx.save_model(model, path, save_as_external_data=False))"
+)
+
+
+def _no_external_data(model: bytes, label: str) -> None:
+    """Refuse a graph with a tensor stored outside its bytes (onnx, where installed)."""
     try:
-        return ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
-    except Exception as e:  # onnxruntime raises its own types for a bad graph
-        raise FacecleanError(f"not a loadable ONNX model ({str(e).splitlines()[0]})") from None
+        import onnx
+        from onnx import external_data_helper
+    except ImportError:
+        return  # the session's empty data folder refuses it instead
+    try:
+        proto = onnx.load_model_from_string(model, load_external_data=False)
+    except Exception:
+        return  # not a model: the session says so
+    if any(
+        external_data_helper.uses_external_data(t)
+        for t in external_data_helper._get_all_tensors(proto)
+    ):
+        raise FacecleanError(f"{label}: {EXTERNAL_DATA}")
 
 
 def model_bytes(path: str | os.PathLike) -> bytes:
@@ -72,7 +108,7 @@ class OnnxLearned(StreamCleaner):
     ) -> None:
         graph = path if isinstance(path, bytes) else model_bytes(path)
         label = "model" if isinstance(path, bytes) else Path(path).name
-        self.session = _session(graph, threads)
+        self.session = _session(graph, threads, label)
         meta = self.session.get_modelmeta().custom_metadata_map
         if meta.get("faceclean.format") != STEP_FORMAT:
             raise FacecleanError(f"{label}: not a faceclean step graph ({STEP_FORMAT})")

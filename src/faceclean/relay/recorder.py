@@ -169,8 +169,10 @@ class Recorder:
     def save(self) -> tuple[Path, Path]:
         """Write the input and the cleaned output; their paths."""
         from faceclean import io
+        from faceclean.io.atomic import together
 
         take, cleaned = self.animations()
-        io.save(take, self.path, fmt=self.fmt)
-        io.save(cleaned, clean_path(self.path), fmt=self.fmt)
+        with together():  # both written, then both renamed: never one new beside one old
+            io.save(take, self.path, fmt=self.fmt)
+            io.save(cleaned, clean_path(self.path), fmt=self.fmt)
         return self.path, clean_path(self.path)
