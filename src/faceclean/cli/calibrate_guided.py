@@ -64,8 +64,6 @@ def run_guided(args: argparse.Namespace) -> int:
 
 def report(result) -> list[str]:
     """The lines ``calibrate --guided`` prints (a Guided from faceclean.guided.fit)."""
-    from faceclean.guided.fit import CLOSE_STEEP
-
     lines = [f"{'prompt':<12} {'take s':>13}  {'':<14} peak before -> after (aim)"]
     for g in result.alignment.segments:
         pid = g.prompt.id
@@ -100,9 +98,6 @@ def report(result) -> list[str]:
         for name, (knee, top) in ad.closure.items():
             lines.append(f"  {name:<20} reads {top:.2f} shut: lifted from {knee:.2f} so that "
                          "this face's closure reads 1")  # fmt: skip
-            if abs((top - knee) * CLOSE_STEEP - 1.0) < 1e-4:  # fit.fit_closure's gentle lift
-                lines.append("    (gently: this face reads its look down and squint as high as "
-                             "its blink, so they read partly shut too)")  # fmt: skip
     else:
         chans = adjust.facts.get("channels", {})
         lifted = adjust.facts.get("lifted", [])
