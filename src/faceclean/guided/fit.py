@@ -111,27 +111,27 @@ HOLD_Q = 75.0  # percentile of a channel over its holds, taken as the level it r
 REST_INPUTS = GROUPS["mouth"] + GAZE
 # The face's own closure (``Adaptation.closure``): where its closed eyes, the script's
 # blinks and eyes closed alone, read ``top`` after D, short of CLOSED, each blink output is
-# lifted from CLOSE_KNEE of the way from its rest to that top, so its closure reads 1 and
-# its narrowings (below the knee) as they were; the shipped map cannot: MediaPipe reads a
-# closing eye and a narrowing one on one scale, which differs by face (docs/MODEL.md, 22nd
-# round; docs/CALIBRATION.md, "The face's own closure"). Chosen on four faces: from 0.3
-# dressed 5's lids go over raw, from 0.7 blinks close less. A blink (100-300 ms) comes out
-# of the cleaner short of a held closure's level (the band smooths it), so the level read
-# as 1 is CLOSE_AIM of the way from the knee to the holds' top (by the mean |log closure|
-# of six faces: 0.13 / 0.11 / 0.10 / 0.11 at 1 / 0.9 / 0.8 / 0.7). Obama 47's closed eyes
-# read 0.3, a slope of 6-7, and so lifted its blinks overshot (closure 1.47, lids 0.48 ->
-# 0.74x raw): such a face reads a look down or a squint as high as a blink, so a lift
-# steeper than CLOSE_GAIN is made at CLOSE_STEEP (read as 1 at the knee plus 1 /
-# CLOSE_STEEP): of the ten faces chosen on, the three it moves close 0.55 / 0.52 / 0.80 ->
-# 0.98 / 0.94 / 0.95 at MSE +0.021 / +0.016 / +0.002 (at 3: 0.84 / 0.81 / 0.91; at 4: 1.12
-# / 1.07 / 0.95; docs/CALIBRATION.md, "A steep closure lifted gently").
+# lifted from CLOSE_KNEE of the way from its rest to that top, so the face's own closure
+# reads 1 and its narrowings (below the knee) as they were (docs/CALIBRATION.md,
+# "The face's own closure"). The shipped map cannot: MediaPipe reads a closing eye and a
+# narrowing one on one scale, which differs by face (docs/MODEL.md, 22nd round).
+# Chosen on the four faces of LAMBDA's choice: from half way (0.5) their blinks close
+# 0.81 / 0.62 / 0.55 / 0.68 -> 0.85 / 0.84 / 0.55 / 0.87 with every lids group under raw;
+# from 0.3 dressed 5's lids go over raw (1.02x), from 0.7 they close less; obama's closed
+# eyes read 0.3 (a slope of 6-7), and lifted its blinks overshot (closure 1.47, lids
+# 0.48 -> 0.74x raw), so a slope over CLOSE_GAIN lifts none.
+# A blink (100-300 ms) comes out of the cleaner short of the level a held closure reads
+# (the map's band smooths it), so the closure read as 1 is CLOSE_AIM of the way from the
+# knee to the holds' top. Chosen on the six faces chosen on (painted 7, 31, dressed 5, 37,
+# photo 47, 53) by the mean |log closure| of the four it lifts: 0.13 / 0.11 / 0.10 / 0.11
+# at 1 / 0.9 / 0.8 / 0.7, every face's MSE within 0.001 (docs/CALIBRATION.md, "The face's
+# own closure").
 BLINKS = ("eyeBlinkLeft", "eyeBlinkRight")
 CLOSE_AIM = 0.8
 CLOSE_KNEE = 0.5
 CLOSED = 0.95
 CLOSE_MIN = 0.1  # weight units: an eye whose closure rose less was not seen closing
-CLOSE_GAIN = 4.0  # the lift's slope 1 / (top - knee) at most, else CLOSE_STEEP's
-CLOSE_STEEP = 3.5  # the slope of a lift that CLOSE_GAIN refuses
+CLOSE_GAIN = 4.0  # the lift's slope 1 / (top - knee) at most, else none
 # Outputs that measure their rises from the face's rest reading: the mouth's, cheeks' and
 # gaze's, but for four whose rest reading made them worse on the six faces chosen on (by
 # over 0.002 of raw MSE, summed: dimples 0.018 / 0.010, shrugUpper 0.005, rollLower 0.004;
@@ -353,9 +353,9 @@ def fit_closure(y: np.ndarray, target: np.ndarray, alignment: al.Alignment, t: n
     """{blink: (knee, top)} (module docstring, CLOSE_KNEE, CLOSE_AIM): the holds' top is
     the median over the seen prompts that close the eye of its HOLD_Q-th percentile over
     their holds, in y (N, 52) as corrected; the rest its median over ``rest`` (N,) bool;
-    ``top`` (read as 1) CLOSE_AIM of the way from the knee to it, or 1 / CLOSE_STEEP over
-    the knee where that would need a slope over CLOSE_GAIN (of the holds' top). None where
-    the eye was never seen closing, closes to CLOSED already or did not rise by CLOSE_MIN."""
+    ``top`` (read as 1) CLOSE_AIM of the way from the knee to it. None where the eye was
+    never seen closing, closes to CLOSED already, did not rise by CLOSE_MIN, or would need
+    a slope over CLOSE_GAIN (of the holds' top)."""
     out: dict[str, tuple[float, float]] = {}
     if not rest.any():
         return out
@@ -370,8 +370,8 @@ def fit_closure(y: np.ndarray, target: np.ndarray, alignment: al.Alignment, t: n
         if top is None or top >= CLOSED or top - low < CLOSE_MIN:
             continue
         knee = low + CLOSE_KNEE * (top - low)
-        steep = 1.0 / (top - knee) > CLOSE_GAIN  # its narrowings read as high as a blink
-        out[name] = (knee, knee + (1.0 / CLOSE_STEEP if steep else CLOSE_AIM * (top - knee)))
+        if 1.0 / (top - knee) <= CLOSE_GAIN:  # a steeper lift takes a narrowing for a blink
+            out[name] = (knee, knee + CLOSE_AIM * (top - knee))
     return out
 
 
