@@ -24,15 +24,19 @@ REPO = Path(__file__).resolve().parents[1]  # the repository root
 IMPORTERS = REPO / "tests" / "importers"  # the real glTF importers the tests drive
 
 
-# A prelude for `python -c`: torch as if not installed (a finder that refuses it).
-NOT_INSTALLED = """
+def not_installed(package: str) -> str:
+    """A prelude for `python -c`: ``package`` as if not installed (a finder that refuses it)."""
+    return f"""
 import sys
-class _NoTorch:
+class _NotInstalled:
     def find_spec(self, name, path=None, target=None):
-        if name == "torch" or name.startswith("torch."):
-            raise ImportError("torch is not installed (test)")
-sys.meta_path.insert(0, _NoTorch())
+        if name == {package!r} or name.startswith({package + "."!r}):
+            raise ImportError("{package} is not installed (test)")
+sys.meta_path.insert(0, _NotInstalled())
 """
+
+
+NOT_INSTALLED = not_installed("torch")
 
 
 def steps(cleaner, t, x) -> np.ndarray:

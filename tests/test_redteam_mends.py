@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import not_installed
 from test_redteam import _env, fc, no_temp_files, ok, plain_text, refused
 
 from faceclean import io
@@ -204,13 +205,7 @@ def test_onnx_external_data_beside_the_model_is_refused_in_one_line(tmp_path):
     assert "external data" in r.stderr, r.stderr
 
 
-NO_ONNX = """
-import sys
-class _NoOnnx:
-    def find_spec(self, name, path=None, target=None):
-        if name == "onnx" or name.startswith("onnx."):
-            raise ImportError("onnx is not installed (test)")
-sys.meta_path.insert(0, _NoOnnx())
+NO_ONNX = not_installed("onnx") + """
 from faceclean.errors import FacecleanError
 from faceclean.learned.onnx import OnnxLearned
 try:

@@ -139,19 +139,14 @@ def together() -> Iterator[None]:
     pending: list[tuple[Path, Path]] = []
     token = _pending.set(pending)
     try:
-        yield
-    except BaseException:
-        for tmp, _ in pending:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
-        raise
-    finally:
-        _pending.reset(token)
-    try:
+        try:
+            yield
+        finally:
+            _pending.reset(token)
         while pending:
             _commit(*pending[0])
             pending.pop(0)
-    except BaseException:
+    except BaseException:  # those not yet renamed are removed
         for tmp, _ in pending:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(tmp)
