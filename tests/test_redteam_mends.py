@@ -205,7 +205,9 @@ def test_onnx_external_data_beside_the_model_is_refused_in_one_line(tmp_path):
     assert "external data" in r.stderr, r.stderr
 
 
-NO_ONNX = not_installed("onnx") + """
+NO_ONNX = (
+    not_installed("onnx")
+    + """
 from faceclean.errors import FacecleanError
 from faceclean.learned.onnx import OnnxLearned
 try:
@@ -215,6 +217,7 @@ except FacecleanError as e:
 else:
     print("loaded")
 """
+)
 
 
 def test_onnx_external_data_refused_by_onnxruntime_alone(tmp_path):
