@@ -84,8 +84,9 @@ def _same(tmp_path: Path) -> Path:
         ["convert", "{IN}", "-o", "{DIR}/x.glb"],
         ["corrupt", "{IN}", "-o", "{DIR}/x.csv", "--seed", "1", "--preset", "mixed"],
         ["tune", "{IN}", "--truth", "{IN}", "--method", "ema", "-o", "{DIR}/q.json"],
+        ["replay", "{IN}", "--send", "livelink://127.0.0.1:9"],  # would go unpaced
     ],
-    ids=["convert-json", "convert-glb", "corrupt", "tune"],
+    ids=["convert-json", "convert-glb", "corrupt", "tune", "replay"],
 )
 def test_times_that_do_not_increase_are_refused(tmp_path, make, command):
     src = make(tmp_path)

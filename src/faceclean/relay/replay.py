@@ -30,6 +30,7 @@ from faceclean.errors import FacecleanError, within
 from faceclean.relay import livelink, vmc
 from faceclean.relay.frame import POSE_NAMES, Frame, Malformed
 from faceclean.relay.url import Endpoint
+from faceclean.timing import Restarts
 
 MIN_SPEED, MAX_SPEED = 1e-3, 1e3  # --speed: playback rate bounds
 MAX_PAUSE = 600.0  # s between two frames: a longer one is a broken clock, not a pause
@@ -94,6 +95,7 @@ def load_frames(path: str | os.PathLike) -> list[Frame]:
         raise FacecleanError(f"{Path(path).name}: no frames to replay")
     t = np.array([f.t for f in frames if f.t is not None], dtype=np.float64)
     t = t[np.isfinite(t)]
+    Restarts(Path(path).name).see(t)  # times that stand still would go unpaced: as clean
     jumps = np.flatnonzero(np.diff(t) > MAX_PAUSE)
     if len(jumps):  # replay waits out each pause in real time
         i = int(jumps[0])
