@@ -230,3 +230,15 @@ def test_onnx_external_data_refused_by_onnxruntime_alone(tmp_path):
                        env=_env(), capture_output=True, text=True, timeout=TIMEOUT)  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert "external data" in r.stdout, r.stdout
+
+
+@pytest.mark.parametrize("names", [[f"c{j}" for j in range(5000)], ["x" * 300, "jawOpen"]],
+                         ids=["5000-channels", "a-300-byte-name"])  # fmt: skip
+def test_a_csv_its_own_reader_would_refuse_is_not_written(tmp_path, names):
+    from faceclean.animation import Animation
+
+    src, out = tmp_path / "wide.npz", tmp_path / "wide.csv"
+    io.save(Animation(np.arange(5) / 30.0, np.full((5, len(names)), 0.5), tuple(names)), src)
+    r = fc("convert", src, "-o", out, timeout=TIMEOUT)
+    refused(r)
+    assert "write .npz or .json" in r.stderr and not out.exists(), r.stderr

@@ -140,10 +140,17 @@ def write(anim: Animation, f: BinaryIO) -> None:
 
 
 def header_text(names: tuple[str, ...]) -> bytes:
-    """The header line for channels ``names``; a name a CSV cannot hold is refused."""
+    """The header line for channels ``names``; a name a CSV cannot hold, or a header its
+    reader would refuse (``source.MAX_FIELDS``, ``MAX_NAME``), is refused."""
+    if len(names) + 1 > source.MAX_FIELDS:
+        raise FacecleanError(f"a CSV holds at most {source.MAX_FIELDS - 1} channels, this take "
+                             f"has {len(names)}: write .npz or .json")  # fmt: skip
     for n in names:
         if "," in n or "\n" in n or "\r" in n:
             raise FacecleanError(f"channel name {n!r} cannot go in a CSV header")
+        if len(n.encode("utf-8")) > source.MAX_NAME:
+            raise FacecleanError(f"channel name {n[:40]!r}... is over {source.MAX_NAME} bytes, "
+                                 "more than a CSV header holds: write .npz or .json")  # fmt: skip
     return (",".join(("time", *names)) + "\n").encode("utf-8")
 
 
