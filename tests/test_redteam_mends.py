@@ -242,3 +242,10 @@ def test_a_csv_its_own_reader_would_refuse_is_not_written(tmp_path, names):
     r = fc("convert", src, "-o", out, timeout=TIMEOUT)
     refused(r)
     assert "write .npz or .json" in r.stderr and not out.exists(), r.stderr
+
+
+@pytest.mark.parametrize("out", [".", "/dev/null"])
+def test_an_output_with_no_extension_says_which_it_is_and_what_to_name(tmp_path, out):
+    r = fc("synth", "-o", out, "--seconds", "1", timeout=TIMEOUT, cwd=tmp_path)
+    refused(r)
+    assert f"{out}: unknown output type '(no extension)': name a file ending .csv" in r.stderr

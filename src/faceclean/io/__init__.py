@@ -153,7 +153,9 @@ def output_format(path: str | os.PathLike, source: str | None, fmt: str | None =
                                  "the output so")  # fmt: skip
         return fmt
     if candidates is None:
-        raise FacecleanError(f"{p.name}: unknown output type {p.suffix or '(none)'!r}")
+        ext, known = p.suffix or "(no extension)", ", ".join(sorted(EXTENSIONS))
+        raise FacecleanError(f"{os.fspath(path)}: unknown output type {ext!r}: name a file "
+                             f"ending {known}")  # fmt: skip
     return source if source in candidates else candidates[-1]
 
 

@@ -46,7 +46,7 @@ def parse(p: Path) -> tuple[bytes, dict, pygltflib.GLTF2, int | None, tuple[byte
     glb = raw.startswith(b"glTF")
     text, bin_offset, bin_chunk = _split_glb(raw, p.name) if glb else (raw, None, None)
     try:
-        doc = strict_json.loads(text, f"{p.name}: not a glTF file:", numbers=False)
+        doc = strict_json.loads(text, f"{p.name}: not a glTF file", numbers=False)
         if not isinstance(doc, dict):
             raise ValueError("the JSON is not an object")
         with warnings.catch_warnings():  # dataclasses_json warns on absent optional fields
