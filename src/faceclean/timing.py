@@ -120,11 +120,13 @@ class Restarts:
         over = np.flatnonzero(run >= STALE_RUN)
         if len(over):
             i = int(over[0])
+            back, last = _s(start[i]), _s(before[i])
+            went = (f"stand still at {last} s" if start[i] == before[i] else
+                    f"go back to {back} s after {last} s and stay behind")  # fmt: skip
             raise FacecleanError(
-                f"{self.label}: the times go back to {_s(start[i])} s after {_s(before[i])} s "
-                f"and stay behind ({STALE_RUN} frames on): the take restarts there (a recording "
-                "restarted, takes joined?), and a cleaner holds such frames still; split the "
-                "take there, or give it increasing times"
+                f"{self.label}: the times {went} ({STALE_RUN} frames on): the take restarts "
+                "there (a recording restarted, takes joined?), and a cleaner holds such frames "
+                "still; split the take there, or give it increasing times"
             )
         self.run, self.since = int(run[-1]), float(start[-1])
         self.newest = max(self.newest, float(t.max()))

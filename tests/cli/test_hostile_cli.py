@@ -568,6 +568,9 @@ def test_a_take_whose_times_restart_is_refused_not_held_still(tmp_path, capsys, 
     io.save(Animation(far, np.concatenate([x[:11], x[10:]]), ARKIT52), joined)
     assert main(["clean", str(joined), "-o", str(out)]) == 2
     one_line(capsys, "the times go back to 0.167 s after 1e+308 s")
+    io.save(Animation(np.zeros(240), x, ARKIT52), joined)  # times that never move: not "back"
+    assert main(["clean", str(joined), "-o", str(out)]) == 2
+    one_line(capsys, "the times stand still at 0.000 s (30 frames on)")
     late = np.concatenate([t[:100], t[80:85], t[100:]])  # five late frames: a tracker's jitter
     io.save(Animation(late, np.concatenate([x, x[:5]]), ARKIT52), joined)
     assert main(["clean", str(joined), "-o", str(out)]) == 0
