@@ -68,11 +68,21 @@ def _no_external_data(model: bytes, label: str) -> None:
         proto = onnx.load_model_from_string(model, load_external_data=False)
     except Exception:
         return  # not a model: the session says so
-    if any(
-        external_data_helper.uses_external_data(t)
-        for t in external_data_helper._get_all_tensors(proto)
-    ):
+    if any(external_data_helper.uses_external_data(t) for t in _tensors(proto.graph)):
         raise FacecleanError(f"{label}: {EXTERNAL_DATA}")
+
+
+def _tensors(graph) -> Any:
+    """Every tensor of an ONNX graph: its initializers, and its nodes' tensor attributes,
+    subgraphs included (onnx's public fields, not its private walker)."""
+    yield from graph.initializer
+    for node in graph.node:
+        for a in node.attribute:
+            if a.HasField("t"):
+                yield a.t
+            yield from a.tensors
+            for g in (*([a.g] if a.HasField("g") else []), *a.graphs):
+                yield from _tensors(g)
 
 
 def model_bytes(path: str | os.PathLike) -> bytes:
