@@ -132,6 +132,12 @@ class Restarts:
         self.newest = max(self.newest, float(t.max()))
 
 
+def refuse_restarts(anim, label: str) -> None:
+    """A whole take (an ``Animation``) watched as ``Restarts`` watches a stream: one whose
+    times restart or stand still is refused, as ``clean`` refuses it."""
+    Restarts(label).see(anim.times[anim.valid])
+
+
 def _s(t: float) -> str:
     """A time in s as a message shows it: ms where that reads, else 4 digits (1e308 s)."""
     return f"{t:.3f}" if abs(t) < 1e7 else f"{t:.4g}"

@@ -34,7 +34,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
     from faceclean.adjust import Adjusted, check_range
     from faceclean.filters import rotation
     from faceclean.io import stream
-    from faceclean.timing import Restarts
+    from faceclean.timing import refuse_restarts
 
     choice = options.choice(args)
     src = Path(input)
@@ -62,7 +62,7 @@ def clean_one(args: argparse.Namespace, input: str, output: str, progress: bool 
                                       len(names))  # fmt: skip
             return _line(done, output, frames, missing, names, what, adjust, choice, pose)
     anim = io.load(src)
-    Restarts(src.name).see(anim.times[anim.valid])  # as the stream's: never held still
+    refuse_restarts(anim, src.name)  # as the stream's: never held still
     for a in range(0, max(anim.n_frames, 1), stream.BLOCK):  # as the stream's, by block
         check_range(anim.values[a : a + stream.BLOCK], anim.names, input, args.scale)
     _signature(args, anim, input)

@@ -35,13 +35,13 @@ def run(args: argparse.Namespace) -> int:
 
     from faceclean import io
     from faceclean.errors import FacecleanError
-    from faceclean.timing import Restarts
+    from faceclean.timing import refuse_restarts
 
     rule = "a take is never converted over itself"
     io.paths.onto_input(args.input, args.output, args.in_place, rule)
     done = io.paths.verb(args.output)
     anim = io.load(args.input)
-    Restarts(Path(args.input).name).see(anim.times[anim.valid])  # as clean refuses them
+    refuse_restarts(anim, Path(args.input).name)  # as clean refuses them
     fmt = io.output_format(args.output, anim.meta.get("format"), args.fmt)
     new_gltf = fmt == "gltf" and (args.mesh is not None or "gltf" not in anim.meta)
     if args.mesh is not None and fmt != "gltf":

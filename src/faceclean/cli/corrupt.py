@@ -25,11 +25,11 @@ def run(args: argparse.Namespace) -> int:
     from faceclean import io
     from faceclean.datasets import simulate
     from faceclean.io.atomic import together
-    from faceclean.timing import Restarts
+    from faceclean.timing import refuse_restarts
 
     io.paths.distinct(args.output, args.truth_out)
     clean = io.load(args.input)
-    Restarts(Path(args.input).name).see(clean.times[clean.valid])  # as clean refuses them
+    refuse_restarts(clean, Path(args.input).name)  # as clean refuses them
     for out in filter(None, (args.output, args.truth_out)):  # both, before writing one
         io.check_output(out, args.fmt, clean.meta.get("format"))
     noisy, truth = simulate.corrupt(clean, args.seed, args.preset, args.strength)

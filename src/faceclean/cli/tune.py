@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from faceclean import io
     from faceclean.errors import FacecleanError
     from faceclean.filters import tune
-    from faceclean.timing import Restarts
+    from faceclean.timing import refuse_restarts
 
     if len(args.noisy) != len(args.truth):
         raise FacecleanError(
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     for n, c in zip(args.noisy, args.truth, strict=True):
         noisy, truth = io.load(n), io.load(c)
         for anim, name in ((noisy, n), (truth, c)):  # as clean refuses them
-            Restarts(Path(name).name).see(anim.times[anim.valid])
+            refuse_restarts(anim, Path(name).name)
         if args.method == "rotation":  # the head and eye angles, not the blendshapes
             noisy, truth = angles(noisy, n), angles(truth, c)
         pairs.append((noisy, tune.align(noisy, truth)))

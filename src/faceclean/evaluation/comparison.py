@@ -20,7 +20,7 @@ from faceclean.channels import channel_key
 from faceclean.errors import FacecleanError
 from faceclean.filters.rotation import clean_pose
 from faceclean.resolve import DEFAULT, Choice, resolve
-from faceclean.timing import Restarts
+from faceclean.timing import refuse_restarts
 
 SPIKE = 0.15  # weight units: a frame this far from its neighbours' median is a spike
 SPIKE_HALF_WIDTH = 2  # frames each side in that median
@@ -118,7 +118,7 @@ def compare(
     mapping of ``noisy``; the input shown stays ``noisy``."""
     if noisy.n_frames < 2 or not noisy.valid.any():
         raise FacecleanError("the input has fewer than 2 frames with values")
-    Restarts("the input").see(noisy.times[noisy.valid])  # a cleaner would hold it still
+    refuse_restarts(noisy, "the input")  # a cleaner would hold it still
     specs = dict(m if isinstance(m, tuple) else (m, m) for m in methods) or {DEFAULT: DEFAULT}
     if truth is not None:
         same = truth.n_frames == noisy.n_frames and np.array_equal(truth.times, noisy.times)
